@@ -1,0 +1,48 @@
+# srlab: `make run` and `make test` do the whole set-up on a fresh machine.
+# uv is installed into .tools/ with pip when it is not on PATH; the project's venv is .venv/.
+SHELL := /bin/bash
+PYTHON ?= python3
+UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: help install run test test-fast lint typecheck format bench clean
+
+help:
+	@echo "make run | test | test-fast | lint | typecheck | format | bench | clean"
+
+.tools/bin/uv:
+	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
+
+$(BIN)/srlab: pyproject.toml uv.lock | $(UV)
+	$(UV) sync --frozen --quiet
+	@touch $@
+
+install: $(BIN)/srlab
+
+run: install
+	$(BIN)/srlab simulate --condition expert --episodes 20 --seed 1
+	$(BIN)/srlab simulate --condition innate --episodes 50 --seed 1
+
+lint: install
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: install
+	$(BIN)/mypy
+
+test: lint typecheck
+	$(BIN)/pytest
+
+test-fast: install
+	$(BIN)/pytest tests/core -q
+
+format: install
+	$(BIN)/ruff format .
+	$(BIN)/ruff check --fix .
+
+bench: install
+	$(BIN)/python bench/ticks.py
+
+clean:
+	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache

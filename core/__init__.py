@@ -1,0 +1,1 @@
+"""srlab core: the behaviour-based architecture and its simulated world, pure and deterministic."""

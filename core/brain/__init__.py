@@ -1,0 +1,1 @@
+"""The brain: sensor, perception, behaviour selection, memory and motor modules (Fig. 1)."""

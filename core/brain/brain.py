@@ -1,0 +1,160 @@
+"""The brain: the five modules of Fig. 1 wired into one tick and one reward pipeline."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.brain.catalog import Catalog
+from core.brain.memory import Credit, LongTermMemory, ShortTermMemory
+from core.brain.motor import Motor
+from core.brain.network import BehaviourNetwork
+from core.brain.perception import Perception
+from core.brain.selection import Decision, How, SelectionConfig, Selector
+from core.brain.sensors import compile_detector
+from core.events import AssociationDemoted, AssociationPromoted
+from core.sim.robot import RobotConfig
+from core.sim.world import MotorCommand
+
+
+@dataclass(frozen=True, slots=True)
+class LearningConfig:
+    """Parameters of the memory module.
+
+    Attributes:
+        enabled: whether rewards update LTM and the behaviour network.
+        eta: Eq. (1)'s learning rate.
+        insert_threshold: a pair whose reliability reaches this joins the behaviour network
+            (and a learned pair that falls below it leaves).
+        stm_capacity: STM's bound in records.
+        clear_stm_each_episode: forget STM when an episode starts, so a success is never
+            credited to the previous episode's records.
+        learnable_sensors: logical sensors whose stimuli are explored (epsilon-greedy).
+    """
+
+    enabled: bool = False
+    eta: float = 0.1
+    insert_threshold: float = 0.5
+    stm_capacity: int = 1000
+    clear_stm_each_episode: bool = True
+    learnable_sensors: tuple[str, ...] = ("signal", "camera_obstacle")
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.insert_threshold <= 1.0:
+            raise ValueError("insert_threshold must be in (0, 1]")
+
+
+@dataclass(frozen=True, slots=True)
+class BrainConfig:
+    """Selection and learning parameters."""
+
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
+    learning: LearningConfig = field(default_factory=LearningConfig)
+
+
+@dataclass(frozen=True, slots=True)
+class RewardOutcome:
+    """What a reward did: the credited STM records and the network changes."""
+
+    credits: tuple[Credit, ...]
+    changes: tuple[AssociationPromoted | AssociationDemoted, ...]
+
+
+class Brain:
+    """Sensor (logical) -> perception -> selection -> motor, with STM/LTM learning."""
+
+    def __init__(
+        self,
+        catalog: Catalog,
+        network: BehaviourNetwork,
+        config: BrainConfig,
+        robot: RobotConfig,
+        rng: np.random.Generator,
+        dt_s: float = 0.1,
+    ) -> None:
+        self.catalog = catalog
+        self.network = network
+        self.config = config
+        self.detect = compile_detector(catalog)
+        self.perception = Perception(catalog)
+        learnable = frozenset(
+            s.id for s in catalog.stimuli if s.sensor in config.learning.learnable_sensors
+        )
+        self.selector = Selector(
+            catalog, network, self.perception, config.selection, learnable, rng
+        )
+        self.motor = Motor(catalog, robot.align_gain, robot.max_turn_rad_s, dt_s)
+        self.stm = ShortTermMemory(config.learning.stm_capacity)
+        self.ltm = LongTermMemory(config.learning.eta)
+        self._priority = self.selector.priority
+        self._filter = any(w <= 0.0 for w in self.perception.strength)
+        self._last = Decision(-1, -1, 0.0, How.DEFAULT)
+        self._running_priority = -1
+
+    @property
+    def last(self) -> Decision:
+        """The decision of the latest tick."""
+        return self._last
+
+    def reset_episode(self) -> None:
+        """A new episode: nothing runs; STM is forgotten if so configured."""
+        self.motor.stop()
+        self._last = Decision(-1, -1, 0.0, How.DEFAULT)
+        self._running_priority = -1
+        if self.config.learning.clear_stm_each_episode:
+            self.stm.clear()
+
+    def step(self, tick: int, channels: list[float]) -> tuple[list[int], MotorCommand]:
+        """One tick of Fig. 6: sense, perceive, match, select, motor, record to STM.
+
+        Returns the active stimuli and the wheel command; the decision is `last`.
+        """
+        active = self.detect(channels)
+        if self._filter:
+            active = self.perception.filter(active)
+        motor = self.motor
+        last = self._last
+        if motor.busy:
+            top = max((self._priority[s] for s in active), default=-1)
+            decision = last
+            if top > self._running_priority:
+                d = self.selector.select(active, last.behaviour)
+                if d.stimulus >= 0 and self._priority[d.stimulus] > self._running_priority:
+                    decision = d
+            if decision is last:
+                decision = Decision(last.behaviour, last.stimulus, last.value, How.CONTINUED)
+            else:
+                self._start(decision, channels)
+        else:
+            decision = self.selector.select(active, last.behaviour)
+            self._start(decision, channels)
+        self._last = decision
+        command = motor.command(channels)
+        if decision.stimulus >= 0:
+            self.stm.push((tick, decision.stimulus, decision.behaviour))
+        return active, command
+
+    def _start(self, decision: Decision, channels: list[float]) -> None:
+        self.motor.start(decision.behaviour, channels)
+        s = decision.stimulus
+        self._running_priority = self._priority[s] if s >= 0 else -1
+
+    def reward(self, reward_tick: int, value: float) -> RewardOutcome:
+        """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network."""
+        if not self.config.learning.enabled:
+            self.stm.clear()
+            return RewardOutcome((), ())
+        credits = self.ltm.apply(self.stm.pop_all(), reward_tick, value)
+        threshold = self.config.learning.insert_threshold
+        changes: list[AssociationPromoted | AssociationDemoted] = []
+        for s, b in dict.fromkeys((c.stimulus, c.behaviour) for c in credits):
+            v = self.ltm.reliability(s, b)
+            old = self.network.get(s, b)
+            if v >= threshold:
+                if self.network.learn(s, b, v, "learned") and old is None:
+                    changes.append(AssociationPromoted(s, b, v, "learned"))
+            elif old is not None and old.source == "learned" and not old.locked:
+                self.network.remove(s, b)
+                changes.append(AssociationDemoted(s, b, v))
+        return RewardOutcome(tuple(credits), tuple(changes))

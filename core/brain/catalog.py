@@ -1,0 +1,349 @@
+"""The catalogue: stimuli, behaviours, logical sensors and knowledge sets, loaded from data."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+from core.errors import CatalogError, UnknownNameError
+from core.sim.channels import CHANNELS
+
+Source = Literal["innate", "dp", "learned", "kp", "expert", "designed"]
+Level = Literal["low", "high"]
+Mode = Literal["align", "steer", "constant"]
+MODES = ("align", "steer", "constant")
+OPS = ("<", "<=", ">", ">=", "==", "!=")
+
+
+@dataclass(frozen=True, slots=True)
+class Behaviour:
+    """A motor primitive: a constant wheel command held for `ticks` ticks.
+
+    Attributes:
+        id: index in the catalogue.
+        name: e.g. ``goforward3`` or ``leftturn30``.
+        family: forward, stop, turn, wall, back, or synthesized.
+        speed_mps: forward speed while it runs.
+        turn_dps: heading rate while it runs, degrees per second, + = left.
+        ticks: how many ticks it runs once selected.
+        mode: ``align`` (hold the corridor's heading), ``steer`` (turn towards a heading
+            `turn_dps * ticks * dt` off the corridor's direction) or ``constant``.
+        synthesized: made by knowledge propagation rather than designed.
+    """
+
+    id: int
+    name: str
+    family: str
+    speed_mps: float
+    turn_dps: float
+    ticks: int
+    mode: Mode = "constant"
+    synthesized: bool = False
+
+    def motion_vector(self, dt_s: float) -> tuple[float, float, float]:
+        """Displacement (forward, left) in metres and heading change in radians over its run."""
+        duration = self.ticks * dt_s
+        w = math.radians(self.turn_dps)
+        dth = w * duration
+        if abs(w) < 1e-12:
+            return (self.speed_mps * duration, 0.0, 0.0)
+        radius = self.speed_mps / w
+        return (radius * math.sin(dth), radius * (1 - math.cos(dth)), dth)
+
+
+@dataclass(frozen=True, slots=True)
+class RuleCondition:
+    """One condition of a stimulus rule: channel op value."""
+
+    channel: int
+    op: str
+    value: float
+
+
+@dataclass(frozen=True, slots=True)
+class Stimulus:
+    """A stimulus a logical sensor emits.
+
+    Attributes:
+        id: index in the catalogue.
+        name: e.g. ``Corner`` or ``Obstacle_M_R``.
+        sensor: the logical sensor that emits it.
+        objective: what responses to it are for (KP propagates within an objective).
+        level: low- or high-level sensor.
+        priority: layer for priority selection and pre-emption; higher wins.
+        rule: alternatives (OR) of conjunctions (AND) of channel conditions.
+    """
+
+    id: int
+    name: str
+    sensor: str
+    objective: str
+    level: Level
+    priority: int
+    rule: tuple[tuple[RuleCondition, ...], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class LogicalSensorSpec:
+    """A logical sensor as declared in data: which physical sensors, processing, stimuli."""
+
+    name: str
+    physical: tuple[str, ...]
+    processing: str
+    objective: str
+    level: Level
+    priority: int
+    weight: float
+    stimuli: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class AssociationSpec:
+    """An S-R association in a knowledge set (a network as designed, before any run)."""
+
+    stimulus: str
+    behaviour: str
+    strength: float = 1.0
+    source: Source = "innate"
+    locked: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class KnowledgeSet:
+    """A named set of S-R associations: Table I's innate knowledge, DP sets, the expert."""
+
+    name: str
+    description: str
+    associations: tuple[AssociationSpec, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Catalog:
+    """Everything the brain knows by name, indexed for speed."""
+
+    stimuli: tuple[Stimulus, ...]
+    behaviours: tuple[Behaviour, ...]
+    sensors: tuple[LogicalSensorSpec, ...]
+    knowledge: Mapping[str, KnowledgeSet] = field(default_factory=dict)
+
+    def stimulus(self, name: str) -> Stimulus:
+        """The stimulus called `name`."""
+        for s in self.stimuli:
+            if s.name == name:
+                return s
+        raise UnknownNameError(f"unknown stimulus {name!r}")
+
+    def behaviour(self, name: str) -> Behaviour:
+        """The behaviour called `name`."""
+        for b in self.behaviours:
+            if b.name == name:
+                return b
+        raise UnknownNameError(f"unknown behaviour {name!r}")
+
+    def knowledge_set(self, name: str) -> KnowledgeSet:
+        """The knowledge set called `name`."""
+        try:
+            return self.knowledge[name]
+        except KeyError:
+            known = ", ".join(sorted(self.knowledge))
+            raise UnknownNameError(f"unknown network {name!r} (known: {known})") from None
+
+    def stimuli_of_sensor(self, sensor: str) -> tuple[Stimulus, ...]:
+        """The stimuli a logical sensor emits."""
+        return tuple(s for s in self.stimuli if s.sensor == sensor)
+
+    def with_behaviour(self, behaviour: Behaviour) -> Catalog:
+        """A catalogue with one more behaviour (e.g. one synthesised by KP)."""
+        if any(b.name == behaviour.name for b in self.behaviours):
+            raise CatalogError(f"behaviour {behaviour.name!r} exists already")
+        b = Behaviour(
+            len(self.behaviours),
+            behaviour.name,
+            behaviour.family,
+            behaviour.speed_mps,
+            behaviour.turn_dps,
+            behaviour.ticks,
+            behaviour.mode,
+            behaviour.synthesized,
+        )
+        return Catalog(self.stimuli, (*self.behaviours, b), self.sensors, self.knowledge)
+
+
+def data_dir() -> Path:
+    """The folder of srlab's shipped data files."""
+    return Path(str(resources.files("core") / "data"))
+
+
+def _read(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise CatalogError(f"{path}: {e}") from e
+
+
+def _need(d: Mapping[str, Any], key: str, where: str) -> Any:
+    if key not in d:
+        raise CatalogError(f"{where}: missing {key!r}")
+    return d[key]
+
+
+def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
+    """Behaviours from their data-file form."""
+    out: list[Behaviour] = []
+    for i, b in enumerate(raw):
+        where = f"behaviour #{i}"
+        ticks = int(_need(b, "ticks", where))
+        if ticks < 1:
+            raise CatalogError(f"{where}: ticks must be >= 1")
+        mode = b.get("mode", "constant")
+        if mode not in MODES:
+            raise CatalogError(f"{where}: mode must be one of {', '.join(MODES)}")
+        out.append(
+            Behaviour(
+                id=i,
+                name=str(_need(b, "name", where)),
+                family=str(b.get("family", "other")),
+                speed_mps=float(_need(b, "speed_mps", where)),
+                turn_dps=float(_need(b, "turn_dps", where)),
+                ticks=ticks,
+                mode=mode,
+                synthesized=bool(b.get("synthesized", False)),
+            )
+        )
+    names = [b.name for b in out]
+    if len(set(names)) != len(names):
+        raise CatalogError("behaviour names must be unique")
+    return tuple(out)
+
+
+def _parse_condition(raw: Any, where: str) -> RuleCondition:
+    if not (isinstance(raw, list | tuple) and len(raw) == 3):
+        raise CatalogError(f"{where}: a condition is [channel, op, value], got {raw!r}")
+    channel, op, value = raw
+    if channel not in CHANNELS:
+        raise CatalogError(f"{where}: unknown channel {channel!r}")
+    if op not in OPS:
+        raise CatalogError(f"{where}: unknown operator {op!r} (use one of {' '.join(OPS)})")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise CatalogError(f"{where}: value must be a number, got {value!r}")
+    return RuleCondition(CHANNELS.index(channel), op, float(value))
+
+
+def parse_sensors(
+    raw: Iterable[Mapping[str, Any]],
+) -> tuple[tuple[LogicalSensorSpec, ...], tuple[Stimulus, ...]]:
+    """Logical sensors and the stimuli they declare, from their data-file form."""
+    sensors: list[LogicalSensorSpec] = []
+    stimuli: list[Stimulus] = []
+    for i, s in enumerate(raw):
+        where = f"sensor #{i}"
+        name = str(_need(s, "name", where))
+        processing = str(s.get("processing", "rules"))
+        if processing != "rules":
+            raise CatalogError(f"sensor {name!r}: unknown processing {processing!r}")
+        level = s.get("level", "low")
+        if level not in ("low", "high"):
+            raise CatalogError(f"sensor {name!r}: level must be 'low' or 'high'")
+        priority = int(s.get("priority", 1))
+        weight = float(s.get("weight", 1.0))
+        if not 0.0 <= weight <= 1.0:
+            raise CatalogError(f"sensor {name!r}: weight must be in [0, 1]")
+        objective = str(_need(s, "objective", f"sensor {name!r}"))
+        names: list[str] = []
+        for j, st in enumerate(_need(s, "stimuli", f"sensor {name!r}")):
+            swhere = f"sensor {name!r} stimulus #{j}"
+            sname = str(_need(st, "name", swhere))
+            alternatives = list(st.get("any", []))
+            if "when" in st:
+                alternatives.insert(0, st["when"])
+            if not alternatives or any(not alt for alt in alternatives):
+                raise CatalogError(f"{swhere}: needs a non-empty 'when' or 'any'")
+            rule = tuple(
+                tuple(_parse_condition(c, f"{swhere} ({sname})") for c in alt)
+                for alt in alternatives
+            )
+            stimuli.append(Stimulus(len(stimuli), sname, name, objective, level, priority, rule))
+            names.append(sname)
+        sensors.append(
+            LogicalSensorSpec(
+                name=name,
+                physical=tuple(str(p) for p in s.get("physical", ())),
+                processing=processing,
+                objective=objective,
+                level=level,
+                priority=priority,
+                weight=weight,
+                stimuli=tuple(names),
+            )
+        )
+    snames = [s.name for s in stimuli]
+    if len(set(snames)) != len(snames):
+        raise CatalogError("stimulus names must be unique")
+    if len({s.name for s in sensors}) != len(sensors):
+        raise CatalogError("logical sensor names must be unique")
+    return tuple(sensors), tuple(stimuli)
+
+
+def parse_knowledge(
+    raw: Mapping[str, Mapping[str, Any]],
+    stimuli: Iterable[Stimulus],
+    behaviours: Iterable[Behaviour],
+) -> dict[str, KnowledgeSet]:
+    """Knowledge sets from their data-file form, with `include` resolved."""
+    snames = {s.name for s in stimuli}
+    bnames = {b.name for b in behaviours}
+    done: dict[str, KnowledgeSet] = {}
+
+    def resolve(name: str, stack: tuple[str, ...]) -> KnowledgeSet:
+        if name in done:
+            return done[name]
+        if name in stack:
+            raise CatalogError(f"network {name!r} includes itself")
+        if name not in raw:
+            raise UnknownNameError(f"unknown network {name!r}")
+        spec = raw[name]
+        merged: dict[str, AssociationSpec] = {}
+        for inc in spec.get("include", []):
+            for a in resolve(str(inc), (*stack, name)).associations:
+                merged[f"{a.stimulus}\0{a.behaviour}"] = a
+        default_source = str(spec.get("source", "innate" if name == "innate" else "designed"))
+        for j, a in enumerate(spec.get("associations", [])):
+            where = f"network {name!r} association #{j}"
+            st = str(_need(a, "stimulus", where))
+            be = str(_need(a, "behaviour", where))
+            if st not in snames:
+                raise UnknownNameError(f"{where}: unknown stimulus {st!r}")
+            if be not in bnames:
+                raise UnknownNameError(f"{where}: unknown behaviour {be!r}")
+            strength = float(a.get("strength", 1.0))
+            if not 0.0 <= strength <= 1.0:
+                raise CatalogError(f"{where}: strength must be in [0, 1]")
+            merged[f"{st}\0{be}"] = AssociationSpec(
+                st, be, strength, a.get("source", default_source), bool(a.get("locked", False))
+            )
+        ks = KnowledgeSet(name, str(spec.get("description", "")), tuple(merged.values()))
+        done[name] = ks
+        return ks
+
+    for n in raw:
+        resolve(n, ())
+    return done
+
+
+def load_catalog(path: Path | None = None) -> Catalog:
+    """Load the catalogue from a data folder (srlab's own by default)."""
+    root = path or data_dir()
+    behaviours = parse_behaviours(_read(root / "behaviours.toml").get("behaviour", []))
+    sensors, stimuli = parse_sensors(_read(root / "sensors.toml").get("sensor", []))
+    raw_sets: dict[str, dict[str, Any]] = {}
+    for f in sorted((root / "networks").glob("*.toml")):
+        spec = _read(f)
+        raw_sets[str(spec.get("name", f.stem))] = spec
+    knowledge = parse_knowledge(raw_sets, stimuli, behaviours)
+    return Catalog(stimuli, behaviours, sensors, knowledge)

@@ -1,0 +1,199 @@
+"""The behaviour selection module: releasers, internal desires, competition, exploration."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+import numpy as np
+
+from core.brain.catalog import Catalog
+from core.brain.network import BehaviourNetwork
+from core.brain.perception import Perception
+
+
+class Strategy(StrEnum):
+    """How the behaviour to run is chosen among the released ones."""
+
+    COMPETITION = "competition"
+    """The paper's choice: behaviours over a threshold compete; the incumbent gets a small
+    self-excitation (hysteresis), the strongest wins."""
+    MAX = "max"
+    """The maximum behaviour value wins, threshold or not."""
+    PRIORITY = "priority"
+    """Subsumption: the highest-priority layer with a released behaviour wins."""
+
+
+class How(StrEnum):
+    """Where a decision came from."""
+
+    RELEASED = "released"
+    DEFAULT = "default"
+    EXPLORED = "explored"
+    CONTINUED = "continued"
+
+
+DEFAULT_DESIRES: Mapping[str, float] = {
+    "avoid_collision": 1.0,
+    "avoid_wall": 1.0,
+    "avoid_obstacle": 1.0,
+    "obey_signal": 1.0,
+    "follow_track": 1.0,
+    "keep_moving": 0.3,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class SelectionConfig:
+    """Parameters of behaviour selection.
+
+    Attributes:
+        strategy: competition (default), max or priority.
+        threshold: a behaviour value must reach this to compete.
+        hysteresis: bonus of the incumbent behaviour in a competition.
+        epsilon: probability per tick of exploring a random behaviour for an active learnable
+            stimulus that has no confident association.
+        confident: an association this strong stops exploration of its stimulus.
+        default_behaviour: what the keep-moving desire runs when nothing is released.
+        desires: internal desire level per objective; a releaser's value is the stimulus
+            strength x association strength x the desire of the stimulus' objective.
+    """
+
+    strategy: Strategy = Strategy.COMPETITION
+    threshold: float = 0.25
+    hysteresis: float = 0.05
+    epsilon: float = 0.0
+    confident: float = 0.8
+    default_behaviour: str = "goforward3"
+    desires: Mapping[str, float] = field(default_factory=lambda: dict(DEFAULT_DESIRES))
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.epsilon <= 1.0:
+            raise ValueError("epsilon must be in [0, 1]")
+        if not 0.0 <= self.threshold <= 1.0:
+            raise ValueError("threshold must be in [0, 1]")
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """The behaviour chosen for a tick and the stimulus credited with it (-1: none)."""
+
+    behaviour: int
+    stimulus: int
+    value: float
+    how: How
+
+
+class Selector:
+    """Releasers + desires + a selection strategy + epsilon-greedy exploration."""
+
+    def __init__(
+        self,
+        catalog: Catalog,
+        network: BehaviourNetwork,
+        perception: Perception,
+        config: SelectionConfig,
+        learnable: frozenset[int],
+        rng: np.random.Generator,
+    ) -> None:
+        self.network = network
+        self.config = config
+        self._strength = perception.strength
+        desires = dict(DEFAULT_DESIRES)
+        desires.update(config.desires)
+        self._gain = tuple(
+            s_strength * desires.get(s.objective, 1.0)
+            for s, s_strength in zip(catalog.stimuli, perception.strength, strict=True)
+        )
+        self._priority = tuple(s.priority for s in catalog.stimuli)
+        self._default = catalog.behaviour(config.default_behaviour).id
+        self._default_value = desires.get("keep_moving", 0.3)
+        self._n_behaviours = len(catalog.behaviours)
+        self._learnable = learnable
+        self._rng = rng
+        self._random = rng.random
+
+    @property
+    def priority(self) -> tuple[int, ...]:
+        """Priority layer of each stimulus."""
+        return self._priority
+
+    def values(self, active: list[int]) -> dict[int, tuple[float, int]]:
+        """Each released behaviour's value and the stimulus releasing it most."""
+        gain = self._gain
+        out: dict[int, tuple[float, int]] = {}
+        for s in active:
+            g = gain[s]
+            for a in self.network.releasers(s):
+                v = g * a.strength
+                cur = out.get(a.behaviour)
+                if cur is None or v > cur[0]:
+                    out[a.behaviour] = (v, s)
+        return out
+
+    def select(self, active: list[int], incumbent: int) -> Decision:
+        """Choose this tick's behaviour from the active stimuli."""
+        cfg = self.config
+        values = self.values(active)
+        decision = self._choose(values, active, incumbent)
+        if cfg.epsilon > 0.0 and self._learnable:
+            decision = self._explore(decision, active)
+        return decision
+
+    def _choose(
+        self, values: dict[int, tuple[float, int]], active: list[int], incumbent: int
+    ) -> Decision:
+        cfg = self.config
+        prio = self._priority
+        best_b = -1
+        best_key: tuple[float, ...] = ()
+        if cfg.strategy is Strategy.PRIORITY:
+            for b, (v, s) in values.items():
+                key: tuple[float, ...] = (prio[s], v, -b)
+                if v > 0.0 and key > best_key:
+                    best_b, best_key = b, key
+        else:
+            threshold = cfg.threshold if cfg.strategy is Strategy.COMPETITION else 0.0
+            bonus = cfg.hysteresis if cfg.strategy is Strategy.COMPETITION else 0.0
+            for b, (v, s) in values.items():
+                if v < threshold or v <= 0.0:
+                    continue
+                score = v + bonus if b == incumbent else v
+                key = (score, prio[s], -b)
+                if key > best_key:
+                    best_b, best_key = b, key
+        if best_b >= 0:
+            v, s = values[best_b]
+            return Decision(best_b, s, v, How.RELEASED)
+        return Decision(self._default, self.focus(active), self._default_value, How.DEFAULT)
+
+    def focus(self, active: list[int]) -> int:
+        """The most salient active stimulus (highest priority, then lowest id), or -1."""
+        prio = self._priority
+        best = -1
+        for s in active:
+            if best < 0 or prio[s] > prio[best]:
+                best = s
+        return best
+
+    def _explore(self, decision: Decision, active: list[int]) -> Decision:
+        learnable = self._learnable
+        prio = self._priority
+        confident = self.config.confident
+        target = -1
+        for s in active:
+            if (
+                s in learnable
+                and self.network.strongest(s) < confident
+                and (target < 0 or prio[s] > prio[target])
+            ):
+                target = s
+        if target < 0:
+            return decision
+        if decision.how is How.RELEASED and prio[decision.stimulus] > prio[target]:
+            return decision  # never explore over a reflex of a higher layer
+        if self._random() >= self.config.epsilon:
+            return decision
+        b = int(self._rng.integers(self._n_behaviours))
+        return Decision(b, target, 0.0, How.EXPLORED)

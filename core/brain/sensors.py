@@ -1,0 +1,34 @@
+"""The sensor module's logical sensors: data-declared rules compiled into one function."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+from core.brain.catalog import Catalog, RuleCondition
+
+StimulusDetector = Callable[[Sequence[float]], list[int]]
+
+
+def _condition_source(c: RuleCondition) -> str:
+    # Every piece is validated data: an int index, an operator from a closed set, a float.
+    return f"c[{int(c.channel)}] {c.op} {float(c.value)!r}"
+
+
+def compile_detector(catalog: Catalog) -> StimulusDetector:
+    """Compile every logical sensor's rules into one function: channels -> active stimulus ids.
+
+    The rules come from data files, so a new logical sensor needs no code; compiling them to
+    a single Python function keeps the per-tick cost to a few comparisons per stimulus.
+    """
+    lines = ["def detect(c):", "    active = []"]
+    for s in catalog.stimuli:
+        alternatives = " or ".join(
+            "(" + " and ".join(_condition_source(c) for c in alt) + ")" for alt in s.rule
+        )
+        lines.append(f"    if {alternatives}:")
+        lines.append(f"        active.append({int(s.id)})")
+    lines.append("    return active")
+    namespace: dict[str, object] = {}
+    exec(compile("\n".join(lines), "<srlab logical sensors>", "exec"), namespace)
+    detect: StimulusDetector = namespace["detect"]  # type: ignore[assignment]
+    return detect

@@ -1,0 +1,21 @@
+"""Errors the core raises; the server maps them to HTTP codes in one place."""
+
+
+class CoreError(Exception):
+    """Base of every error srlab's core raises on purpose."""
+
+
+class CatalogError(CoreError):
+    """A data file (stimuli, behaviours, logical sensors, networks) is malformed."""
+
+
+class UnknownNameError(CatalogError):
+    """A stimulus, behaviour, sensor, network or condition name that does not exist."""
+
+
+class SimulationStateError(CoreError):
+    """The simulation was used out of order, e.g. ticked before `reset`."""
+
+
+class LockedAssociationError(CoreError):
+    """An attempt to change an association that is locked."""

@@ -1,0 +1,68 @@
+"""Domain events: what happened during a tick, in the past tense."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from core.brain.memory import Credit
+
+
+class Outcome(StrEnum):
+    """How an episode ended."""
+
+    SUCCESS = "success"
+    FAILURE = "failure"
+
+
+class Cause(StrEnum):
+    """Why an episode failed."""
+
+    WALL_COLLISION = "wall_collision"
+    OBSTACLE_COLLISION = "obstacle_collision"
+    SIGNAL_VIOLATION = "signal_violation"
+    TIMEOUT = "timeout"
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeEnded:
+    """An episode finished."""
+
+    episode: int
+    outcome: Outcome
+    cause: Cause | None
+    ticks: int
+
+
+@dataclass(frozen=True, slots=True)
+class RewardApplied:
+    """A reward popped STM into LTM (Eq. 1)."""
+
+    tick: int
+    episode: int
+    value: float
+    source: str
+    note: str
+    credits: tuple[Credit, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class AssociationPromoted:
+    """An S-R pair's reliability passed the threshold: it joined the behaviour network."""
+
+    stimulus: int
+    behaviour: int
+    reliability: float
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class AssociationDemoted:
+    """A learned S-R pair's reliability fell below the threshold: it left the network."""
+
+    stimulus: int
+    behaviour: int
+    reliability: float
+
+
+Event = EpisodeEnded | RewardApplied | AssociationPromoted | AssociationDemoted

@@ -1,0 +1,245 @@
+"""The sensing kernel: sonars, camera and map odometry, computed analytically.
+
+The track's walls and the obstacle are axis-aligned boxes, so every sonar reading is a slab
+test; numba compiles this to machine code so sensing costs less than the physics step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numba
+import numpy as np
+
+INF = 1.0e9
+UNSEEN = 99.0
+
+# Layout of the geometry vector `g` the kernel reads (built by PymunkWorld).
+G_OUTER = 0  # 4: x0 y0 x1 y1
+G_INNER = 4  # 4
+G_SONAR_RANGE = 8
+G_SONAR_MOUNT = 9
+G_FOV_HALF = 10
+G_CAMERA_RANGE = 11
+G_CAMERA_OFFSET = 12
+G_LAMP_X = 13
+G_LAMP_Y = 14
+G_SIGNAL_LEG = 15
+G_STOPLINE_X = 16
+G_STOPLINE_Y = 17
+G_CORNER_TRIGGER = 18
+G_HALF_LENGTH = 19
+G_CORRIDOR = 20
+G_TRACK_HOLD = 21
+G_SIZE = 22
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _jit(f: _F) -> _F:
+    """Compile with numba, caching the machine code beside the module."""
+    return cast(_F, numba.njit(cache=True, nogil=True)(f))
+
+
+@_jit
+def ray_exit(px: float, py: float, dx: float, dy: float, box: Any) -> float:
+    """Distance along a ray from inside a box to the box's boundary."""
+    t = INF
+    if dx > 1e-12:
+        t = min(t, (box[2] - px) / dx)
+    elif dx < -1e-12:
+        t = min(t, (box[0] - px) / dx)
+    if dy > 1e-12:
+        t = min(t, (box[3] - py) / dy)
+    elif dy < -1e-12:
+        t = min(t, (box[1] - py) / dy)
+    return max(t, 0.0)
+
+
+@_jit
+def ray_entry(px: float, py: float, dx: float, dy: float, box: Any) -> float:
+    """Distance along a ray to where it enters a box (0 inside it, INF if it misses)."""
+    tmin = -INF
+    tmax = INF
+    if abs(dx) < 1e-12:
+        if px < box[0] or px > box[2]:
+            return INF
+    else:
+        t1 = (box[0] - px) / dx
+        t2 = (box[2] - px) / dx
+        if t1 > t2:
+            t1, t2 = t2, t1
+        tmin = max(tmin, t1)
+        tmax = min(tmax, t2)
+    if abs(dy) < 1e-12:
+        if py < box[1] or py > box[3]:
+            return INF
+    else:
+        t1 = (box[1] - py) / dy
+        t2 = (box[3] - py) / dy
+        if t1 > t2:
+            t1, t2 = t2, t1
+        tmin = max(tmin, t1)
+        tmax = min(tmax, t2)
+    if tmax < max(tmin, 0.0):
+        return INF
+    return max(tmin, 0.0)
+
+
+@_jit
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@_jit
+def _sees(
+    cx: float, cy: float, c: float, s: float, tx: float, ty: float, g: Any
+) -> tuple[bool, float, float, float]:
+    """Whether the camera at (cx, cy) heading (c, s) sees the point (tx, ty)."""
+    rx = tx - cx
+    ry = ty - cy
+    fwd = rx * c + ry * s
+    lat = -rx * s + ry * c
+    dist = math.sqrt(rx * rx + ry * ry)
+    if fwd <= 0.0 or dist > g[G_CAMERA_RANGE]:
+        return False, dist, fwd, lat
+    if abs(math.atan2(lat, fwd)) > g[G_FOV_HALF]:
+        return False, dist, fwd, lat
+    # The inner island is the only thing that hides a target on this track.
+    if ray_entry(cx, cy, rx, ry, g[G_INNER : G_INNER + 4]) < 1.0:
+        return False, dist, fwd, lat
+    return True, dist, fwd, lat
+
+
+@_jit
+def sense(
+    x: float,
+    y: float,
+    th: float,
+    g: Any,
+    sonar_angles: Any,
+    noise: Any,
+    obstacle: Any,
+    has_obstacle: bool,
+    lamp_color: float,
+    bumper: float,
+    track: Any,
+    vertices: Any,
+    directions: Any,
+    lengths: Any,
+    starts: Any,
+    out: Any,
+) -> None:
+    """Fill `out` (see core.sim.channels.Channel) for a robot at pose (x, y, th)."""
+    outer = g[G_OUTER : G_OUTER + 4]
+    inner = g[G_INNER : G_INNER + 4]
+    rng = g[G_SONAR_RANGE]
+    mount = g[G_SONAR_MOUNT]
+    for i in range(8):
+        a = th + sonar_angles[i]
+        dx = math.cos(a)
+        dy = math.sin(a)
+        ox = x + mount * dx
+        oy = y + mount * dy
+        walls = min(ray_exit(ox, oy, dx, dy, outer), ray_entry(ox, oy, dx, dy, inner))
+        seen = walls
+        if has_obstacle:
+            seen = min(seen, ray_entry(ox, oy, dx, dy, obstacle))
+        walls = min(walls, rng)
+        reading = min(max(min(seen, rng) + noise[i], 0.0), rng)
+        out[i] = reading
+        out[8 + i] = walls - reading
+
+    # Map odometry: the nearest leg of the centre line.
+    best = 0
+    best_d = INF
+    for leg in range(4):
+        ax = vertices[(leg + 3) % 4, 0]
+        ay = vertices[(leg + 3) % 4, 1]
+        along = (x - ax) * directions[leg, 0] + (y - ay) * directions[leg, 1]
+        along = min(max(along, 0.0), lengths[leg])
+        ex = ax + along * directions[leg, 0] - x
+        ey = ay + along * directions[leg, 1] - y
+        d = ex * ex + ey * ey
+        if d < best_d:
+            best_d = d
+            best = leg
+    ax = vertices[(best + 3) % 4, 0]
+    ay = vertices[(best + 3) % 4, 1]
+    dxl = directions[best, 0]
+    dyl = directions[best, 1]
+    along = (x - ax) * dxl + (y - ay) * dyl
+    vertex_ahead = lengths[best] - along
+    err_cur = _wrap(th - math.atan2(dyl, dxl))
+    nxt = (best + 1) % 4
+    err_next = _wrap(th - math.atan2(directions[nxt, 1], directions[nxt, 0]))
+    ref = best
+    err = err_cur
+    if vertex_ahead < 0.5 * g[G_CORRIDOR] and abs(err_next) < abs(err_cur):
+        ref = nxt
+        err = err_next
+    rax = vertices[(ref + 3) % 4, 0]
+    ray_ = vertices[(ref + 3) % 4, 1]
+    lateral = -(x - rax) * directions[ref, 1] + (y - ray_) * directions[ref, 0]
+    out[16] = lateral
+    out[17] = err
+    out[18] = vertex_ahead
+    out[19] = 1.0 if (ref == best and vertex_ahead < g[G_CORNER_TRIGGER]) else 0.0
+    out[26] = best
+    out[27] = starts[best] + min(max(along, 0.0), lengths[best])
+
+    # Camera.
+    c = math.cos(th)
+    s = math.sin(th)
+    cx = x + g[G_CAMERA_OFFSET] * c
+    cy = y + g[G_CAMERA_OFFSET] * s
+    out[20] = 0.0
+    out[21] = UNSEEN
+    out[22] = UNSEEN
+    out[29] = UNSEEN
+    if has_obstacle:
+        ocx = 0.5 * (obstacle[0] + obstacle[2])
+        ocy = 0.5 * (obstacle[1] + obstacle[3])
+        ok, _, _, _ = _sees(cx, cy, c, s, ocx, ocy, g)
+        if ok:
+            out[20] = 1.0
+            track[0] = 1.0
+            track[1] = ocx
+            track[2] = ocy
+            track[3] = 0.0
+        elif track[0] > 0.0:
+            track[3] += 1.0
+    # The obstacle's position on the map, from the camera's range and bearing and the
+    # robot's own pose, is tracked for a while after it leaves the field of view, as long
+    # as it is still ahead: where it lies across the corridor does not depend on where the
+    # robot points.
+    if track[0] > 0.0 and track[3] <= g[G_TRACK_HOLD]:
+        tx = track[1] - x
+        ty = track[2] - y
+        ahead = tx * directions[ref, 0] + ty * directions[ref, 1]
+        if ahead > -0.1:
+            out[21] = math.sqrt(tx * tx + ty * ty)
+            out[22] = -tx * directions[ref, 1] + ty * directions[ref, 0]
+            out[29] = (
+                -(track[1] - rax) * directions[ref, 1] + (track[2] - ray_) * directions[ref, 0]
+            )
+        else:
+            track[0] = 0.0
+    ok, _, _, _ = _sees(cx, cy, c, s, g[G_LAMP_X], g[G_LAMP_Y], g)
+    out[23] = lamp_color if ok else 0.0
+    if best == int(g[G_SIGNAL_LEG]):
+        ahead = (g[G_STOPLINE_X] - x) * dxl + (g[G_STOPLINE_Y] - y) * dyl
+        out[24] = ahead if ahead > 0.0 else UNSEEN
+        out[28] = ahead - g[G_HALF_LENGTH]
+    else:
+        out[24] = UNSEEN
+        out[28] = UNSEEN
+    out[25] = bumper
+    out[30] = th
+
+
+def empty_channels() -> np.ndarray[Any, np.dtype[np.float64]]:
+    """A channel vector to fill."""
+    return np.zeros(31, dtype=np.float64)

@@ -1,0 +1,365 @@
+"""The pymunk world: track walls, the AmigoBot, the traffic signal and the obstacle."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any, Literal, Protocol
+
+import numpy as np
+import pymunk
+
+from core.sim import _kernel as k
+from core.sim.robot import RobotConfig
+from core.sim.track import TrackConfig, TrackGeometry
+
+CollisionKind = Literal["wall", "obstacle"]
+
+_ROBOT, _WALL, _OBSTACLE = 1, 2, 3
+
+
+class LampColor(IntEnum):
+    """The lamp's colour as the camera channel encodes it (the paper's "Blue" is green)."""
+
+    NONE = 0
+    RED = 1
+    YELLOW = 2
+    GREEN = 3
+
+
+@dataclass(frozen=True, slots=True)
+class WorldConfig:
+    """Everything that defines the simulated world.
+
+    Attributes:
+        track: the corridor, signal and obstacle.
+        robot: the AmigoBot.
+        dt_s: the fixed tick, seconds; the physics steps once per tick.
+        max_ticks: an episode's time limit in ticks (120 s by default).
+    """
+
+    track: TrackConfig = field(default_factory=TrackConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    dt_s: float = 0.1
+    max_ticks: int = 1200
+
+    def __post_init__(self) -> None:
+        if self.dt_s <= 0 or self.max_ticks <= 0:
+            raise ValueError("dt_s and max_ticks must be positive")
+
+
+@dataclass(frozen=True, slots=True)
+class MotorCommand:
+    """Wheel command for one tick: forward speed and turning rate (+ = left)."""
+
+    speed_mps: float
+    turn_rad_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeLayout:
+    """What is random in an episode: where the obstacle is and how the lamp cycles."""
+
+    obstacle_center: tuple[float, float] | None
+    obstacle_leg: int
+    signal_phases: tuple[tuple[LampColor, int], ...]
+    """The lamp's cycle as (colour, ticks), repeated if the episode outlasts it."""
+
+
+@dataclass(frozen=True, slots=True)
+class SensorFrame:
+    """All physical readings after a step, plus what the world itself judged.
+
+    `channels` is indexed by `core.sim.channels.Channel`. `collision` and `violation` are the
+    referee's view (the robot only knows what its bumper and camera report).
+    """
+
+    tick: int
+    x: float
+    y: float
+    heading_rad: float
+    channels: np.ndarray[Any, np.dtype[np.float64]]
+    lamp: LampColor
+    collision: CollisionKind | None
+    violation: bool
+
+
+class World(Protocol):
+    """What the brain's simulation needs from a world."""
+
+    config: WorldConfig
+    geometry: TrackGeometry
+
+    def reset(self, seed: int, episode: int) -> SensorFrame:
+        """Start episode `episode` of the run seeded `seed`; return the first frame."""
+        ...
+
+    def apply(self, command: MotorCommand) -> None:
+        """Set the wheel command for the next step."""
+        ...
+
+    def step(self) -> SensorFrame:
+        """Advance one tick and sense."""
+        ...
+
+    @property
+    def layout(self) -> EpisodeLayout:
+        """The current episode's layout."""
+        ...
+
+
+def episode_layout(
+    config: WorldConfig, geometry: TrackGeometry, seed: int, episode: int
+) -> EpisodeLayout:
+    """Draw an episode's obstacle and lamp cycle from (seed, episode) alone.
+
+    Every condition of an experiment meets the same obstacles and lamp cycles for the same
+    seed and episode, whatever happened in earlier episodes (common random numbers).
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 1]))
+    track = config.track
+    obs = track.obstacle
+    half = track.corridor_width_m / 2
+    center: tuple[float, float] | None = None
+    leg_chosen = -1
+    if obs.enabled:
+        straights = [
+            (
+                leg,
+                half + obs.corner_margin_m,
+                float(geometry.leg_lengths_m[leg]) - half - obs.corner_margin_m,
+            )
+            for leg in range(4)
+        ]
+        total = sum(max(hi - lo, 0.0) for _, lo, hi in straights)
+        stop_leg = track.signal.leg
+        stop_along = _along(geometry, stop_leg, geometry.stopline_point)
+        for _ in range(1000):
+            leg, along = _pick_on_straights(straights, rng.random() * total)
+            lateral = (rng.random() * 2 - 1) * obs.max_lateral_m
+            if leg == 0 and -0.3 <= along - track.start_along_m <= obs.start_clearance_m:
+                continue
+            if leg == stop_leg and abs(along - stop_along) < obs.stopline_clearance_m:
+                continue
+            center = geometry.point_on_leg(leg, along, lateral)
+            leg_chosen = leg
+            break
+        else:  # pragma: no cover - the keep-outs never cover the whole track
+            raise RuntimeError("no place for the obstacle")
+    sig = track.signal
+    per_s = 1.0 / config.dt_s
+    n = 64
+    reds = np.maximum(1, np.rint(rng.uniform(*sig.red_s, n) * per_s)).astype(int).tolist()
+    greens = np.maximum(1, np.rint(rng.uniform(*sig.green_s, n) * per_s)).astype(int).tolist()
+    yellow = max(1, round(sig.yellow_s * per_s))
+    phases: list[tuple[LampColor, int]] = []
+    for red, green in zip(reds, greens, strict=True):
+        phases += [(LampColor.RED, red), (LampColor.GREEN, green), (LampColor.YELLOW, yellow)]
+    shift = int(rng.integers(len(phases) // 2))
+    return EpisodeLayout(
+        obstacle_center=center,
+        obstacle_leg=leg_chosen,
+        signal_phases=tuple(phases[shift:] + phases[:shift]),
+    )
+
+
+def _pick_on_straights(straights: list[tuple[int, float, float]], u: float) -> tuple[int, float]:
+    """The (leg, along) at distance `u` along the concatenated straights."""
+    for leg, lo, hi in straights:
+        span = max(hi - lo, 0.0)
+        if u <= span:
+            return leg, lo + u
+        u -= span
+    leg, lo, hi = straights[-1]
+    return leg, hi
+
+
+def _along(geometry: TrackGeometry, leg: int, point: tuple[float, float]) -> float:
+    start = geometry.vertices[(leg - 1) % 4]
+    return float(np.dot(np.asarray(point) - start, geometry.directions[leg]))
+
+
+class PymunkWorld:
+    """The world simulated with pymunk: rigid body contacts, analytic sensing.
+
+    The robot is a dynamic box driven by setting its velocity each step (a differential
+    drive without wheel slip); the walls and the obstacle are static. Contacts come from
+    pymunk's collision callbacks; sonar, camera and odometry readings from the sensing kernel.
+    """
+
+    def __init__(self, config: WorldConfig | None = None) -> None:
+        self.config = config or WorldConfig()
+        self.geometry = TrackGeometry.build(self.config.track)
+        robot = self.config.robot
+        geo = self.geometry
+        self._space = pymunk.Space()
+        for a, b in geo.wall_segments():
+            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
+            seg.collision_type = _WALL
+            self._space.add(seg)
+        self._body = pymunk.Body(
+            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
+        )
+        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
+        self._robot_shape.collision_type = _ROBOT
+        self._space.add(self._body, self._robot_shape)
+        self._obstacle_body = pymunk.Body(body_type=pymunk.Body.STATIC)
+        size = self.config.track.obstacle.size_m
+        self._obstacle_shape = pymunk.Poly.create_box(self._obstacle_body, (size, size))
+        self._obstacle_shape.collision_type = _OBSTACLE
+        self._space.add(self._obstacle_body, self._obstacle_shape)
+        self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
+        self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
+
+        g = np.zeros(k.G_SIZE)
+        g[k.G_OUTER : k.G_OUTER + 4] = geo.outer_box
+        g[k.G_INNER : k.G_INNER + 4] = geo.inner_box
+        g[k.G_SONAR_RANGE] = robot.sonar_range_m
+        g[k.G_SONAR_MOUNT] = robot.sonar_mount_m
+        g[k.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
+        g[k.G_CAMERA_RANGE] = robot.camera_range_m
+        g[k.G_CAMERA_OFFSET] = robot.camera_offset_m
+        g[k.G_LAMP_X], g[k.G_LAMP_Y] = geo.lamp_point
+        g[k.G_SIGNAL_LEG] = self.config.track.signal.leg
+        g[k.G_STOPLINE_X], g[k.G_STOPLINE_Y] = geo.stopline_point
+        g[k.G_CORNER_TRIGGER] = 0.1
+        g[k.G_HALF_LENGTH] = robot.length_m / 2
+        g[k.G_CORRIDOR] = self.config.track.corridor_width_m
+        g[k.G_TRACK_HOLD] = robot.camera_track_ticks
+        self._track = np.zeros(4)
+        self._g = g
+        self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
+        self._obstacle_box = np.zeros(4)
+        self._has_obstacle = False
+        self._channels = k.empty_channels()
+        self._noise = np.zeros((0, 8))
+        self._noise_at = 0
+        self._rng = np.random.default_rng(0)
+        self._command = MotorCommand(0.0, 0.0)
+        self._tick = 0
+        self._hit: CollisionKind | None = None
+        self._phase_index = 0
+        self._phase_left = 0
+        self._lamp = LampColor.RED
+        self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
+        self._front_to_line = k.UNSEEN
+
+    @property
+    def layout(self) -> EpisodeLayout:
+        """The current episode's layout."""
+        return self._layout
+
+    def _on_wall(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        if self._hit is None:
+            self._hit = "wall"
+
+    def _on_obstacle(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data: Any) -> None:
+        self._hit = "obstacle"
+
+    def reset(self, seed: int, episode: int) -> SensorFrame:
+        """Start episode `episode` of the run seeded `seed`; return the first frame."""
+        layout = episode_layout(self.config, self.geometry, seed, episode)
+        self._layout = layout
+        self._rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 2]))
+        self._refill_noise()
+        x, y, th = self.geometry.start_pose
+        self._body.position = (x, y)
+        self._body.angle = th
+        self._body.velocity = (0.0, 0.0)
+        self._body.angular_velocity = 0.0
+        self._space.reindex_shapes_for_body(self._body)
+        if layout.obstacle_center is None:
+            self._has_obstacle = False
+            self._obstacle_body.position = (-100.0, -100.0)
+        else:
+            self._has_obstacle = True
+            ox, oy = layout.obstacle_center
+            half = self.config.track.obstacle.size_m / 2
+            self._obstacle_box[:] = (ox - half, oy - half, ox + half, oy + half)
+            self._obstacle_body.position = (ox, oy)
+        self._space.reindex_shapes_for_body(self._obstacle_body)
+        self._track[:] = 0.0
+        self._phase_index = 0
+        self._lamp, self._phase_left = layout.signal_phases[0]
+        self._command = MotorCommand(0.0, 0.0)
+        self._tick = 0
+        self._hit = None
+        frame = self._sense(violation=False)
+        self._front_to_line = float(frame.channels[28])
+        return frame
+
+    def apply(self, command: MotorCommand) -> None:
+        """Set the wheel command for the next step (clipped to the robot's limits)."""
+        self._command = command
+
+    def step(self) -> SensorFrame:
+        """Advance one tick: drive, step the physics, cycle the lamp, referee, sense."""
+        robot = self.config.robot
+        cmd = self._command
+        v = min(max(cmd.speed_mps, -robot.max_speed_mps), robot.max_speed_mps)
+        w_max = robot.max_turn_rad_s
+        w = min(max(cmd.turn_rad_s, -w_max), w_max)
+        body = self._body
+        th = body.angle
+        body.velocity = (v * math.cos(th), v * math.sin(th))
+        body.angular_velocity = w
+        self._hit = None
+        self._space.step(self.config.dt_s)
+        self._tick += 1
+        self._phase_left -= 1
+        if self._phase_left <= 0:
+            phases = self._layout.signal_phases
+            self._phase_index = (self._phase_index + 1) % len(phases)
+            self._lamp, self._phase_left = phases[self._phase_index]
+        frame = self._sense(violation=False)
+        front = float(frame.channels[28])
+        crossed = self._front_to_line > 0.0 >= front and self._front_to_line < k.UNSEEN
+        self._front_to_line = front
+        if crossed and self._lamp == LampColor.RED:
+            return SensorFrame(
+                frame.tick,
+                frame.x,
+                frame.y,
+                frame.heading_rad,
+                frame.channels,
+                frame.lamp,
+                frame.collision,
+                True,
+            )
+        return frame
+
+    def _refill_noise(self) -> None:
+        self._noise = self._rng.normal(0.0, self.config.robot.sonar_noise_m, (256, 8))
+        self._noise_at = 0
+
+    def _sense(self, violation: bool) -> SensorFrame:
+        if self._noise_at >= len(self._noise):
+            self._refill_noise()
+        noise = self._noise[self._noise_at]
+        self._noise_at += 1
+        pos = self._body.position
+        th = self._body.angle
+        geo = self.geometry
+        out = self._channels
+        k.sense(
+            pos.x,
+            pos.y,
+            th,
+            self._g,
+            self._sonar_angles,
+            noise,
+            self._obstacle_box,
+            self._has_obstacle,
+            float(self._lamp),
+            1.0 if self._hit else 0.0,
+            self._track,
+            geo.vertices,
+            geo.directions,
+            geo.leg_lengths_m,
+            geo.leg_start_m,
+            out,
+        )
+        return SensorFrame(
+            self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
+        )

@@ -1,0 +1,226 @@
+"""The synchronous simulation: a world and a brain, stepped one tick at a time."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from core.brain.brain import Brain, BrainConfig, RewardOutcome
+from core.brain.catalog import Catalog, load_catalog
+from core.brain.network import BehaviourNetwork
+from core.brain.selection import How
+from core.commands import InjectReward
+from core.conditions import Condition
+from core.errors import SimulationStateError
+from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied
+from core.sim.channels import Channel
+from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
+
+_PROGRESS = int(Channel.PROGRESS_M)
+
+
+@dataclass(frozen=True, slots=True)
+class TickInputs:
+    """What reaches the robot from outside at a tick boundary."""
+
+    rewards: tuple[InjectReward, ...] = ()
+
+
+NO_INPUTS = TickInputs()
+
+
+@dataclass(frozen=True, slots=True)
+class Snapshot:
+    """The state after a tick: what the robot sensed and did, and where the episode stands."""
+
+    episode: int
+    tick: int
+    episode_tick: int
+    x: float
+    y: float
+    heading_rad: float
+    stimuli: tuple[int, ...]
+    behaviour: int
+    how: How
+    lamp: LampColor
+    progress_m: float
+    outcome: Outcome | None = None
+    cause: Cause | None = None
+
+    @property
+    def done(self) -> bool:
+        """Whether the episode has ended."""
+        return self.outcome is not None
+
+
+@dataclass(frozen=True, slots=True)
+class TickResult:
+    """A tick's new snapshot and the events it produced."""
+
+    snapshot: Snapshot
+    events: tuple[Event, ...] = field(default=())
+
+
+class Simulation:
+    """The world and the brain, with episodes, the referee and the delayed reward.
+
+    `reset()` starts the next episode; `tick()` advances one tick. Everything random comes
+    from `seed` (the obstacle and the lamp per episode, sonar noise, exploration), so the
+    same seed and the same rewards give the same trajectory and LTM, bit for bit.
+    """
+
+    def __init__(
+        self,
+        condition: Condition,
+        seed: int,
+        *,
+        world: World | None = None,
+        world_config: WorldConfig | None = None,
+        catalog: Catalog | None = None,
+        network: BehaviourNetwork | None = None,
+        brain_config: BrainConfig | None = None,
+        end_on_failure: bool = True,
+    ) -> None:
+        self.condition = condition
+        self.seed = seed
+        self.catalog = catalog or load_catalog()
+        self.world = world or PymunkWorld(world_config)
+        if network is None:
+            network = BehaviourNetwork.from_specs(
+                self.catalog, self.catalog.knowledge_set(condition.network).associations
+            )
+        brain_rng = np.random.default_rng(np.random.SeedSequence([seed, 0, 3]))
+        self.brain = Brain(
+            self.catalog,
+            network,
+            brain_config or condition.brain_config(),
+            self.world.config.robot,
+            brain_rng,
+            self.world.config.dt_s,
+        )
+        self.end_on_failure = end_on_failure
+        self.episode = -1
+        self.tick_count = 0
+        self._episode_tick = 0
+        self._lap = self.world.geometry.lap_length_m
+        self._max_ticks = self.world.config.max_ticks
+        self._progress = 0.0
+        self._last_p = 0.0
+        self._cause: Cause | None = None
+        self._done = True
+        self._snapshot: Snapshot | None = None
+
+    @property
+    def snapshot(self) -> Snapshot:
+        """The latest snapshot."""
+        if self._snapshot is None:
+            raise SimulationStateError("call reset() before reading the snapshot")
+        return self._snapshot
+
+    def reset(self) -> Snapshot:
+        """Start the next episode and return its first snapshot."""
+        self.episode += 1
+        frame = self.world.reset(self.seed, self.episode)
+        self.brain.reset_episode()
+        self._episode_tick = 0
+        self._progress = 0.0
+        self._last_p = float(frame.channels[_PROGRESS])
+        self._cause = None
+        self._done = False
+        self._channels = frame.channels.tolist()
+        self._snapshot = Snapshot(
+            self.episode,
+            self.tick_count,
+            0,
+            frame.x,
+            frame.y,
+            frame.heading_rad,
+            (),
+            -1,
+            How.DEFAULT,
+            frame.lamp,
+            0.0,
+        )
+        return self._snapshot
+
+    def reward(self, value: float, source: str = "trainer", note: str = "") -> RewardApplied:
+        """Apply a reward now, between ticks: it credits every STM record so far."""
+        return self._reward(InjectReward(value, note, source))[0]
+
+    def _reward(self, r: InjectReward) -> tuple[RewardApplied, RewardOutcome]:
+        outcome = self.brain.reward(self.tick_count + 1, r.value)
+        event = RewardApplied(
+            self.tick_count + 1, self.episode, r.value, r.source, r.note, outcome.credits
+        )
+        return event, outcome
+
+    def tick(self, inputs: TickInputs = NO_INPUTS) -> TickResult:
+        """Advance one tick: rewards at the boundary, then sense to act, step, referee."""
+        if self._done:
+            raise SimulationStateError("the episode is over: call reset() first")
+        events: list[Event] = []
+        for r in inputs.rewards:
+            event, applied = self._reward(r)
+            events.append(event)
+            events.extend(applied.changes)
+        self.tick_count += 1
+        self._episode_tick += 1
+        brain = self.brain
+        active, command = brain.step(self.tick_count, self._channels)
+        self.world.apply(command)
+        frame = self.world.step()
+        channels = frame.channels.tolist()
+        self._channels = channels
+        p = channels[_PROGRESS]
+        ds = p - self._last_p
+        half = self._lap / 2
+        if ds < -half:
+            ds += self._lap
+        elif ds > half:
+            ds -= self._lap
+        self._progress += ds
+        self._last_p = p
+
+        if self._cause is None:
+            if frame.collision == "wall":
+                self._cause = Cause.WALL_COLLISION
+            elif frame.collision == "obstacle":
+                self._cause = Cause.OBSTACLE_COLLISION
+            elif frame.violation:
+                self._cause = Cause.SIGNAL_VIOLATION
+        outcome: Outcome | None = None
+        cause = self._cause
+        if cause is not None and self.end_on_failure:
+            outcome = Outcome.FAILURE
+        elif self._progress >= self._lap:
+            outcome = Outcome.SUCCESS if cause is None else Outcome.FAILURE
+        elif self._episode_tick >= self._max_ticks:
+            outcome = Outcome.FAILURE
+            cause = cause or Cause.TIMEOUT
+        decision = brain.last
+        snap = Snapshot(
+            self.episode,
+            self.tick_count,
+            self._episode_tick,
+            frame.x,
+            frame.y,
+            frame.heading_rad,
+            tuple(active),
+            decision.behaviour,
+            decision.how,
+            frame.lamp,
+            self._progress,
+            outcome,
+            cause,
+        )
+        self._snapshot = snap
+        if outcome is not None:
+            self._done = True
+            events.append(EpisodeEnded(self.episode, outcome, cause, self._episode_tick))
+            reward = self.condition.success_reward
+            if outcome is Outcome.SUCCESS and reward is not None:
+                event, rout = self._reward(InjectReward(reward, "lap completed", "task"))
+                events.append(event)
+                events.extend(rout.changes)
+        return TickResult(snap, tuple(events))

@@ -1,0 +1,1 @@
+"""srlab adapters: the command line, and later the HTTP service, persistence and 3D view."""

@@ -1,0 +1,213 @@
+"""The `srlab` command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import IO, Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from core.brain.catalog import Catalog, load_catalog
+from core.brain.selection import Strategy
+from core.conditions import CONDITIONS, get_condition
+from core.errors import CoreError
+from core.events import Outcome
+from core.runner import EpisodeSummary, RunSummary, run
+from core.simulation import Snapshot
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every `srlab` command."""
+    parser = argparse.ArgumentParser(
+        prog="srlab",
+        description="A behaviour-based control and learning architecture with knowledge "
+        "propagation (Suh et al.), on a simulated AmigoBot.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sim = sub.add_parser(
+        "simulate",
+        help="run a condition headless for some episodes and summarise the outcomes",
+        description="Run a condition headless and summarise successes and failures.",
+    )
+    sim.add_argument(
+        "--condition",
+        required=True,
+        choices=sorted(CONDITIONS),
+        help="which knowledge and learning the robot has",
+    )
+    sim.add_argument("--episodes", type=_positive_int, default=50, help="episodes (default 50)")
+    sim.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    sim.add_argument(
+        "--strategy",
+        choices=[s.value for s in Strategy],
+        default=None,
+        help="behaviour selection strategy (default: the condition's, competition)",
+    )
+    sim.add_argument("--json", action="store_true", help="print one JSON object, nothing else")
+    sim.add_argument(
+        "--trace",
+        type=Path,
+        metavar="FILE",
+        help="write every tick (pose, stimuli, behaviour) as JSON lines to FILE",
+    )
+    sim.add_argument(
+        "--quiet", action="store_true", help="no progress bar (it goes to stderr)"
+    )
+    return parser
+
+
+class _TraceWriter:
+    """Writes one JSON line per tick with names instead of ids."""
+
+    def __init__(self, out: IO[str], catalog: Catalog) -> None:
+        self._out = out
+        self._stimuli = [s.name for s in catalog.stimuli]
+        self._behaviours = [b.name for b in catalog.behaviours]
+
+    def __call__(self, s: Snapshot) -> None:
+        row: dict[str, Any] = {
+            "episode": s.episode,
+            "tick": s.tick,
+            "episode_tick": s.episode_tick,
+            "x": round(s.x, 4),
+            "y": round(s.y, 4),
+            "heading_rad": round(s.heading_rad, 4),
+            "stimuli": [self._stimuli[i] for i in s.stimuli],
+            "behaviour": self._behaviours[s.behaviour] if s.behaviour >= 0 else None,
+            "how": s.how.value,
+            "lamp": s.lamp.name.lower(),
+            "progress_m": round(s.progress_m, 3),
+        }
+        if s.outcome is not None:
+            row["outcome"] = s.outcome.value
+            row["cause"] = s.cause.value if s.cause else None
+        self._out.write(json.dumps(row) + "\n")
+
+
+def summary_dict(result: RunSummary) -> dict[str, Any]:
+    """The `--json` form of a run's summary."""
+    return {
+        "condition": result.condition,
+        "seed": result.seed,
+        "episodes": len(result.episodes),
+        "successes": result.successes,
+        "success_rate": result.success_rate,
+        "failures": result.failures(),
+        "ticks": result.ticks,
+    }
+
+
+def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    condition = get_condition(args.condition)
+    catalog = load_catalog()
+    brain_config = None
+    if args.strategy is not None:
+        from dataclasses import replace
+
+        base = condition.brain_config()
+        brain_config = replace(
+            base, selection=replace(base.selection, strategy=Strategy(args.strategy))
+        )
+    err_console = Console(file=stderr, stderr=True)
+    progress = Progress(
+        TextColumn(f"[bold]{condition.name}[/] seed {args.seed}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[ok]} ok"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+        disable=args.quiet,
+    )
+    task = progress.add_task("episodes", total=args.episodes, ok=0)
+    successes = 0
+
+    def on_episode(e: EpisodeSummary) -> None:
+        nonlocal successes
+        successes += e.outcome is Outcome.SUCCESS
+        progress.update(task, advance=1, ok=successes)
+
+    trace_file = None
+    try:
+        if args.trace is not None:
+            trace_file = args.trace.open("w", encoding="utf-8")
+        started = time.perf_counter()
+        with progress:
+            result = run(
+                condition,
+                args.seed,
+                args.episodes,
+                catalog=catalog,
+                brain_config=brain_config,
+                on_episode=on_episode,
+                on_tick=_TraceWriter(trace_file, catalog) if trace_file else None,
+            )
+        elapsed = time.perf_counter() - started
+    finally:
+        if trace_file is not None:
+            trace_file.close()
+
+    if args.json:
+        stdout.write(json.dumps(summary_dict(result)) + "\n")
+        return 0
+    console = Console(file=stdout)
+    table = Table(title=f"srlab simulate: {condition.name}, seed {args.seed}", show_header=False)
+    table.add_column("what")
+    table.add_column("value", justify="right")
+    table.add_row("episodes", str(len(result.episodes)))
+    table.add_row("successes", str(result.successes))
+    table.add_row("success rate", f"{result.success_rate:.1%}")
+    for cause, count in result.failures().items():
+        table.add_row(f"  {cause.replace('_', ' ')}", str(count))
+    table.add_row("ticks", f"{result.ticks:,}")
+    table.add_row("ticks/s", f"{result.ticks / elapsed:,.0f}" if elapsed > 0 else "-")
+    console.print(table)
+    if args.trace is not None:
+        console.print(f"trace written to {args.trace}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `srlab` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "simulate":
+            return _simulate(args, sys.stdout, sys.stderr)
+    except (CoreError, ValueError, OSError) as e:
+        parser.exit(2, f"srlab: error: {e}\n")
+    except KeyboardInterrupt:
+        parser.exit(130, "srlab: interrupted\n")
+    parser.error(f"unknown command {args.command!r}")
+    return 2  # pragma: no cover - parser.error exits
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
