@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from core.brain.brain import BrainConfig, LearningConfig
+from core.brain.propagation import KpConfig
 from core.brain.selection import SelectionConfig
 from core.errors import UnknownNameError
 
@@ -21,6 +22,9 @@ class Condition:
         epsilon: exploration rate of the learnable stimuli.
         success_reward: the delayed reward a successful lap gives (None: none).
         learnable_sensors: the logical sensors whose stimuli are explored and learned.
+        trainer: the reinforcement program that rewards responses at once (None: none).
+        kp: whether knowledge propagation runs.
+        agent: ``brain`` (the paper's architecture) or ``qlambda`` (the baseline learner).
     """
 
     name: str
@@ -30,14 +34,18 @@ class Condition:
     epsilon: float = 0.0
     success_reward: float | None = None
     learnable_sensors: tuple[str, ...] = ("signal", "camera_obstacle")
+    trainer: str | None = None
+    kp: bool = False
+    agent: str = "brain"
 
-    def brain_config(self, eta: float = 0.1) -> BrainConfig:
+    def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
         return BrainConfig(
             selection=SelectionConfig(epsilon=self.epsilon if self.learning else 0.0),
             learning=LearningConfig(
                 enabled=self.learning, eta=eta, learnable_sensors=self.learnable_sensors
             ),
+            kp=KpConfig(enabled=self.kp, eta=eta, synthesize=synthesize),
         )
 
 
@@ -56,6 +64,45 @@ CONDITIONS: dict[str, Condition] = {
             learning=True,
             epsilon=0.1,
             success_reward=1.0,
+        ),
+        Condition(
+            "dp",
+            "Direct programming: signal and six camera obstacle responses programmed and "
+            "locked; R-L, R-M and R-R learned from the delayed reward.",
+            network="dp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+        ),
+        Condition(
+            "rp",
+            "A reinforcement program rewards signal and camera obstacle responses at once "
+            "(+1 acceptable, -1 not), plus the delayed reward.",
+            network="innate",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            trainer="rp",
+        ),
+        Condition(
+            "kp",
+            "Sonar and signal S-R designed (Fig. 13); camera obstacle responses learned by "
+            "knowledge propagation from the delayed reward.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            kp=True,
+        ),
+        Condition(
+            "qlambda",
+            "Tabular Watkins Q(lambda) on the same stimuli, behaviours and delayed reward, "
+            "starting from the KP condition's design.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            agent="qlambda",
         ),
         Condition(
             "expert",

@@ -61,11 +61,15 @@ def run(
     brain_config: BrainConfig | None = None,
     on_episode: Callable[[EpisodeSummary], None] | None = None,
     on_tick: Callable[[Snapshot], None] | None = None,
+    simulation: Simulation | None = None,
 ) -> RunSummary:
-    """Run `episodes` episodes of a condition from `seed` and summarise them."""
+    """Run `episodes` episodes of a condition from `seed` and summarise them.
+
+    Pass `simulation` to run a prepared one (and read its brain afterwards).
+    """
     if episodes < 1:
         raise ValueError("episodes must be >= 1")
-    sim = Simulation(
+    sim = simulation or Simulation(
         condition, seed, world_config=world_config, catalog=catalog, brain_config=brain_config
     )
     results: list[EpisodeSummary] = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +17,7 @@ from core.errors import SimulationStateError
 from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied
 from core.sim.channels import Channel
 from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
+from core.trainer import ReinforcementProgram, load_trainer
 
 _PROGRESS = int(Channel.PROGRESS_M)
 
@@ -25,6 +27,8 @@ class TickInputs:
     """What reaches the robot from outside at a tick boundary."""
 
     rewards: tuple[InjectReward, ...] = ()
+    behaviour: int = -1
+    """A behaviour chosen by an external learner for this tick (-1: the brain chooses)."""
 
 
 NO_INPUTS = TickInputs()
@@ -99,6 +103,10 @@ class Simulation:
             brain_rng,
             self.world.config.dt_s,
         )
+        self.trainer: ReinforcementProgram | None = (
+            load_trainer(self.catalog, condition.trainer) if condition.trainer else None
+        )
+        self._pending: list[InjectReward] = []
         self.end_on_failure = end_on_failure
         self.episode = -1
         self.tick_count = 0
@@ -128,6 +136,7 @@ class Simulation:
         self._last_p = float(frame.channels[_PROGRESS])
         self._cause = None
         self._done = False
+        self._pending.clear()
         self._channels = frame.channels.tolist()
         self._snapshot = Snapshot(
             self.episode,
@@ -143,6 +152,10 @@ class Simulation:
             0.0,
         )
         return self._snapshot
+
+    def upcoming_stimuli(self) -> list[int]:
+        """The stimuli the next tick will act on (sensed at the end of the last one)."""
+        return self.brain.stimuli(self._channels)
 
     def reward(self, value: float, source: str = "trainer", note: str = "") -> RewardApplied:
         """Apply a reward now, between ticks: it credits every STM record so far."""
@@ -160,14 +173,19 @@ class Simulation:
         if self._done:
             raise SimulationStateError("the episode is over: call reset() first")
         events: list[Event] = []
-        for r in inputs.rewards:
-            event, applied = self._reward(r)
-            events.append(event)
-            events.extend(applied.changes)
+        if self._pending:
+            self._apply_rewards(self._pending, events)
+            self._pending = []
+        if inputs.rewards:
+            self._apply_rewards(inputs.rewards, events)
         self.tick_count += 1
         self._episode_tick += 1
         brain = self.brain
-        active, command = brain.step(self.tick_count, self._channels)
+        active, command = brain.step(self.tick_count, self._channels, inputs.behaviour)
+        if self.trainer is not None:
+            judged = self.trainer.judge(brain.last)
+            if judged is not None:
+                self._pending.append(InjectReward(judged, self.trainer.name, "program"))
         self.world.apply(command)
         frame = self.world.step()
         channels = frame.channels.tolist()
@@ -217,10 +235,17 @@ class Simulation:
         self._snapshot = snap
         if outcome is not None:
             self._done = True
+            if self._pending:
+                self._apply_rewards(self._pending, events)
+                self._pending = []
             events.append(EpisodeEnded(self.episode, outcome, cause, self._episode_tick))
             reward = self.condition.success_reward
             if outcome is Outcome.SUCCESS and reward is not None:
-                event, rout = self._reward(InjectReward(reward, "lap completed", "task"))
-                events.append(event)
-                events.extend(rout.changes)
+                self._apply_rewards([InjectReward(reward, "lap completed", "task")], events)
         return TickResult(snap, tuple(events))
+
+    def _apply_rewards(self, rewards: Iterable[InjectReward], events: list[Event]) -> None:
+        for r in rewards:
+            event, applied = self._reward(r)
+            events.append(event)
+            events.extend(applied.changes)

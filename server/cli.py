@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -19,6 +21,7 @@ from core.brain.selection import Strategy
 from core.conditions import CONDITIONS, get_condition
 from core.errors import CoreError
 from core.events import Outcome
+from core.experiment import TaskResult
 from core.runner import EpisodeSummary, RunSummary, run
 from core.simulation import Snapshot
 
@@ -77,9 +80,46 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="write every tick (pose, stimuli, behaviour) as JSON lines to FILE",
     )
-    sim.add_argument(
-        "--quiet", action="store_true", help="no progress bar (it goes to stderr)"
+    sim.add_argument("--quiet", action="store_true", help="no progress bar (it goes to stderr)")
+
+    exp = sub.add_parser(
+        "experiment",
+        help="run conditions x seeds x episodes in parallel and write a report",
+        description="Run the paper's comparison: every condition for every seed, in "
+        "parallel processes, then write summary.json, summary.md, runs.jsonl, "
+        "learning_curves.png and reliability.png to --out.",
     )
+    exp.add_argument(
+        "--conditions",
+        default="innate,delayed,dp,rp,kp,qlambda",
+        help=f"comma-separated, from: {', '.join(CONDITIONS)} (default: the paper's four, "
+        "innate and qlambda)",
+    )
+    exp.add_argument("--seeds", type=_positive_int, default=20, help="seeds 0..N-1 (default 20)")
+    exp.add_argument("--seed-base", type=_seed, default=0, help="first seed (default 0)")
+    exp.add_argument(
+        "--episodes", type=_positive_int, default=50, help="episodes per seed (default 50)"
+    )
+    exp.add_argument(
+        "--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes"
+    )
+    exp.add_argument("--out", type=Path, default=Path("results"), help="output folder")
+    exp.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    sweep = sub.add_parser(
+        "qlambda-sweep",
+        help="tune Q(lambda)'s hyper-parameters on seeds the experiments do not use",
+        description="Grid over alpha x lambda x epsilon; prints mean success over the last "
+        "episodes per setting, best first.",
+    )
+    sweep.add_argument("--seeds", type=_positive_int, default=5)
+    sweep.add_argument("--seed-base", type=_seed, default=1000)
+    sweep.add_argument("--episodes", type=_positive_int, default=300)
+    sweep.add_argument("--alphas", default="0.1,0.3,0.5")
+    sweep.add_argument("--lambdas", default="0.5,0.9")
+    sweep.add_argument("--epsilons", default="0.05,0.1,0.2")
+    sweep.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1)
+    sweep.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
 
 
@@ -194,6 +234,124 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
     return 0
 
 
+def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    from core.experiment import parse_conditions, run_experiment, summarise
+    from server.report import write_report
+
+    conditions = parse_conditions(args.conditions)
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    catalog = load_catalog()
+    err = Console(file=stderr, stderr=True)
+    progress = Progress(
+        TextColumn("[bold]experiment[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[last]}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=args.quiet,
+    )
+    bar = progress.add_task("tasks", total=len(conditions) * len(seeds), last="")
+
+    def on_result(r: TaskResult) -> None:
+        mark = "ok" if r.ok else "[red]FAILED[/]"
+        progress.update(bar, advance=1, last=f"{r.task.condition} seed {r.task.seed} {mark}")
+
+    started = time.perf_counter()
+    with progress:
+        results = run_experiment(conditions, seeds, args.episodes, args.jobs, on_result)
+    elapsed = time.perf_counter() - started
+    summary = summarise(results, conditions)
+    params = {
+        "command": "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "srlab experiment",
+        "conditions": conditions,
+        "seeds": len(seeds),
+        "seed_base": args.seed_base,
+        "episodes": args.episodes,
+        "jobs": args.jobs,
+        "elapsed_s": elapsed,
+        "ticks": sum(r.ticks for r in results),
+    }
+    paths = write_report(args.out, results, summary, catalog, params)
+    console = Console(file=stdout)
+    table = Table(title=f"srlab experiment: {len(seeds)} seeds x {args.episodes} episodes")
+    for col in ("condition", "success", "last 10", "to criterion", "collisions/ep", "viol./ep"):
+        table.add_column(col, justify="right" if col != "condition" else "left")
+    for name, s in summary.items():
+        if not s.get("seeds"):
+            table.add_row(name, "failed", "", "", "", "")
+            continue
+        crit = s["episodes_to_criterion"]
+        table.add_row(
+            name,
+            f"{s['success_rate']['mean']:.0%}",
+            f"{s['success_last10']['mean']:.0%}",
+            "never" if crit["median"] is None else f"{crit['median']:.0f} ({crit['never']} never)",
+            f"{s['collisions_per_episode']['mean']:.2f}",
+            f"{s['violations_per_episode']['mean']:.2f}",
+        )
+    console.print(table)
+    ticks = params["ticks"]
+    console.print(f"{ticks:,} ticks in {elapsed:.1f} s ({ticks / elapsed:,.0f} ticks/s)")
+    for p in paths:
+        console.print(f"wrote {p}")
+    failed = [r for r in results if not r.ok]
+    for r in failed:
+        first = (r.error or "").splitlines()[0]
+        err.print(f"[red]task {r.task.condition} seed {r.task.seed} failed:[/] {first}")
+    return 1 if failed else 0
+
+
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"--{name} takes comma-separated numbers, got {text!r}") from None
+    if not values or any(not 0.0 <= v <= 1.0 for v in values):
+        raise ValueError(f"--{name} values must be in [0, 1], got {text!r}")
+    return values
+
+
+def _qlambda_sweep(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    from core.qlambda import QLambdaConfig, sweep
+
+    grid = [
+        QLambdaConfig(alpha=a, lam=lam, epsilon=e)
+        for a in _floats(args.alphas, "alphas")
+        for lam in _floats(args.lambdas, "lambdas")
+        for e in _floats(args.epsilons, "epsilons")
+    ]
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    err = Console(file=stderr, stderr=True)
+    with Progress(
+        TextColumn("[bold]Q(lambda) sweep[/]"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+    ) as progress:
+        bar = progress.add_task("runs", total=len(grid) * len(seeds))
+        rows = sweep(grid, seeds, args.episodes, args.jobs, lambda: progress.advance(bar))
+    if args.json:
+        stdout.write(json.dumps({"seeds": seeds, "episodes": args.episodes, "rows": rows}) + "\n")
+        return 0
+    table = Table(title=f"Q(lambda) sweep: seeds {seeds[0]}..{seeds[-1]}, {args.episodes} episodes")
+    for col in ("alpha", "lambda", "epsilon", "success, last 50", "success, all"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            f"{r['alpha']:g}",
+            f"{r['lambda']:g}",
+            f"{r['epsilon']:g}",
+            f"{r['success_last50']:.1%}",
+            f"{r['success_all']:.1%}",
+        )
+    Console(file=stdout).print(table)
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `srlab` console script."""
     parser = build_parser()
@@ -201,6 +359,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "simulate":
             return _simulate(args, sys.stdout, sys.stderr)
+        if args.command == "experiment":
+            return _experiment(args, sys.stdout, sys.stderr)
+        if args.command == "qlambda-sweep":
+            return _qlambda_sweep(args, sys.stdout, sys.stderr)
     except (CoreError, ValueError, OSError) as e:
         parser.exit(2, f"srlab: error: {e}\n")
     except KeyboardInterrupt:

@@ -6,11 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from core.brain.catalog import Catalog
+from core.brain.catalog import Behaviour, Catalog
 from core.brain.memory import Credit, LongTermMemory, ShortTermMemory
 from core.brain.motor import Motor
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
+from core.brain.propagation import KnowledgePropagation, KpConfig, Propagated
 from core.brain.selection import Decision, How, SelectionConfig, Selector
 from core.brain.sensors import compile_detector
 from core.events import AssociationDemoted, AssociationPromoted
@@ -51,6 +52,7 @@ class BrainConfig:
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     learning: LearningConfig = field(default_factory=LearningConfig)
+    kp: KpConfig = field(default_factory=KpConfig)
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +61,7 @@ class RewardOutcome:
 
     credits: tuple[Credit, ...]
     changes: tuple[AssociationPromoted | AssociationDemoted, ...]
+    propagated: tuple[Propagated, ...] = ()
 
 
 class Brain:
@@ -87,6 +90,11 @@ class Brain:
         self.motor = Motor(catalog, robot.align_gain, robot.max_turn_rad_s, dt_s)
         self.stm = ShortTermMemory(config.learning.stm_capacity)
         self.ltm = LongTermMemory(config.learning.eta)
+        self.kp = (
+            KnowledgePropagation(catalog, network, config.kp, dt_s, self._add_behaviour)
+            if config.kp.enabled
+            else None
+        )
         self._priority = self.selector.priority
         self._filter = any(w <= 0.0 for w in self.perception.strength)
         self._last = Decision(-1, -1, 0.0, How.DEFAULT)
@@ -100,14 +108,35 @@ class Brain:
     def reset_episode(self) -> None:
         """A new episode: nothing runs; STM is forgotten if so configured."""
         self.motor.stop()
+        self.selector.reset()
         self._last = Decision(-1, -1, 0.0, How.DEFAULT)
         self._running_priority = -1
         if self.config.learning.clear_stm_each_episode:
             self.stm.clear()
+        if self.kp is not None:
+            self.kp.reset_episode()
 
-    def step(self, tick: int, channels: list[float]) -> tuple[list[int], MotorCommand]:
+    def _add_behaviour(self, behaviour: Behaviour) -> Behaviour:
+        """Make a synthesised behaviour part of the catalogue and runnable."""
+        self.catalog = self.catalog.with_behaviour(behaviour)
+        added = self.catalog.behaviours[-1]
+        self.motor.add_behaviour(added)
+        return added
+
+    def stimuli(self, channels: list[float]) -> list[int]:
+        """The active stimuli for a channel vector (sensor and perception modules)."""
+        active = self.detect(channels)
+        if self._filter:
+            active = self.perception.filter(active)
+        return active
+
+    def step(
+        self, tick: int, channels: list[float], command: int = -1
+    ) -> tuple[list[int], MotorCommand]:
         """One tick of Fig. 6: sense, perceive, match, select, motor, record to STM.
 
+        `command`, when >= 0 and no primitive is running, is the behaviour an external
+        learner chose; it is recorded against the most salient stimulus.
         Returns the active stimuli and the wheel command; the decision is `last`.
         """
         active = self.detect(channels)
@@ -115,7 +144,10 @@ class Brain:
             active = self.perception.filter(active)
         motor = self.motor
         last = self._last
-        if motor.busy:
+        if command >= 0 and not motor.busy:
+            decision = Decision(command, self.selector.focus(active), 0.0, How.COMMANDED)
+            self._start(decision, channels)
+        elif motor.busy:
             top = max((self._priority[s] for s in active), default=-1)
             decision = last
             if top > self._running_priority:
@@ -130,10 +162,12 @@ class Brain:
             decision = self.selector.select(active, last.behaviour)
             self._start(decision, channels)
         self._last = decision
-        command = motor.command(channels)
+        wheels = motor.command(channels)
+        if self.kp is not None:
+            self.kp.percept(tick, active, decision)
         if decision.stimulus >= 0:
             self.stm.push((tick, decision.stimulus, decision.behaviour))
-        return active, command
+        return active, wheels
 
     def _start(self, decision: Decision, channels: list[float]) -> None:
         self.motor.start(decision.behaviour, channels)
@@ -144,8 +178,12 @@ class Brain:
         """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network."""
         if not self.config.learning.enabled:
             self.stm.clear()
+            if self.kp is not None:
+                self.kp.reset_episode()
             return RewardOutcome((), ())
         credits = self.ltm.apply(self.stm.pop_all(), reward_tick, value)
+        if value < 0.0 and credits and credits[0].d_k == 1:
+            self.selector.retry(credits[0].stimulus)
         threshold = self.config.learning.insert_threshold
         changes: list[AssociationPromoted | AssociationDemoted] = []
         for s, b in dict.fromkeys((c.stimulus, c.behaviour) for c in credits):
@@ -157,4 +195,8 @@ class Brain:
             elif old is not None and old.source == "learned" and not old.locked:
                 self.network.remove(s, b)
                 changes.append(AssociationDemoted(s, b, v))
-        return RewardOutcome(tuple(credits), tuple(changes))
+        propagated: list[Propagated] = []
+        if self.kp is not None:
+            propagated, promoted = self.kp.reward(value)
+            changes.extend(promoted)
+        return RewardOutcome(tuple(credits), tuple(changes), tuple(propagated))

@@ -17,8 +17,9 @@ class Strategy(StrEnum):
     """How the behaviour to run is chosen among the released ones."""
 
     COMPETITION = "competition"
-    """The paper's choice: behaviours over a threshold compete; the incumbent gets a small
-    self-excitation (hysteresis), the strongest wins."""
+    """The paper's choice: behaviours over a threshold compete and the strongest wins; the
+    incumbent gets a small self-excitation (hysteresis) against rivals of its own or a lower
+    priority layer."""
     MAX = "max"
     """The maximum behaviour value wins, threshold or not."""
     PRIORITY = "priority"
@@ -32,14 +33,18 @@ class How(StrEnum):
     DEFAULT = "default"
     EXPLORED = "explored"
     CONTINUED = "continued"
+    COMMANDED = "commanded"
+    """Chosen from outside the brain: an external learner (the Gymnasium environment)."""
 
+
+_RETRY = -2
 
 DEFAULT_DESIRES: Mapping[str, float] = {
     "avoid_collision": 1.0,
     "avoid_wall": 1.0,
     "avoid_obstacle": 1.0,
     "obey_signal": 1.0,
-    "follow_track": 1.0,
+    "follow_track": 0.8,
     "keep_moving": 0.3,
 }
 
@@ -52,8 +57,9 @@ class SelectionConfig:
         strategy: competition (default), max or priority.
         threshold: a behaviour value must reach this to compete.
         hysteresis: bonus of the incumbent behaviour in a competition.
-        epsilon: probability per tick of exploring a random behaviour for an active learnable
-            stimulus that has no confident association.
+        epsilon: probability, per encounter with an active learnable stimulus that has no
+            confident association, of trying a random behaviour for it. The trial lasts as
+            long as the stimulus does, so a try is a whole response, not a one-tick twitch.
         confident: an association this strong stops exploration of its stimulus.
         default_behaviour: what the keep-moving desire runs when nothing is released.
         desires: internal desire level per objective; a releaser's value is the stimulus
@@ -113,6 +119,8 @@ class Selector:
         self._learnable = learnable
         self._rng = rng
         self._random = rng.random
+        self._trials: dict[int, int] = {}
+        """Learnable stimuli met in the current encounter -> behaviour tried (-1: none)."""
 
     @property
     def priority(self) -> tuple[int, ...]:
@@ -155,18 +163,51 @@ class Selector:
                     best_b, best_key = b, key
         else:
             threshold = cfg.threshold if cfg.strategy is Strategy.COMPETITION else 0.0
-            bonus = cfg.hysteresis if cfg.strategy is Strategy.COMPETITION else 0.0
             for b, (v, s) in values.items():
                 if v < threshold or v <= 0.0:
                     continue
-                score = v + bonus if b == incumbent else v
-                key = (score, prio[s], -b)
+                key = (v, prio[s], -b)
                 if key > best_key:
                     best_b, best_key = b, key
+            if (
+                cfg.strategy is Strategy.COMPETITION
+                and best_b >= 0
+                and incumbent != best_b
+                and incumbent in values
+            ):
+                # The incumbent's self-excitation keeps it against a slightly stronger rival
+                # of its own or a lower layer, never against a higher layer's response.
+                v_inc, s_inc = values[incumbent]
+                v_best, s_best = values[best_b]
+                if (
+                    v_inc >= threshold
+                    and v_inc + cfg.hysteresis >= v_best
+                    and prio[s_inc] >= prio[s_best]
+                ):
+                    best_b = incumbent
         if best_b >= 0:
             v, s = values[best_b]
             return Decision(best_b, s, v, How.RELEASED)
         return Decision(self._default, self.focus(active), self._default_value, How.DEFAULT)
+
+    def open_stimulus(self, active: list[int], learnable: frozenset[int]) -> int:
+        """The most salient active stimulus of `learnable` that nothing answers, or -1.
+
+        "Nothing answers" means no response of its own or a higher priority layer would be
+        released (default behaviours do not count): it is the stimulus a learner must
+        answer.
+        """
+        prio = self._priority
+        target = -1
+        for s in active:
+            if s in learnable and (target < 0 or prio[s] > prio[target]):
+                target = s
+        if target < 0:
+            return -1
+        decision = self._choose(self.values(active), active, -1)
+        if decision.how is How.RELEASED and prio[decision.stimulus] >= prio[target]:
+            return -1
+        return target
 
     def focus(self, active: list[int]) -> int:
         """The most salient active stimulus (highest priority, then lowest id), or -1."""
@@ -177,7 +218,24 @@ class Selector:
                 best = s
         return best
 
+    def reset(self) -> None:
+        """Forget the current encounters (a new episode)."""
+        self._trials.clear()
+
+    def retry(self, stimulus: int) -> None:
+        """After a punishment: the next response to `stimulus` is a random try.
+
+        Operant conditioning's trial and error: a "bad" from a trainer makes the robot try
+        something else for the stimulus it is facing, instead of waiting for epsilon.
+        """
+        if stimulus in self._learnable and self.config.epsilon > 0.0:
+            self._trials[stimulus] = _RETRY
+
     def _explore(self, decision: Decision, active: list[int]) -> Decision:
+        trials = self._trials
+        if trials:
+            for s in [s for s in trials if s not in active]:
+                del trials[s]
         learnable = self._learnable
         prio = self._priority
         confident = self.config.confident
@@ -191,9 +249,15 @@ class Selector:
                 target = s
         if target < 0:
             return decision
-        if decision.how is How.RELEASED and prio[decision.stimulus] > prio[target]:
-            return decision  # never explore over a reflex of a higher layer
-        if self._random() >= self.config.epsilon:
+        if decision.how is How.RELEASED and prio[decision.stimulus] >= prio[target]:
+            return decision  # never explore over a response of the same or a higher layer
+        tried = trials.get(target)
+        if tried is None or tried == _RETRY:
+            if tried == _RETRY or self._random() < self.config.epsilon:
+                tried = int(self._rng.integers(self._n_behaviours))
+            else:
+                tried = -1
+            trials[target] = tried
+        if tried < 0:
             return decision
-        b = int(self._rng.integers(self._n_behaviours))
-        return Decision(b, target, 0.0, How.EXPLORED)
+        return Decision(tried, target, 0.0, How.EXPLORED)

@@ -1,0 +1,223 @@
+"""Knowledge propagation (KP, Fig. 4-6): low-level S-R pairs teach a high-level sensor.
+
+While a high-level stimulus S1 (a camera obstacle stimulus) is perceived, the low-level S-R
+behaviours of the same objective that fire (sonar obstacle stimuli S0_a, S0_b... releasing
+B1, B2...) are recorded in the RSTM of S1's logical sensor. On a reward, `reasoning`
+(the paper's reasoningKPM) makes B from the vector sum of B1..Bn, and `update` (its
+updateKPMMemory) applies the Eq. (1) rule to S1 -> B in RLTM with d_k = 1: the RSTM knows
+which behaviour deserved the reward, so a delayed reward acts as an immediate one. Over the
+threshold, S1 -> B joins the behaviour network as a ``kp`` association.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict, deque
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+
+from core.brain.catalog import Behaviour, Catalog
+from core.brain.memory import reinforce
+from core.brain.network import BehaviourNetwork
+from core.brain.selection import Decision, How
+from core.events import AssociationPromoted
+
+
+@dataclass(frozen=True, slots=True)
+class KpConfig:
+    """Parameters of knowledge propagation.
+
+    Attributes:
+        enabled: whether the KP module runs.
+        window_ticks: a low-level response up to this many ticks after the high-level
+            stimulus was last perceived is associated with it (the camera sees the obstacle
+            before the sonars do, Fig. 5's t1 before t2..t4).
+        eta: the RLTM learning rate of the Eq. (1) rule.
+        insert_threshold: an RLTM pair this reliable joins the behaviour network.
+        synthesize: False snaps B to the nearest primitive behaviour; True keeps B as a new,
+            synthesised behaviour when no primitive is within `snap_tolerance_deg`.
+        snap_tolerance_deg: how close a primitive must be to stand for B when synthesising.
+        rstm_capacity: bound of each RSTM.
+    """
+
+    enabled: bool = False
+    window_ticks: int = 20
+    eta: float = 0.1
+    insert_threshold: float = 0.5
+    synthesize: bool = False
+    snap_tolerance_deg: float = 1.0
+    rstm_capacity: int = 256
+
+
+@dataclass(frozen=True, slots=True)
+class RstmRecord:
+    """A low-level response recorded while a high-level stimulus was perceived."""
+
+    tick: int
+    high: int
+    low: int
+    behaviour: int
+
+
+@dataclass(frozen=True, slots=True)
+class Propagated:
+    """What one reward taught a high-level stimulus."""
+
+    stimulus: int
+    behaviour: int
+    sources: tuple[int, ...]
+    before: float
+    after: float
+    synthesized: bool
+
+
+def steer_angle(b: Behaviour, dt_s: float) -> float:
+    """The heading, relative to the corridor, a primitive drives towards (0 for align)."""
+    if b.mode == "align":
+        return 0.0
+    return math.radians(b.turn_dps) * b.ticks * dt_s
+
+
+def resultant_direction(behaviours: Iterable[Behaviour], dt_s: float) -> float:
+    """Direction of the vector sum of the behaviours' displacements, radians (+ = left)."""
+    sx = sy = 0.0
+    for b in behaviours:
+        dx, dy, _ = b.motion_vector(dt_s)
+        sx += dx
+        sy += dy
+    if sx == 0.0 and sy == 0.0:
+        return 0.0
+    return math.atan2(sy, sx)
+
+
+def nearest_primitive(catalog: Catalog, angle_rad: float, dt_s: float) -> Behaviour:
+    """The forward or turn primitive whose heading is nearest `angle_rad` (smaller on ties)."""
+    best: Behaviour | None = None
+    best_key = (math.inf, math.inf, math.inf)
+    for b in catalog.behaviours:
+        if b.family not in ("forward", "turn") or b.synthesized:
+            continue
+        a = steer_angle(b, dt_s)
+        # Among forward speeds prefer the default cruise (goforward3, 0.45 m/s).
+        key = (round(abs(a - angle_rad), 9), abs(a), abs(b.speed_mps - 0.45))
+        if key < best_key:
+            best, best_key = b, key
+    assert best is not None, "the catalogue has no forward or turn primitive"
+    return best
+
+
+def synthesized_behaviour(angle_rad: float, speed_mps: float, dt_s: float) -> Behaviour:
+    """A new steer primitive towards `angle_rad` at 150 deg/s or less (id set on insertion)."""
+    deg = math.degrees(angle_rad)
+    ticks = max(1, math.ceil(abs(deg) / 15.0 - 1e-9))
+    name = f"kp_{'left' if deg >= 0 else 'right'}{abs(round(deg))}"
+    return Behaviour(
+        id=-1,
+        name=name,
+        family="synthesized",
+        speed_mps=speed_mps,
+        turn_dps=deg / (ticks * dt_s),
+        ticks=ticks,
+        mode="steer",
+        synthesized=True,
+    )
+
+
+class KnowledgePropagation:
+    """RSTM per high-level logical sensor, RLTM, and the reasoning between them."""
+
+    def __init__(
+        self,
+        catalog: Catalog,
+        network: BehaviourNetwork,
+        config: KpConfig,
+        dt_s: float,
+        add_behaviour: Callable[[Behaviour], Behaviour],
+    ) -> None:
+        self.catalog = catalog
+        self.network = network
+        self.config = config
+        self._dt = dt_s
+        self._add_behaviour = add_behaviour
+        self._high = tuple(s.level == "high" for s in catalog.stimuli)
+        self._objective = tuple(s.objective for s in catalog.stimuli)
+        self._sensor = tuple(s.sensor for s in catalog.stimuli)
+        self._low_objectives = {s.objective for s in catalog.stimuli if s.level == "low"}
+        self._last_high: dict[str, tuple[int, int]] = {}
+        self.rstm: dict[str, deque[RstmRecord]] = defaultdict(
+            lambda: deque(maxlen=config.rstm_capacity)
+        )
+        self.rltm: dict[tuple[int, int], float] = {}
+
+    def reset_episode(self) -> None:
+        """Forget what was perceived and recorded (a new episode, a new approach)."""
+        self._last_high.clear()
+        for r in self.rstm.values():
+            r.clear()
+
+    def percept(self, tick: int, active: Sequence[int], decision: Decision) -> None:
+        """Fig. 6: if a KP percept exists, save it with the current behaviour in RSTM."""
+        high = self._high
+        objective = self._objective
+        for s in active:
+            if high[s] and objective[s] in self._low_objectives:
+                self._last_high[objective[s]] = (s, tick)
+        low = decision.stimulus
+        if low < 0 or high[low] or decision.how is not How.RELEASED:
+            return
+        seen = self._last_high.get(objective[low])
+        if seen is None or tick - seen[1] > self.config.window_ticks:
+            return
+        s1 = seen[0]
+        self.rstm[self._sensor[s1]].append(RstmRecord(tick, s1, low, decision.behaviour))
+
+    def reasoning(self, behaviours: Sequence[int]) -> tuple[Behaviour, bool]:
+        """reasoningKPM: B from the vector sum of B1..Bn; returns (B, whether it is new)."""
+        catalog = self.catalog
+        parts = [catalog.behaviours[b] for b in behaviours]
+        angle = resultant_direction(parts, self._dt)
+        nearest = nearest_primitive(catalog, angle, self._dt)
+        if not self.config.synthesize:
+            return nearest, False
+        tolerance = math.radians(self.config.snap_tolerance_deg)
+        if abs(steer_angle(nearest, self._dt) - angle) <= tolerance:
+            return nearest, False
+        speed = sum(b.speed_mps for b in parts) / len(parts)
+        new = synthesized_behaviour(angle, speed, self._dt)
+        for b in catalog.behaviours:
+            if b.name == new.name:
+                return b, False
+        added = self._add_behaviour(new)
+        self.catalog = self._catalog_after(added)
+        return added, True
+
+    def _catalog_after(self, added: Behaviour) -> Catalog:
+        if len(self.catalog.behaviours) > added.id:
+            return self.catalog
+        return self.catalog.with_behaviour(added)
+
+    def reward(self, value: float) -> tuple[list[Propagated], list[AssociationPromoted]]:
+        """updateKPMMemory: reason over every RSTM and apply Eq. (1) to RLTM (d_k = 1)."""
+        learned: list[Propagated] = []
+        promoted: list[AssociationPromoted] = []
+        cfg = self.config
+        for records in self.rstm.values():
+            by_high: dict[int, list[RstmRecord]] = defaultdict(list)
+            for r in records:
+                by_high[r.high].append(r)
+            records.clear()
+            for s1, recs in sorted(by_high.items()):
+                b, new = self.reasoning([r.behaviour for r in recs])
+                before = self.rltm.get((s1, b.id), 0.0)
+                after = reinforce(before, value, cfg.eta, 1)
+                self.rltm[(s1, b.id)] = after
+                learned.append(
+                    Propagated(s1, b.id, tuple(r.behaviour for r in recs), before, after, new)
+                )
+                old = self.network.get(s1, b.id)
+                if after >= cfg.insert_threshold:
+                    if self.network.learn(s1, b.id, after, "kp") and old is None:
+                        promoted.append(AssociationPromoted(s1, b.id, after, "kp"))
+                elif old is not None and old.source == "kp":
+                    self.network.remove(s1, b.id)
+        return learned, promoted

@@ -1,0 +1,159 @@
+"""A Gymnasium environment over the same world and stimuli: `srlab/AmigoTrack-v0`.
+
+Any Gymnasium learner can be compared with the architecture on the same track. The robot
+keeps a prior knowledge set as its built-in behaviour (Table I by default); the learner
+answers the stimuli of the learnable logical sensors that the prior leaves open, as the
+architecture's own exploration does. A step lasts from one such decision to the next (or
+to the episode's end), and the only reward is the delayed one of a successful lap.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from core.brain.catalog import Catalog, load_catalog
+from core.brain.network import BehaviourNetwork
+from core.conditions import Condition
+from core.events import Cause, EpisodeEnded, Outcome
+from core.runner import EpisodeSummary
+from core.sim.world import WorldConfig
+from core.simulation import NO_INPUTS, Simulation, TickInputs
+
+ENV_ID = "srlab/AmigoTrack-v0"
+
+Observation = npt.NDArray[np.int8]
+
+
+class AmigoTrackEnv(gym.Env[Observation, np.int64]):
+    """The AmigoBot track as a semi-Markov decision process over S-R stimuli.
+
+    Observation: which of the catalogue's stimuli are active (MultiBinary). Action: which of
+    its behaviours to run (Discrete). Reward: `success_reward` when a lap is completed, 0
+    otherwise. `terminated` on success, collision or violation; `truncated` on time-out.
+
+    Episodes in which the learner never has to decide (the robot crashed before meeting a
+    learnable stimulus) are run inside `reset` and reported in ``info["skipped"]``.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium's API
+
+    def __init__(
+        self,
+        prior: str | None = "innate",
+        learnable: tuple[str, ...] = ("signal", "camera_obstacle"),
+        success_reward: float = 1.0,
+        world_config: WorldConfig | None = None,
+        catalog: Catalog | None = None,
+    ) -> None:
+        self.catalog = catalog or load_catalog()
+        for name in learnable:
+            if not any(s.name == name for s in self.catalog.sensors):
+                raise ValueError(f"unknown logical sensor {name!r}")
+        if prior is not None:
+            self.catalog.knowledge_set(prior)
+        self.prior = prior
+        self.learnable_sensors = learnable
+        self.success_reward = success_reward
+        self.world_config = world_config
+        self._learnable = frozenset(s.id for s in self.catalog.stimuli if s.sensor in learnable)
+        self.observation_space = gym.spaces.MultiBinary(len(self.catalog.stimuli))
+        self.action_space = gym.spaces.Discrete(len(self.catalog.behaviours))
+        self._sim: Simulation | None = None
+        self._seed = 0
+
+    def _new_simulation(self, seed: int) -> Simulation:
+        condition = Condition(
+            name="gym",
+            description="built-in behaviour for a Gymnasium learner",
+            network=self.prior or "innate",
+            learnable_sensors=self.learnable_sensors,
+        )
+        network = None if self.prior is not None else BehaviourNetwork(len(self.catalog.stimuli))
+        return Simulation(
+            condition,
+            seed,
+            world_config=self.world_config,
+            catalog=self.catalog,
+            network=network,
+        )
+
+    @property
+    def simulation(self) -> Simulation:
+        """The simulation behind the environment (after the first reset)."""
+        if self._sim is None:
+            raise gym.error.ResetNeeded("call reset() first")
+        return self._sim
+
+    def _observe(self) -> Observation:
+        obs = np.zeros(len(self.catalog.stimuli), dtype=np.int8)
+        obs[self.simulation.upcoming_stimuli()] = 1
+        return obs
+
+    def _learner_turn(self) -> bool:
+        sim = self.simulation
+        if sim.brain.motor.busy:
+            return False
+        active = sim.upcoming_stimuli()
+        return sim.brain.selector.open_stimulus(active, self._learnable) >= 0
+
+    def _advance(self, first: TickInputs) -> EpisodeEnded | None:
+        """Tick until the learner's turn or the episode's end."""
+        sim = self.simulation
+        inputs = first
+        while True:
+            result = sim.tick(inputs)
+            inputs = NO_INPUTS
+            for e in result.events:
+                if isinstance(e, EpisodeEnded):
+                    return e
+            if self._learner_turn():
+                return None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Observation, dict[str, Any]]:
+        """Start the next episode in which the learner has a decision to make."""
+        super().reset(seed=seed)
+        if seed is not None or self._sim is None:
+            self._seed = seed if seed is not None else int(self.np_random.integers(2**31))
+            self._sim = self._new_simulation(self._seed)
+        sim = self._sim
+        skipped: list[EpisodeSummary] = []
+        while True:
+            sim.reset()
+            if self._learner_turn():
+                break
+            ended = self._advance(NO_INPUTS)
+            if ended is None:
+                break
+            skipped.append(_summary(ended))
+        return self._observe(), {"episode": sim.episode, "skipped": skipped}
+
+    def step(self, action: np.int64 | int) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
+        """Run `action` for the open stimulus, then the built-in behaviour until next time."""
+        if not self.action_space.contains(np.int64(action)):
+            raise ValueError(f"action {action!r} is not in {self.action_space}")
+        ended = self._advance(TickInputs(behaviour=int(action)))
+        obs = self._observe()
+        if ended is None:
+            return obs, 0.0, False, False, {}
+        reward = self.success_reward if ended.outcome is Outcome.SUCCESS else 0.0
+        truncated = ended.cause is Cause.TIMEOUT
+        return obs, reward, not truncated, truncated, {"episode_summary": _summary(ended)}
+
+
+def _summary(e: EpisodeEnded) -> EpisodeSummary:
+    return EpisodeSummary(e.episode, e.outcome, e.cause, e.ticks, int(e.outcome is Outcome.SUCCESS))
+
+
+def register() -> None:
+    """Register `srlab/AmigoTrack-v0` with Gymnasium (idempotent)."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="core.envs:AmigoTrackEnv")
+
+
+register()

@@ -1,0 +1,257 @@
+"""Experiments: conditions x seeds x episodes, run in parallel, summarised over seeds."""
+
+from __future__ import annotations
+
+import math
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from core.brain.catalog import Catalog, load_catalog
+from core.conditions import CONDITIONS, get_condition
+from core.errors import UnknownNameError
+from core.events import Cause, Outcome
+from core.qlambda import QLambdaConfig, run_qlambda
+from core.runner import EpisodeSummary, run
+
+CRITERION_WINDOW = 10
+CRITERION_RATE = 0.8
+CAMERA_SENSOR = "camera_obstacle"
+
+
+@dataclass(frozen=True, slots=True)
+class Task:
+    """One (condition, seed) run."""
+
+    condition: str
+    seed: int
+    episodes: int
+
+
+@dataclass(frozen=True, slots=True)
+class TaskResult:
+    """A task's episodes and its final camera-stimulus reliabilities, or its error.
+
+    `ltm` and `rltm` map "stimulus/behaviour" to the reliability, for the camera obstacle
+    stimuli (the paper's Table III); `rltm` is empty unless KP ran.
+    """
+
+    task: Task
+    episodes: tuple[EpisodeSummary, ...] = ()
+    ticks: int = 0
+    ltm: dict[str, float] = field(default_factory=dict)
+    rltm: dict[str, float] = field(default_factory=dict)
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """Whether the task ran to the end."""
+        return self.error is None
+
+
+def parse_conditions(text: str) -> list[str]:
+    """A comma-separated list of known condition names, in order, without repeats."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise UnknownNameError("no condition given")
+    for n in names:
+        get_condition(n)
+    return list(dict.fromkeys(names))
+
+
+def _camera_memory(
+    catalog: Catalog, memory: Iterable[tuple[tuple[int, int], float]], behaviours: Sequence[str]
+) -> dict[str, float]:
+    camera = {s.id: s.name for s in catalog.stimuli if s.sensor == CAMERA_SENSOR}
+    return {
+        f"{camera[s]}/{behaviours[b]}": v
+        for (s, b), v in memory
+        if s in camera and v > 0.0 and b < len(behaviours)
+    }
+
+
+def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
+    """Run one task; any error is returned, not raised, so the others' results survive."""
+    try:
+        catalog = catalog or load_catalog()
+        condition = get_condition(task.condition)
+        if condition.agent == "qlambda":
+            episodes, _, ticks = run_qlambda(task.seed, task.episodes, QLambdaConfig())
+            return TaskResult(task, tuple(episodes), ticks)
+        from core.simulation import Simulation
+
+        sim = Simulation(condition, task.seed, catalog=catalog)
+        summary = run(condition, task.seed, task.episodes, simulation=sim)
+        names = [b.name for b in sim.brain.catalog.behaviours]
+        rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
+        return TaskResult(
+            task,
+            summary.episodes,
+            summary.ticks,
+            _camera_memory(catalog, sim.brain.ltm.items(), names),
+            _camera_memory(catalog, rltm, names),
+        )
+    except Exception as e:  # a failed task is reported with its seed, never lost silently
+        return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
+
+
+_WORKER_CATALOG: Catalog | None = None
+
+
+def _init_worker() -> None:
+    global _WORKER_CATALOG
+    _WORKER_CATALOG = load_catalog()
+
+
+def _run_in_worker(task: Task) -> TaskResult:
+    return run_task(task, _WORKER_CATALOG)
+
+
+def run_experiment(
+    conditions: Sequence[str],
+    seeds: Sequence[int],
+    episodes: int,
+    jobs: int = 1,
+    on_result: Callable[[TaskResult], None] | None = None,
+) -> list[TaskResult]:
+    """Run every (condition, seed) task, `jobs` processes at a time.
+
+    Each task is a pure function of (condition, seed, episodes), so the results are the
+    same whatever `jobs` is; they are returned in (condition, seed) order.
+    """
+    if episodes < 1:
+        raise ValueError("episodes must be >= 1")
+    if not seeds:
+        raise ValueError("at least one seed is needed")
+    if jobs < 1:
+        raise ValueError("jobs must be >= 1")
+    for c in conditions:
+        get_condition(c)
+    tasks = [Task(c, s, episodes) for c in conditions for s in seeds]
+    results: list[TaskResult] = []
+    if jobs == 1:
+        catalog = load_catalog()
+        for t in tasks:
+            r = run_task(t, catalog)
+            results.append(r)
+            if on_result is not None:
+                on_result(r)
+    else:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_init_worker) as pool:
+            pending: set[Future[TaskResult]] = {pool.submit(_run_in_worker, t) for t in tasks}
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    r = f.result()
+                    results.append(r)
+                    if on_result is not None:
+                        on_result(r)
+    order = {(t.condition, t.seed): i for i, t in enumerate(tasks)}
+    results.sort(key=lambda r: order[(r.task.condition, r.task.seed)])
+    return results
+
+
+# --- analysis -------------------------------------------------------------------------
+
+_T975 = (
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+    2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
+)  # fmt: skip
+
+
+def t_quantile_975(df: int) -> float:
+    """Student's t 97.5% quantile for `df` degrees of freedom (1.96 beyond 30)."""
+    if df < 1:
+        return math.nan
+    return _T975[df - 1] if df <= len(_T975) else 1.96
+
+
+def mean_ci(values: Sequence[float]) -> dict[str, float]:
+    """Mean and the half-width of its 95% confidence interval (Student's t), over seeds."""
+    n = len(values)
+    if n == 0:
+        return {"mean": math.nan, "ci95": math.nan, "n": 0}
+    arr = np.asarray(values, dtype=np.float64)
+    mean = float(arr.mean())
+    if n == 1:
+        return {"mean": mean, "ci95": math.nan, "n": 1}
+    sd = float(arr.std(ddof=1))
+    return {"mean": mean, "ci95": t_quantile_975(n - 1) * sd / math.sqrt(n), "n": n}
+
+
+def episodes_to_criterion(
+    successes: Sequence[bool], window: int = CRITERION_WINDOW, rate: float = CRITERION_RATE
+) -> int | None:
+    """The first episode count after which the rolling success over `window` is >= `rate`."""
+    need = math.ceil(rate * window - 1e-9)
+    count = 0
+    for i, s in enumerate(successes):
+        count += s
+        if i >= window:
+            count -= successes[i - window]
+        if i + 1 >= window and count >= need:
+            return i + 1
+    return None
+
+
+def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[str, Any]:
+    """Per condition, over seeds: the figures of the experiment's summary."""
+    out: dict[str, Any] = {}
+    for c in conditions:
+        rs = [r for r in results if r.task.condition == c and r.ok]
+        if not rs:
+            out[c] = {"seeds": 0}
+            continue
+        n_ep = min(len(r.episodes) for r in rs)
+        success = np.array([[e.outcome is Outcome.SUCCESS for e in r.episodes[:n_ep]] for r in rs])
+        last = min(CRITERION_WINDOW, n_ep)
+        crit = [episodes_to_criterion(list(row)) for row in success]
+        reached = sorted(x for x in crit if x is not None)
+
+        def per_episode(cause: Cause, rs: list[TaskResult] = rs) -> list[float]:
+            return [sum(e.cause is cause for e in r.episodes) / len(r.episodes) for r in rs]
+
+        collisions = [
+            a + b
+            for a, b in zip(
+                per_episode(Cause.WALL_COLLISION),
+                per_episode(Cause.OBSTACLE_COLLISION),
+                strict=True,
+            )
+        ]
+        memory = "rltm" if get_condition(c).kp else "ltm"
+        keys = sorted({k for r in rs for k in getattr(r, memory)})
+        reliab = {k: mean_ci([getattr(r, memory).get(k, 0.0) for r in rs]) for k in keys}
+        out[c] = {
+            "description": CONDITIONS[c].description,
+            "seeds": len(rs),
+            "episodes": n_ep,
+            "success_rate": mean_ci(success.mean(axis=1).tolist()),
+            "success_last10": mean_ci(success[:, -last:].mean(axis=1).tolist()),
+            "success_curve": success.mean(axis=0).tolist(),
+            "success_by_seed": success.astype(int).tolist(),
+            "success_curve_ci95": [
+                mean_ci(success[:, i].astype(float).tolist())["ci95"] for i in range(n_ep)
+            ],
+            "episodes_to_criterion": {
+                "median": float(np.median(reached)) if reached else None,
+                "reached": len(reached),
+                "never": len(crit) - len(reached),
+                "per_seed": crit,
+            },
+            "collisions_per_episode": mean_ci(collisions),
+            "obstacle_collisions_per_episode": mean_ci(per_episode(Cause.OBSTACLE_COLLISION)),
+            "wall_collisions_per_episode": mean_ci(per_episode(Cause.WALL_COLLISION)),
+            "violations_per_episode": mean_ci(per_episode(Cause.SIGNAL_VIOLATION)),
+            "timeouts_per_episode": mean_ci(per_episode(Cause.TIMEOUT)),
+            "camera_memory": memory if get_condition(c).agent == "brain" else None,
+            "learns_camera": get_condition(c).agent == "brain" and get_condition(c).learning,
+            "camera_reliability": reliab,
+            "ticks": sum(r.ticks for r in rs),
+        }
+    return out
