@@ -42,7 +42,8 @@ format: install
 	$(BIN)/ruff check --fix .
 
 bench: install
-	$(BIN)/python bench/ticks.py
+	$(BIN)/python -m bench.ticks
+	$(BIN)/python -m bench.experiment
 
 clean:
 	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache

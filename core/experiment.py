@@ -37,7 +37,9 @@ class TaskResult:
     """A task's episodes and its final camera-stimulus reliabilities, or its error.
 
     `ltm` and `rltm` map "stimulus/behaviour" to the reliability, for the camera obstacle
-    stimuli (the paper's Table III); `rltm` is empty unless KP ran.
+    stimuli (the paper's Table III); `rltm` is empty unless KP ran. `programmed` holds the
+    strengths of the camera pairs the condition's network was designed with (DP's S-R
+    editor), which the paper's Table III shows as reliability 1.
     """
 
     task: Task
@@ -45,6 +47,7 @@ class TaskResult:
     ticks: int = 0
     ltm: dict[str, float] = field(default_factory=dict)
     rltm: dict[str, float] = field(default_factory=dict)
+    programmed: dict[str, float] = field(default_factory=dict)
     error: str | None = None
 
     @property
@@ -88,12 +91,18 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
         summary = run(condition, task.seed, task.episodes, simulation=sim)
         names = [b.name for b in sim.brain.catalog.behaviours]
         rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
+        designed = (
+            ((a.stimulus, a.behaviour), a.strength)
+            for a in sim.brain.network
+            if a.source not in ("learned", "kp")
+        )
         return TaskResult(
             task,
             summary.episodes,
             summary.ticks,
             _camera_memory(catalog, sim.brain.ltm.items(), names),
             _camera_memory(catalog, rltm, names),
+            _camera_memory(catalog, designed, names),
         )
     except Exception as e:  # a failed task is reported with its seed, never lost silently
         return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
@@ -225,8 +234,12 @@ def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[
             )
         ]
         memory = "rltm" if get_condition(c).kp else "ltm"
-        keys = sorted({k for r in rs for k in getattr(r, memory)})
-        reliab = {k: mean_ci([getattr(r, memory).get(k, 0.0) for r in rs]) for k in keys}
+
+        def reliability(r: TaskResult, key: str, memory: str = memory) -> float:
+            return max(getattr(r, memory).get(key, 0.0), r.programmed.get(key, 0.0))
+
+        keys = sorted({k for r in rs for k in (*getattr(r, memory), *r.programmed)})
+        reliab = {k: mean_ci([reliability(r, k) for r in rs]) for k in keys}
         out[c] = {
             "description": CONDITIONS[c].description,
             "seeds": len(rs),

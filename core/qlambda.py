@@ -34,7 +34,7 @@ class QLambdaConfig:
 
     alpha: float = 0.3
     gamma: float = 0.99
-    lam: float = 0.9
+    lam: float = 0.5
     epsilon: float = 0.1
     prior: str = "kp"
 

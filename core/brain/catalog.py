@@ -14,6 +14,7 @@ from core.errors import CatalogError, UnknownNameError
 from core.sim.channels import CHANNELS
 
 Source = Literal["innate", "dp", "learned", "kp", "expert", "designed"]
+SOURCES: tuple[Source, ...] = ("innate", "dp", "learned", "kp", "expert", "designed")
 Level = Literal["low", "high"]
 Mode = Literal["align", "steer", "constant"]
 MODES = ("align", "steer", "constant")
@@ -193,12 +194,26 @@ def _need(d: Mapping[str, Any], key: str, where: str) -> Any:
     return d[key]
 
 
+def _number(value: Any, key: str, where: str) -> float:
+    """A finite number from data, or a CatalogError naming the field."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise CatalogError(f"{where}: {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _whole(value: Any, key: str, where: str) -> int:
+    """A whole number from data, or a CatalogError naming the field."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise CatalogError(f"{where}: {key} must be a whole number, got {value!r}")
+    return value
+
+
 def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
     """Behaviours from their data-file form."""
     out: list[Behaviour] = []
     for i, b in enumerate(raw):
         where = f"behaviour #{i}"
-        ticks = int(_need(b, "ticks", where))
+        ticks = _whole(_need(b, "ticks", where), "ticks", where)
         if ticks < 1:
             raise CatalogError(f"{where}: ticks must be >= 1")
         mode = b.get("mode", "constant")
@@ -209,8 +224,8 @@ def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
                 id=i,
                 name=str(_need(b, "name", where)),
                 family=str(b.get("family", "other")),
-                speed_mps=float(_need(b, "speed_mps", where)),
-                turn_dps=float(_need(b, "turn_dps", where)),
+                speed_mps=_number(_need(b, "speed_mps", where), "speed_mps", where),
+                turn_dps=_number(_need(b, "turn_dps", where), "turn_dps", where),
                 ticks=ticks,
                 mode=mode,
                 synthesized=bool(b.get("synthesized", False)),
@@ -230,9 +245,7 @@ def _parse_condition(raw: Any, where: str) -> RuleCondition:
         raise CatalogError(f"{where}: unknown channel {channel!r}")
     if op not in OPS:
         raise CatalogError(f"{where}: unknown operator {op!r} (use one of {' '.join(OPS)})")
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise CatalogError(f"{where}: value must be a number, got {value!r}")
-    return RuleCondition(CHANNELS.index(channel), op, float(value))
+    return RuleCondition(CHANNELS.index(channel), op, _number(value, "value", where))
 
 
 def parse_sensors(
@@ -250,8 +263,8 @@ def parse_sensors(
         level = s.get("level", "low")
         if level not in ("low", "high"):
             raise CatalogError(f"sensor {name!r}: level must be 'low' or 'high'")
-        priority = int(s.get("priority", 1))
-        weight = float(s.get("weight", 1.0))
+        priority = _whole(s.get("priority", 1), "priority", f"sensor {name!r}")
+        weight = _number(s.get("weight", 1.0), "weight", f"sensor {name!r}")
         if not 0.0 <= weight <= 1.0:
             raise CatalogError(f"sensor {name!r}: weight must be in [0, 1]")
         objective = str(_need(s, "objective", f"sensor {name!r}"))
@@ -304,7 +317,8 @@ def parse_knowledge(
         if name in done:
             return done[name]
         if name in stack:
-            raise CatalogError(f"network {name!r} includes itself")
+            path = " -> ".join((*stack[stack.index(name) :], name))
+            raise CatalogError(f"network {name!r} includes itself: {path}")
         if name not in raw:
             raise UnknownNameError(f"unknown network {name!r}")
         spec = raw[name]
@@ -312,7 +326,7 @@ def parse_knowledge(
         for inc in spec.get("include", []):
             for a in resolve(str(inc), (*stack, name)).associations:
                 merged[f"{a.stimulus}\0{a.behaviour}"] = a
-        default_source = str(spec.get("source", "innate" if name == "innate" else "designed"))
+        default_source = spec.get("source", "innate" if name == "innate" else "designed")
         for j, a in enumerate(spec.get("associations", [])):
             where = f"network {name!r} association #{j}"
             st = str(_need(a, "stimulus", where))
@@ -321,11 +335,16 @@ def parse_knowledge(
                 raise UnknownNameError(f"{where}: unknown stimulus {st!r}")
             if be not in bnames:
                 raise UnknownNameError(f"{where}: unknown behaviour {be!r}")
-            strength = float(a.get("strength", 1.0))
+            strength = _number(a.get("strength", 1.0), "strength", where)
             if not 0.0 <= strength <= 1.0:
                 raise CatalogError(f"{where}: strength must be in [0, 1]")
+            source = a.get("source", default_source)
+            if source not in SOURCES:
+                raise CatalogError(
+                    f"{where}: unknown source {source!r} (use one of {', '.join(SOURCES)})"
+                )
             merged[f"{st}\0{be}"] = AssociationSpec(
-                st, be, strength, a.get("source", default_source), bool(a.get("locked", False))
+                st, be, strength, source, bool(a.get("locked", False))
             )
         ks = KnowledgeSet(name, str(spec.get("description", "")), tuple(merged.values()))
         done[name] = ks

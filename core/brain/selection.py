@@ -249,8 +249,12 @@ class Selector:
                 target = s
         if target < 0:
             return decision
-        if decision.how is How.RELEASED and prio[decision.stimulus] >= prio[target]:
-            return decision  # never explore over a response of the same or a higher layer
+        if (
+            decision.how is How.RELEASED
+            and decision.stimulus != target
+            and prio[decision.stimulus] >= prio[target]
+        ):
+            return decision  # never explore over another response of the same or a higher layer
         tried = trials.get(target)
         if tried is None or tried == _RETRY:
             if tried == _RETRY or self._random() < self.config.epsilon:

@@ -7,8 +7,9 @@ class Channel(IntEnum):
     """Index of each physical channel in a `SensorFrame.channels` array.
 
     Sonars are numbered like the AmigoBot's: 0 (+90 deg, left) to 5 (-90 deg, right) across
-    the front, 6 and 7 at the rear. A sonar reads the distance from the body's edge to the
-    nearest surface along its axis (noisy); its residual is how much shorter that is than the
+    the front, 6 and 7 at the rear. A sonar reads the distance from its mount point (on a
+    circle of `RobotConfig.sonar_mount_m` around the body's centre) to the nearest surface
+    along its axis (noisy); its residual is how much shorter that is than the
     map of the static walls predicts, so a large residual means "not a wall".
     """
 

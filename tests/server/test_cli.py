@@ -1,0 +1,160 @@
+"""The `srlab` command line: JSON summary, traces, and clean errors for bad arguments."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from server.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def fail(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """Run the CLI expecting exit code 2; return stderr."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "Traceback" not in captured.err
+    return captured.err
+
+
+def test_simulate_json_prints_one_object(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["simulate", "--condition", "expert", "--episodes", "3", "--seed", "1", "--json"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1
+    summary = json.loads(out)
+    assert {"episodes", "successes", "success_rate", "failures", "ticks"} <= set(summary)
+    assert summary["episodes"] == 3
+    assert set(summary["failures"]) == {
+        "wall_collision",
+        "obstacle_collision",
+        "signal_violation",
+        "timeout",
+    }
+    assert summary["successes"] + sum(summary["failures"].values()) == 3
+    assert summary["success_rate"] == pytest.approx(summary["successes"] / 3)
+    assert summary["ticks"] > 0
+
+
+def test_simulate_json_is_reproducible(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["simulate", "--condition", "delayed", "--episodes", "2", "--seed", "4", "--json"]
+    main(argv)
+    first = capsys.readouterr().out
+    main([*argv, "--quiet"])
+    assert capsys.readouterr().out == first
+
+
+def test_simulate_prints_a_table_for_people(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "--condition", "innate", "--episodes", "2", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    for row in ("episodes", "successes", "success rate", "obstacle collision", "ticks/s"):
+        assert row in out
+
+
+def test_simulate_with_a_strategy(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["simulate", "--condition", "expert", "--episodes", "1", "--strategy", "priority"]
+    assert main([*argv, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["episodes"] == 1
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["simulate", "--condition", "genius"], "invalid choice: 'genius'"),
+        (["simulate", "--condition", "expert", "--episodes", "0"], "must be at least 1, got 0"),
+        (["simulate", "--condition", "expert", "--episodes", "-3"], "must be at least 1"),
+        (["simulate", "--condition", "expert", "--seed", "-1"], "must be 0 or more, got -1"),
+        (["simulate", "--condition", "expert", "--episodes", "ten"], "'ten' is not a whole"),
+        (["simulate", "--condition", "expert", "--seed", "1.5"], "'1.5' is not a whole number"),
+        (["simulate", "--condition", "expert", "--strategy", "vote"], "invalid choice: 'vote'"),
+        (["simulate"], "the following arguments are required: --condition"),
+        (["fly"], "invalid choice: 'fly'"),
+        ([], "required: COMMAND"),
+    ],
+)
+def test_bad_arguments_exit_2_with_a_message(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = fail(argv, capsys)
+    assert message in err
+    assert "usage: srlab" in err
+
+
+def test_trace_writes_one_json_line_per_snapshot(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    trace = tmp_path / "trace.jsonl"
+    argv = ["simulate", "--condition", "expert", "--episodes", "2", "--seed", "1"]
+    assert main([*argv, "--json", "--trace", str(trace)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    rows = [json.loads(line) for line in trace.read_text(encoding="utf-8").splitlines()]
+    # A reset snapshot per episode, then one per tick.
+    assert len(rows) == summary["ticks"] + 2
+    first = rows[0]
+    assert (first["episode"], first["episode_tick"], first["behaviour"]) == (0, 0, None)
+    for row in rows:
+        assert {"x", "y", "heading_rad", "stimuli", "behaviour"} <= set(row)
+        assert isinstance(row["x"], float)
+        assert isinstance(row["stimuli"], list)
+    ticking = [r for r in rows if r["episode_tick"] > 0]
+    assert all(isinstance(r["behaviour"], str) for r in ticking)
+    assert any("Middle" in r["stimuli"] for r in ticking)
+    assert any("Corner" in r["stimuli"] for r in ticking)
+    ends = [r for r in rows if "outcome" in r]
+    assert [r["episode"] for r in ends] == [0, 1]
+    assert [r["tick"] for r in rows if r["episode_tick"] > 0] == list(
+        range(1, summary["ticks"] + 1)
+    )
+
+
+@pytest.mark.parametrize("where", ["missing-dir/trace.jsonl", "."])
+def test_unwritable_trace_exits_2_with_a_message(
+    tmp_path: Path, where: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / where
+    err = fail(["simulate", "--condition", "expert", "--trace", str(path)], capsys)
+    assert err.startswith("srlab: error: ")
+    assert str(path) in err
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "server.cli", *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+def test_console_script_exits_2_without_a_traceback() -> None:
+    script = REPO / ".venv" / "bin" / "srlab"
+    argv = [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
+    done = subprocess.run(
+        [*argv, "simulate", "--condition", "expert", "--episodes", "0"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert "must be at least 1" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert done.stdout == ""
+
+
+def test_module_entry_point_runs_a_json_simulation() -> None:
+    done = run_cli("simulate", "--condition", "expert", "--episodes", "1", "--json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["episodes"] == 1
+    assert "Traceback" not in done.stderr
