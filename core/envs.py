@@ -24,6 +24,8 @@ from core.sim.world import WorldConfig
 from core.simulation import NO_INPUTS, Simulation, TickInputs
 
 ENV_ID = "srlab/AmigoTrack-v0"
+MAX_SKIPPED = 100
+"""Episodes without a decision `reset` runs before it gives up."""
 
 Observation = npt.NDArray[np.int8]
 
@@ -50,6 +52,8 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         catalog: Catalog | None = None,
     ) -> None:
         self.catalog = catalog or load_catalog()
+        if not learnable:
+            raise ValueError("at least one learnable logical sensor is needed")
         for name in learnable:
             if not any(s.name == name for s in self.catalog.sensors):
                 raise ValueError(f"unknown logical sensor {name!r}")
@@ -124,6 +128,11 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         sim = self._sim
         skipped: list[EpisodeSummary] = []
         while True:
+            if len(skipped) >= MAX_SKIPPED:
+                raise RuntimeError(
+                    f"{MAX_SKIPPED} episodes in a row gave the learner no decision: the prior "
+                    f"{self.prior!r} answers every stimulus of {self.learnable_sensors}"
+                )
             sim.reset()
             if self._learner_turn():
                 break
@@ -135,7 +144,11 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
 
     def step(self, action: np.int64 | int) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
         """Run `action` for the open stimulus, then the built-in behaviour until next time."""
-        if not self.action_space.contains(np.int64(action)):
+        if (
+            isinstance(action, bool)
+            or not isinstance(action, int | np.integer)
+            or not self.action_space.contains(np.int64(action))
+        ):
             raise ValueError(f"action {action!r} is not in {self.action_space}")
         ended = self._advance(TickInputs(behaviour=int(action)))
         obs = self._observe()

@@ -236,7 +236,8 @@ def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[
         memory = "rltm" if get_condition(c).kp else "ltm"
 
         def reliability(r: TaskResult, key: str, memory: str = memory) -> float:
-            return max(getattr(r, memory).get(key, 0.0), r.programmed.get(key, 0.0))
+            learned: dict[str, float] = getattr(r, memory)
+            return max(learned.get(key, 0.0), r.programmed.get(key, 0.0))
 
         keys = sorted({k for r in rs for k in (*getattr(r, memory), *r.programmed)})
         reliab = {k: mean_ci([reliability(r, k) for r in rs]) for k in keys}

@@ -244,9 +244,8 @@ def summary_markdown(
     for stim, row in PAPER_TABLE_III.items():
         cells = []
         for cname in ("dp", "rp", "kp"):
-            best = max(row.items(), key=lambda kv, c=cname: kv[1].get(c, 0.0))
-            value = best[1].get(cname, 0.0)
-            cells.append(f"{best[0]} {value:.2f}" if value > 0 else "-")
+            paper_best = max(((v.get(cname, 0.0), b) for b, v in row.items()), default=(0.0, ""))
+            cells.append(f"{paper_best[1]} {paper_best[0]:.2f}" if paper_best[0] > 0 else "-")
             cond = summary.get(cname, {})
             rel = cond.get("camera_reliability", {}) if cond.get("seeds") else {}
             mine = [(v["mean"], k.split("/", 1)[1]) for k, v in rel.items() if k.startswith(stim)]

@@ -93,12 +93,13 @@ class BehaviourNetwork:
         return True
 
     def learn(self, stimulus: int, behaviour: int, strength: float, source: Source) -> bool:
-        """Set a learned association's strength unless a design or a lock owns the pair.
+        """Set a learned association's strength, unless another owns the pair.
 
-        Returns whether the network changed.
+        A design, a lock or the other learner owns it: LTM learning and KP never relabel
+        each other's pairs. Returns whether the network changed.
         """
         old = self._by_stimulus[stimulus].get(behaviour)
-        if old is not None and (old.locked or old.source not in ("learned", "kp")):
+        if old is not None and (old.locked or old.source != source):
             return False
         if old is not None and old.strength == strength and old.source == source:
             return False

@@ -20,7 +20,7 @@ from core.brain.catalog import Behaviour, Catalog
 from core.brain.memory import reinforce
 from core.brain.network import BehaviourNetwork
 from core.brain.selection import Decision, How
-from core.events import AssociationPromoted
+from core.events import AssociationDemoted, AssociationPromoted
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,10 +196,12 @@ class KnowledgePropagation:
             return self.catalog
         return self.catalog.with_behaviour(added)
 
-    def reward(self, value: float) -> tuple[list[Propagated], list[AssociationPromoted]]:
+    def reward(
+        self, value: float
+    ) -> tuple[list[Propagated], list[AssociationPromoted | AssociationDemoted]]:
         """updateKPMMemory: reason over every RSTM and apply Eq. (1) to RLTM (d_k = 1)."""
         learned: list[Propagated] = []
-        promoted: list[AssociationPromoted] = []
+        promoted: list[AssociationPromoted | AssociationDemoted] = []
         cfg = self.config
         for records in self.rstm.values():
             by_high: dict[int, list[RstmRecord]] = defaultdict(list)
@@ -218,6 +220,7 @@ class KnowledgePropagation:
                 if after >= cfg.insert_threshold:
                     if self.network.learn(s1, b.id, after, "kp") and old is None:
                         promoted.append(AssociationPromoted(s1, b.id, after, "kp"))
-                elif old is not None and old.source == "kp":
+                elif old is not None and old.source == "kp" and not old.locked:
                     self.network.remove(s1, b.id)
+                    promoted.append(AssociationDemoted(s1, b.id, after))
         return learned, promoted

@@ -51,8 +51,11 @@ def test_learn_adds_a_new_learned_association() -> None:
     assert net.get(2, 3) == Association(2, 3, 0.6, "learned")
     assert net.strongest(2) == 0.6
     assert net.learn(2, 3, 0.6, "learned") is False  # nothing changed
-    assert net.learn(2, 3, 0.7, "kp") is True
-    assert net.get(2, 3) == Association(2, 3, 0.7, "kp")
+    # KP never relabels a pair LTM learning owns (nor the reverse).
+    assert net.learn(2, 3, 0.7, "kp") is False
+    assert net.get(2, 3) == Association(2, 3, 0.6, "learned")
+    assert net.learn(2, 3, 0.7, "learned") is True
+    assert net.get(2, 3) == Association(2, 3, 0.7, "learned")
     assert net.version == 2
 
 

@@ -1,0 +1,400 @@
+"""Knowledge propagation by hand: RSTM recording, reasoning, RLTM Eq. (1), promotion, synthesis.
+
+A camera stimulus (high level) is perceived at tick 1; the sonar S-R behaviours of the same
+objective that fire shortly after are recorded in the camera sensor's RSTM, and a reward
+teaches the camera stimulus the vector sum of their motions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from core.brain.catalog import Behaviour, Catalog, load_catalog
+from core.brain.network import Association, BehaviourNetwork
+from core.brain.propagation import (
+    KnowledgePropagation,
+    KpConfig,
+    Propagated,
+    RstmRecord,
+    nearest_primitive,
+    resultant_direction,
+    steer_angle,
+    synthesized_behaviour,
+)
+from core.brain.selection import Decision, How
+from core.events import AssociationDemoted, AssociationPromoted
+
+DT = 0.1
+ETA = 0.3
+WINDOW = 5
+
+
+class Harness:
+    """A KP module over the shipped catalogue and the "kp" knowledge set, with ids by name."""
+
+    def __init__(self, config: KpConfig) -> None:
+        self.catalog: Catalog = load_catalog()
+        self.network = BehaviourNetwork.from_specs(
+            self.catalog, self.catalog.knowledge_set("kp").associations
+        )
+        self.added: list[Behaviour] = []
+        self.kp = KnowledgePropagation(self.catalog, self.network, config, DT, self.add)
+
+    def add(self, behaviour: Behaviour) -> Behaviour:
+        """The brain's callback: append the behaviour to the catalogue, return it with its id."""
+        self.catalog = self.catalog.with_behaviour(behaviour)
+        added = self.catalog.behaviours[-1]
+        self.added.append(added)
+        return added
+
+    def s(self, name: str) -> int:
+        return self.catalog.stimulus(name).id
+
+    def b(self, name: str) -> int:
+        return self.catalog.behaviour(name).id
+
+    def released(self, stimulus: str, behaviour: str, how: How = How.RELEASED) -> Decision:
+        return Decision(self.b(behaviour), self.s(stimulus), 1.0, how)
+
+    def approach(self, start: int = 1) -> None:
+        """Camera M_M at `start`; sonar front -> rightturn45 (2 ticks later, running one
+        more tick), then sonar left -> rightturn30 (4 ticks later)."""
+        kp = self.kp
+        mm = self.s("Obstacle_M_M")
+        front = self.s("SonarObstacleFront")
+        left = self.s("SonarObstacleLeft")
+        kp.percept(start, [mm], Decision(self.b("goforward3"), mm, 0.3, How.DEFAULT))
+        kp.percept(start + 2, [front], self.released("SonarObstacleFront", "rightturn45"))
+        kp.percept(
+            start + 3,
+            [front],
+            self.released("SonarObstacleFront", "rightturn45", How.CONTINUED),
+        )
+        kp.percept(start + 4, [left], self.released("SonarObstacleLeft", "rightturn30"))
+
+
+def kp_config(
+    *,
+    synthesize: bool = False,
+    snap_tolerance_deg: float = 1.0,
+    insert_threshold: float = 0.5,
+    rstm_capacity: int = 256,
+) -> KpConfig:
+    return KpConfig(
+        enabled=True,
+        window_ticks=WINDOW,
+        eta=ETA,
+        insert_threshold=insert_threshold,
+        synthesize=synthesize,
+        snap_tolerance_deg=snap_tolerance_deg,
+        rstm_capacity=rstm_capacity,
+    )
+
+
+def chord_direction_deg(turns_deg: list[float], speed: float, turn_dps: float) -> float:
+    """The vector sum of circular arcs by elementary geometry: an arc of heading change t
+    on a radius r is a chord of length 2|r| sin(|t|/2) in the direction t/2."""
+    r = abs(speed / math.radians(turn_dps))
+    x = y = 0.0
+    for t in turns_deg:
+        length = 2 * r * math.sin(math.radians(abs(t)) / 2)
+        x += length * math.cos(math.radians(t / 2))
+        y += length * math.sin(math.radians(t / 2))
+    return math.degrees(math.atan2(y, x))
+
+
+# --- RSTM ---------------------------------------------------------------------------------
+
+
+def test_percept_records_released_low_responses_after_the_high_stimulus() -> None:
+    h = Harness(kp_config())
+    h.approach(start=1)
+    mm = h.s("Obstacle_M_M")
+    assert set(h.kp.rstm) == {"camera_obstacle"}
+    assert list(h.kp.rstm["camera_obstacle"]) == [
+        RstmRecord(3, mm, h.s("SonarObstacleFront"), h.b("rightturn45")),
+        RstmRecord(5, mm, h.s("SonarObstacleLeft"), h.b("rightturn30")),
+    ]
+
+
+def test_percept_records_up_to_window_ticks_after_the_high_stimulus() -> None:
+    h = Harness(kp_config())
+    mm = h.s("Obstacle_M_M")
+    kp = h.kp
+    kp.percept(1, [mm], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    kp.percept(1 + WINDOW, [], h.released("SonarObstacleFront", "rightturn45"))
+    kp.percept(2 + WINDOW, [], h.released("SonarObstacleLeft", "rightturn30"))
+    assert [r.tick for r in kp.rstm["camera_obstacle"]] == [1 + WINDOW]
+
+
+def test_percept_window_restarts_while_the_high_stimulus_stays_active() -> None:
+    h = Harness(kp_config())
+    mm = h.s("Obstacle_M_M")
+    front = h.s("SonarObstacleFront")
+    kp = h.kp
+    kp.percept(1, [mm], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    kp.percept(10, [mm, front], h.released("SonarObstacleFront", "rightturn45"))
+    kp.percept(10 + WINDOW, [], h.released("SonarObstacleLeft", "rightturn30"))
+    assert [r.tick for r in kp.rstm["camera_obstacle"]] == [10, 10 + WINDOW]
+
+
+@pytest.mark.parametrize("how", [How.CONTINUED, How.EXPLORED, How.DEFAULT, How.COMMANDED])
+def test_percept_ignores_responses_that_were_not_released(how: How) -> None:
+    h = Harness(kp_config())
+    mm = h.s("Obstacle_M_M")
+    h.kp.percept(1, [mm], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    h.kp.percept(2, [], h.released("SonarObstacleFront", "rightturn45", how))
+    assert not h.kp.rstm["camera_obstacle"]
+
+
+def test_percept_ignores_low_responses_without_a_high_stimulus_first() -> None:
+    h = Harness(kp_config())
+    front = h.s("SonarObstacleFront")
+    h.kp.percept(1, [front], h.released("SonarObstacleFront", "rightturn45"))
+    mm = h.s("Obstacle_M_M")
+    h.kp.percept(2, [mm], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    assert not any(h.kp.rstm.values())
+
+
+def test_percept_ignores_other_objectives_and_high_level_responses() -> None:
+    h = Harness(kp_config())
+    mm = h.s("Obstacle_M_M")
+    red = h.s("Red")
+    kp = h.kp
+    kp.percept(1, [mm, red], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    # A wall response (objective avoid_wall) is not an obstacle response.
+    kp.percept(2, [], h.released("LeftWall", "leftwallavoid"))
+    # A response of the high-level stimulus itself is not a low-level one.
+    kp.percept(3, [mm], h.released("Obstacle_M_M", "rightturn45"))
+    # The signal has no low-level sensor, so a red lamp is never a KP percept.
+    kp.percept(4, [red], h.released("Red", "stop"))
+    assert not any(h.kp.rstm.values())
+
+
+def test_reset_episode_forgets_the_rstm_and_the_high_stimulus() -> None:
+    h = Harness(kp_config())
+    h.approach()
+    h.kp.reset_episode()
+    assert not h.kp.rstm["camera_obstacle"]
+    h.kp.percept(6, [], h.released("SonarObstacleFront", "rightturn45"))
+    assert not h.kp.rstm["camera_obstacle"]
+
+
+def test_rstm_keeps_only_its_capacity() -> None:
+    h = Harness(kp_config(rstm_capacity=2))
+    h.approach()
+    mm = h.s("Obstacle_M_M")
+    h.kp.percept(6, [mm], h.released("SonarObstacleRight", "leftturn30"))
+    assert [r.tick for r in h.kp.rstm["camera_obstacle"]] == [5, 6]
+
+
+# --- reasoning ----------------------------------------------------------------------------
+
+
+def test_resultant_direction_is_the_vector_sum_of_motion_vectors() -> None:
+    catalog = load_catalog()
+    rt45 = catalog.behaviour("rightturn45")
+    rt30 = catalog.behaviour("rightturn30")
+    (x1, y1, _), (x2, y2, _) = rt45.motion_vector(DT), rt30.motion_vector(DT)
+    by_hand = math.atan2(y1 + y2, x1 + x2)
+    got = resultant_direction([rt45, rt30], DT)
+    assert got == pytest.approx(by_hand, abs=1e-12)
+    assert math.degrees(got) == pytest.approx(chord_direction_deg([-45, -30], 0.25, 150), 1e-9)
+    assert math.degrees(got) == pytest.approx(-19.47, abs=0.01)
+
+
+def test_resultant_direction_of_nothing_or_standing_still_is_straight_ahead() -> None:
+    catalog = load_catalog()
+    assert resultant_direction([], DT) == 0.0
+    assert resultant_direction([catalog.behaviour("stop")], DT) == 0.0
+
+
+def test_steer_angle_of_turns_and_forward_primitives() -> None:
+    catalog = load_catalog()
+    assert math.degrees(steer_angle(catalog.behaviour("rightturn45"), DT)) == pytest.approx(-45)
+    assert math.degrees(steer_angle(catalog.behaviour("leftturn30"), DT)) == pytest.approx(30)
+    assert steer_angle(catalog.behaviour("goforward5"), DT) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("angle_deg", "expected"),
+    [
+        (-19.47, "rightturn15"),
+        (-23.0, "rightturn30"),
+        (0.0, "goforward3"),
+        (5.0, "goforward3"),
+        (8.0, "leftturn15"),
+        (-95.0, "rightturn90"),
+        (52.0, "leftturn45"),
+    ],
+)
+def test_nearest_primitive_snaps_to_the_closest_heading(angle_deg: float, expected: str) -> None:
+    catalog = load_catalog()
+    got = nearest_primitive(catalog, math.radians(angle_deg), DT)
+    assert got.name == expected
+
+
+def test_nearest_primitive_prefers_the_smaller_turn_on_a_tie() -> None:
+    catalog = load_catalog()
+    assert nearest_primitive(catalog, math.radians(-7.5), DT).name == "goforward3"
+    assert nearest_primitive(catalog, math.radians(22.5), DT).name == "leftturn15"
+
+
+def test_reasoning_snaps_the_vector_sum_to_the_nearest_primitive() -> None:
+    h = Harness(kp_config())
+    b, new = h.kp.reasoning([h.b("rightturn45"), h.b("rightturn30")])
+    assert (b.name, new) == ("rightturn15", False)
+    b, new = h.kp.reasoning([h.b("leftturn45"), h.b("leftturn45"), h.b("leftturn90")])
+    assert (b.name, new) == ("leftturn30", False)  # chords at 22.5, 22.5 and 45 deg
+    assert h.added == []
+
+
+# --- RLTM, Eq. (1) with d_k = 1, and promotion ----------------------------------------------
+
+
+def test_reward_applies_eq1_with_d_equal_1_and_promotes_over_the_threshold() -> None:
+    h = Harness(kp_config())
+    mm, rt15 = h.s("Obstacle_M_M"), h.b("rightturn15")
+    sources = (h.b("rightturn45"), h.b("rightturn30"))
+    before_net = len(h.network)
+
+    h.approach(start=1)
+    learned, promoted = h.kp.reward(1.0)
+    assert learned == [Propagated(mm, rt15, sources, 0.0, ETA, False)]
+    assert promoted == []
+    assert h.kp.rltm == {(mm, rt15): pytest.approx(ETA)}
+    assert not h.kp.rstm["camera_obstacle"], "a reward empties the RSTM"
+    assert h.network.get(mm, rt15) is None
+    assert len(h.network) == before_net
+
+    h.approach(start=20)
+    second = ETA + ETA * (1 - ETA)
+    learned, promoted = h.kp.reward(1.0)
+    assert learned[0].before == pytest.approx(ETA)
+    assert learned[0].after == pytest.approx(second)
+    assert second >= 0.5
+    assert [(p.stimulus, p.behaviour) for p in promoted] == [(mm, rt15)]
+    assert isinstance(promoted[0], AssociationPromoted)
+    assert promoted[0].source == "kp"
+    assert promoted[0].reliability == pytest.approx(second)
+    assoc = h.network.get(mm, rt15)
+    assert assoc is not None
+    assert (assoc.source, assoc.locked) == ("kp", False)
+    assert assoc.strength == pytest.approx(second)
+
+    # A further success strengthens the association without promoting it again.
+    h.approach(start=40)
+    learned, promoted = h.kp.reward(1.0)
+    third = second + ETA * (1 - second)
+    assert promoted == []
+    assoc = h.network.get(mm, rt15)
+    assert assoc is not None
+    assert assoc.strength == pytest.approx(third)
+
+
+def test_negative_reward_lowers_rltm_and_removes_the_kp_association_below_threshold() -> None:
+    h = Harness(kp_config())
+    mm, rt15 = h.s("Obstacle_M_M"), h.b("rightturn15")
+    for start in (1, 20):
+        h.approach(start)
+        h.kp.reward(1.0)
+    v = ETA + ETA * (1 - ETA)
+    assert h.network.get(mm, rt15) is not None
+
+    h.approach(start=40)
+    learned, promoted = h.kp.reward(-1.0)
+    assert learned[0].after == pytest.approx(v - ETA * v)
+    assert learned[0].after < 0.5
+    assert promoted == [AssociationDemoted(mm, rt15, learned[0].after)]
+    assert h.network.get(mm, rt15) is None
+
+
+def test_kp_never_overwrites_nor_removes_a_designed_association() -> None:
+    h = Harness(kp_config())
+    mm, rt15 = h.s("Obstacle_M_M"), h.b("rightturn15")
+    h.network.put(Association(mm, rt15, 0.9, "designed"))
+    for start, value in ((1, 1.0), (20, 1.0), (40, -1.0)):
+        h.approach(start)
+        _, promoted = h.kp.reward(value)
+        assert promoted == []
+        assert h.network.get(mm, rt15) == Association(mm, rt15, 0.9, "designed")
+    v = ETA + ETA * (1 - ETA)
+    assert h.kp.rltm[(mm, rt15)] == pytest.approx(v - ETA * v)
+
+
+def test_reward_without_records_learns_nothing() -> None:
+    h = Harness(kp_config())
+    assert h.kp.reward(1.0) == ([], [])
+    assert h.kp.rltm == {}
+
+
+def test_each_high_stimulus_learns_from_its_own_records() -> None:
+    h = Harness(kp_config())
+    mm, mr = h.s("Obstacle_M_M"), h.s("Obstacle_M_R")
+    kp = h.kp
+    kp.percept(1, [mm], Decision(h.b("goforward3"), mm, 0.3, How.DEFAULT))
+    kp.percept(2, [], h.released("SonarObstacleFront", "rightturn45"))
+    kp.percept(3, [], h.released("SonarObstacleLeft", "rightturn30"))
+    kp.percept(4, [mr], Decision(h.b("goforward3"), mr, 0.3, How.DEFAULT))
+    kp.percept(5, [], h.released("SonarObstacleRight", "leftturn30"))
+    learned, _ = kp.reward(1.0)
+    assert [(p.stimulus, p.behaviour, p.sources) for p in learned] == [
+        (mm, h.b("rightturn15"), (h.b("rightturn45"), h.b("rightturn30"))),
+        (mr, h.b("leftturn15"), (h.b("leftturn30"),)),  # the chord of a 30 deg arc: 15 deg
+    ]
+
+
+# --- synthesis ------------------------------------------------------------------------------
+
+
+def test_synthesize_creates_registers_and_reuses_a_new_behaviour() -> None:
+    h = Harness(kp_config(synthesize=True, snap_tolerance_deg=1.0))
+    mm = h.s("Obstacle_M_M")
+    n = len(h.catalog.behaviours)
+    angle = resultant_direction(
+        [h.catalog.behaviour(x) for x in ("rightturn45", "rightturn30")], DT
+    )
+
+    h.approach(start=1)
+    learned, promoted = h.kp.reward(1.0)
+    assert len(h.added) == 1
+    new = h.added[0]
+    assert new.id == n
+    assert new.name == f"kp_right{round(abs(math.degrees(angle)))}" == "kp_right19"
+    assert (new.mode, new.family, new.synthesized) == ("steer", "synthesized", True)
+    assert new.speed_mps == pytest.approx(0.25)
+    assert math.degrees(steer_angle(new, DT)) == pytest.approx(math.degrees(angle), abs=1e-6)
+    assert abs(new.turn_dps) <= 150.0
+    assert learned == [Propagated(mm, n, (h.b("rightturn45"), h.b("rightturn30")), 0.0, ETA, True)]
+    assert promoted == []
+    assert h.kp.catalog.behaviours[n] == new
+
+    h.approach(start=20)
+    learned, promoted = h.kp.reward(1.0)
+    assert len(h.added) == 1, "the synthesised behaviour is reused, not made again"
+    assert [(p.behaviour, p.synthesized) for p in learned] == [(n, False)]
+    assert learned[0].after == pytest.approx(ETA + ETA * (1 - ETA))
+    assert promoted == [AssociationPromoted(mm, n, learned[0].after, "kp")]
+    assoc = h.network.get(mm, n)
+    assert assoc is not None
+    assert assoc.source == "kp"
+
+
+def test_synthesize_keeps_a_primitive_within_the_snap_tolerance() -> None:
+    h = Harness(kp_config(synthesize=True, snap_tolerance_deg=1.0))
+    b, new = h.kp.reasoning([h.b("rightturn30")])  # chord at exactly -15 deg
+    assert (b.name, new) == ("rightturn15", False)
+    h2 = Harness(kp_config(synthesize=True, snap_tolerance_deg=5.0))
+    b, new = h2.kp.reasoning([h2.b("rightturn45"), h2.b("rightturn30")])  # 4.47 deg off
+    assert (b.name, new) == ("rightturn15", False)
+    assert h.added == h2.added == []
+
+
+def test_synthesized_behaviour_turns_at_most_150_degrees_per_second() -> None:
+    b = synthesized_behaviour(math.radians(37.0), 0.2, DT)
+    assert (b.name, b.ticks, b.mode) == ("kp_left37", 3, "steer")
+    assert b.turn_dps == pytest.approx(37.0 / 0.3)
+    assert math.degrees(steer_angle(b, DT)) == pytest.approx(37.0)
+    assert synthesized_behaviour(math.radians(-15.0), 0.2, DT).ticks == 1

@@ -1,0 +1,216 @@
+"""`srlab experiment` and `srlab qlambda-sweep`: the report files and clean argument errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import matplotlib.image
+import pytest
+
+from server.cli import main
+
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """Run the CLI expecting exit code 2 and no traceback; return stderr."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    assert "Traceback" not in captured.out
+    return captured.err
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("report")
+    argv = ["experiment", "--conditions", "innate,kp", "--seeds", "2", "--episodes", "3"]
+    assert main([*argv, "--jobs", "1", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_experiment_writes_every_report_file(report: Path) -> None:
+    names = {p.name for p in report.iterdir()}
+    assert names == {
+        "summary.json",
+        "summary.md",
+        "runs.jsonl",
+        "learning_curves.png",
+        "reliability.png",
+    }
+
+
+def test_experiment_summary_json(report: Path) -> None:
+    doc = json.loads((report / "summary.json").read_text())
+    params = doc["params"]
+    assert params["conditions"] == ["innate", "kp"]
+    assert (params["seeds"], params["seed_base"], params["episodes"], params["jobs"]) == (
+        2,
+        0,
+        3,
+        1,
+    )
+    assert params["ticks"] > 0
+    assert doc["failed"] == []
+    assert set(doc["conditions"]) == {"innate", "kp"}
+    for name in ("innate", "kp"):
+        c = doc["conditions"][name]
+        assert c["seeds"] == 2
+        assert c["episodes"] == 3
+        assert 0.0 <= c["success_rate"]["mean"] <= 1.0
+        assert c["success_rate"]["n"] == 2
+        assert len(c["success_curve"]) == 3
+        assert "success_by_seed" not in c
+    assert doc["conditions"]["innate"]["learns_camera"] is False
+    assert doc["conditions"]["kp"]["camera_memory"] == "rltm"
+
+
+def test_experiment_summary_json_agrees_with_runs_jsonl(report: Path) -> None:
+    doc = json.loads((report / "summary.json").read_text())
+    rows = [json.loads(line) for line in (report / "runs.jsonl").read_text().splitlines()]
+    for name in ("innate", "kp"):
+        mine = [r for r in rows if r["condition"] == name]
+        rate = sum(r["outcome"] == "success" for r in mine) / len(mine)
+        assert doc["conditions"][name]["success_rate"]["mean"] == pytest.approx(rate)
+    assert doc["params"]["ticks"] == sum(r["ticks"] for r in rows)
+
+
+def test_experiment_runs_jsonl_has_one_line_per_episode(report: Path) -> None:
+    lines = (report / "runs.jsonl").read_text().splitlines()
+    assert len(lines) == 2 * 2 * 3
+    rows = [json.loads(line) for line in lines]
+    assert [(r["condition"], r["seed"], r["episode"]) for r in rows] == [
+        (c, s, e) for c in ("innate", "kp") for s in (0, 1) for e in range(3)
+    ]
+    for r in rows:
+        assert r["outcome"] in ("success", "failure")
+        assert (r["cause"] is None) == (r["outcome"] == "success")
+        assert r["ticks"] > 0
+
+
+def test_experiment_summary_md(report: Path) -> None:
+    md = (report / "summary.md").read_text()
+    assert md.startswith("# srlab experiment\n")
+    assert "## Results" in md
+    side_by_side = md.index("## Side by side with the paper")
+    assert md.index("### Table II", side_by_side) < md.index("### Table III", side_by_side)
+    assert "| innate |" in md
+    assert "| kp |" in md
+    assert "## Failed tasks" not in md
+
+
+@pytest.mark.parametrize("name", ["learning_curves.png", "reliability.png"])
+def test_experiment_plots_are_pngs(report: Path, name: str) -> None:
+    path = report / name
+    assert path.read_bytes()[:8] == PNG_SIGNATURE
+    image = matplotlib.image.imread(path)
+    assert image.ndim == 3
+    height, width = image.shape[:2]
+    assert height > 100
+    assert width > 100
+
+
+def test_experiment_unknown_condition_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    err = exits_2(["experiment", "--conditions", "innate,bogus", "--out", str(out)], capsys)
+    assert "srlab: error: unknown condition 'bogus'" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seeds", "0"], "argument --seeds: must be at least 1, got 0"),
+        (["--episodes", "-1"], "argument --episodes: must be at least 1, got -1"),
+        (["--episodes", "many"], "argument --episodes: 'many' is not a whole number"),
+        (["--jobs", "0"], "argument --jobs: must be at least 1, got 0"),
+        (["--seed-base", "-3"], "argument --seed-base: must be 0 or more, got -3"),
+        (["--conditions", " , "], "srlab: error: no condition given"),
+    ],
+)
+def test_experiment_bad_arguments_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    out = tmp_path / "out"
+    err = exits_2(["experiment", *argv, "--out", str(out), "--quiet"], capsys)
+    assert message in err
+    assert not out.exists()
+
+
+def test_qlambda_sweep_json(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["qlambda-sweep", "--seeds", "1", "--episodes", "3", "--alphas", "0.3"]
+    assert main([*argv, "--lambdas", "0.9", "--epsilons", "0.1", "--jobs", "1", "--json"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") == 1
+    doc = json.loads(out)
+    assert doc["seeds"] == [1000]
+    assert doc["episodes"] == 3
+    assert len(doc["rows"]) == 1
+    row = doc["rows"][0]
+    assert (row["alpha"], row["lambda"], row["epsilon"]) == (0.3, 0.9, 0.1)
+    assert 0.0 <= row["success_last50"] <= 1.0
+    assert 0.0 <= row["success_all"] <= 1.0
+
+
+def test_qlambda_sweep_grid_is_the_product(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["qlambda-sweep", "--seeds", "1", "--episodes", "1", "--alphas", "0.1,0.5"]
+    assert main([*argv, "--lambdas", "0.5,0.9", "--epsilons", "0.1", "--jobs", "1", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    assert sorted((r["alpha"], r["lambda"]) for r in rows) == [
+        (0.1, 0.5),
+        (0.1, 0.9),
+        (0.5, 0.5),
+        (0.5, 0.9),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--alphas", "2"], "--alphas values must be in [0, 1], got '2'"),
+        (["--lambdas", "-0.5"], "--lambdas values must be in [0, 1]"),
+        (["--epsilons", "a,b"], "--epsilons takes comma-separated numbers, got 'a,b'"),
+        (["--alphas", ","], "--alphas values must be in [0, 1]"),
+    ],
+)
+def test_qlambda_sweep_bad_grid_exits_2(
+    capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    err = exits_2(["qlambda-sweep", "--seeds", "1", "--episodes", "1", *argv], capsys)
+    assert f"srlab: error: {message}" in err
+
+
+def test_experiment_with_a_failed_task_reports_it_and_exits_1(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import core.experiment
+    from core.conditions import Condition
+    from core.runner import RunSummary
+    from core.runner import run as real_run
+
+    def run(condition: Condition, seed: int, episodes: int, **kw: Any) -> RunSummary:
+        if condition.name == "kp":
+            raise RuntimeError("sonar unplugged")
+        return real_run(condition, seed, episodes, **kw)
+
+    monkeypatch.setattr(core.experiment, "run", run)
+    argv = ["experiment", "--conditions", "innate,kp", "--seeds", "1", "--episodes", "2"]
+    assert main([*argv, "--jobs", "1", "--out", str(tmp_path), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "task kp seed 0 failed: RuntimeError: sonar unplugged" in err
+    doc = json.loads((tmp_path / "summary.json").read_text())
+    assert [(f["condition"], f["seed"]) for f in doc["failed"]] == [("kp", 0)]
+    assert doc["conditions"]["kp"] == {"seeds": 0}
+    assert doc["conditions"]["innate"]["seeds"] == 1
+    md = (tmp_path / "summary.md").read_text()
+    assert "## Failed tasks" in md
+    assert "- kp seed 0: RuntimeError: sonar unplugged" in md
+    assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 2
+    for name in ("learning_curves.png", "reliability.png"):
+        assert (tmp_path / name).read_bytes()[:8] == PNG_SIGNATURE
