@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install run test test-fast lint typecheck format bench clean
+.PHONY: help install run test test-fast lint typecheck format bench migrate revision pg pg-stop clean
 
 help:
-	@echo "make run | test | test-fast | lint | typecheck | format | bench | clean"
+	@echo "make run | test | test-fast | lint | typecheck | format | bench | migrate | revision m=... | pg | pg-stop | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -31,8 +31,10 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
+# The storage tests run on SQLite and on a throwaway PostgreSQL server on 127.0.0.1, which
+# the script installs (as root) when missing, starts for pytest and stops afterwards.
 test: lint typecheck
-	$(BIN)/pytest
+	bash scripts/pg-test-server.sh run -- $(BIN)/pytest
 
 test-fast: install
 	$(BIN)/pytest tests/core -q
@@ -45,5 +47,17 @@ bench: install
 	$(BIN)/python -m bench.ticks
 	$(BIN)/python -m bench.experiment
 
-clean:
-	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache
+migrate: install
+	$(BIN)/python -c "from server.persistence import upgrade; upgrade()"
+
+revision: install
+	$(BIN)/alembic revision --autogenerate -m "$(m)"
+
+pg:
+	bash scripts/pg-test-server.sh start
+
+pg-stop:
+	bash scripts/pg-test-server.sh stop
+
+clean: pg-stop
+	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache .pg

@@ -19,3 +19,15 @@ class SimulationStateError(CoreError):
 
 class LockedAssociationError(CoreError):
     """An attempt to change an association that is locked."""
+
+
+class UnknownRunError(CoreError):
+    """A run id that does not exist."""
+
+
+class StorageError(CoreError):
+    """Storage failed (disk full, database locked, connection lost): the run stops."""
+
+
+class RunStateError(CoreError):
+    """A command that does not fit the run's state (a reward to a run that is not running)."""

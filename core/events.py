@@ -65,4 +65,19 @@ class AssociationDemoted:
     reliability: float
 
 
-Event = EpisodeEnded | RewardApplied | AssociationPromoted | AssociationDemoted
+@dataclass(frozen=True, slots=True)
+class RewardDue:
+    """A reward the simulation produced (task or reinforcement program), due at `tick`.
+
+    Emitted instead of applied when the simulation defers rewards to the engine's reward
+    task; `tick` is the boundary it applies at (it credits the STM records before it).
+    """
+
+    tick: int
+    episode: int
+    value: float
+    source: str
+    note: str
+
+
+Event = EpisodeEnded | RewardApplied | RewardDue | AssociationPromoted | AssociationDemoted

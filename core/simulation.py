@@ -14,7 +14,7 @@ from core.brain.selection import How
 from core.commands import InjectReward
 from core.conditions import Condition
 from core.errors import SimulationStateError
-from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied
+from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied, RewardDue
 from core.sim.channels import Channel
 from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
 from core.trainer import ReinforcementProgram, load_trainer
@@ -85,6 +85,7 @@ class Simulation:
         network: BehaviourNetwork | None = None,
         brain_config: BrainConfig | None = None,
         end_on_failure: bool = True,
+        defer_rewards: bool = False,
     ) -> None:
         self.condition = condition
         self.seed = seed
@@ -108,6 +109,7 @@ class Simulation:
         )
         self._pending: list[InjectReward] = []
         self.end_on_failure = end_on_failure
+        self.defer_rewards = defer_rewards
         self.episode = -1
         self.tick_count = 0
         self._episode_tick = 0
@@ -159,12 +161,20 @@ class Simulation:
 
     def reward(self, value: float, source: str = "trainer", note: str = "") -> RewardApplied:
         """Apply a reward now, between ticks: it credits every STM record so far."""
-        return self._reward(InjectReward(value, note, source))[0]
+        return self.apply_reward(InjectReward(value, note, source), self.tick_count + 1)[0]
 
-    def _reward(self, r: InjectReward) -> tuple[RewardApplied, RewardOutcome]:
-        outcome = self.brain.reward(self.tick_count + 1, r.value)
+    def apply_reward(
+        self, r: InjectReward, tick: int, episode: int | None = None
+    ) -> tuple[RewardApplied, RewardOutcome]:
+        """Apply a reward stamped with the boundary before `tick` (see `Brain.reward`)."""
+        outcome = self.brain.reward(tick, r.value)
         event = RewardApplied(
-            self.tick_count + 1, self.episode, r.value, r.source, r.note, outcome.credits
+            tick,
+            self.episode if episode is None else episode,
+            r.value,
+            r.source,
+            r.note,
+            outcome.credits,
         )
         return event, outcome
 
@@ -185,7 +195,14 @@ class Simulation:
         if self.trainer is not None:
             judged = self.trainer.judge(brain.last)
             if judged is not None:
-                self._pending.append(InjectReward(judged, self.trainer.name, "program"))
+                r = InjectReward(judged, self.trainer.name, "program")
+                if self.defer_rewards:
+                    # Due at the next boundary: the engine's reward task applies it there.
+                    events.append(
+                        RewardDue(self.tick_count + 1, self.episode, r.value, r.source, r.note)
+                    )
+                else:
+                    self._pending.append(r)
         self.world.apply(command)
         frame = self.world.step()
         channels = frame.channels.tolist()
@@ -245,7 +262,11 @@ class Simulation:
         return TickResult(snap, tuple(events))
 
     def _apply_rewards(self, rewards: Iterable[InjectReward], events: list[Event]) -> None:
+        stamp = self.tick_count + 1
         for r in rewards:
-            event, applied = self._reward(r)
+            if self.defer_rewards:
+                events.append(RewardDue(stamp, self.episode, r.value, r.source, r.note))
+                continue
+            event, applied = self.apply_reward(r, stamp)
             events.append(event)
             events.extend(applied.changes)

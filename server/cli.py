@@ -46,6 +46,26 @@ def _seed(text: str) -> int:
     return value
 
 
+def _unit(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {value}")
+    return value
+
+
+def _rate(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 < value <= 1000.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1000], got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every `srlab` command."""
     parser = argparse.ArgumentParser(
@@ -120,6 +140,45 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--epsilons", default="0.05,0.1,0.2")
     sweep.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1)
     sweep.add_argument("--json", action="store_true", help="print one JSON object")
+
+    db = sub.add_parser("db", help="the database: migrate and seed it")
+    db_sub = db.add_subparsers(dest="db_command", required=True, metavar="ACTION")
+    up = db_sub.add_parser(
+        "upgrade",
+        help="create or migrate the database to the newest schema and seed the catalogue",
+        description="Create or migrate the database (SRLAB_DATABASE_URL, default "
+        "sqlite:///var/srlab.db) to the newest schema, then seed stimuli, behaviours, "
+        "logical sensors and the innate, dp, kp and expert networks.",
+    )
+    up.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
+    down = db_sub.add_parser("downgrade", help="migrate the database down to a revision")
+    down.add_argument("revision", help="an Alembic revision, or 'base' to empty it")
+    down.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
+
+    runp = sub.add_parser(
+        "run",
+        help="run a condition on the engine, stored in the database",
+        description="Run a condition on the asyncio engine (a tick task and a reward "
+        "task), storing its LTM, RLTM, network, episodes and rewards. Ctrl-C or SIGTERM "
+        "stops it cleanly (status interrupted); --resume continues it.",
+    )
+    runp.add_argument("--condition", choices=sorted(CONDITIONS), help="which condition")
+    runp.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
+    runp.add_argument(
+        "--episodes", type=_positive_int, help="episodes to run (default: until stopped)"
+    )
+    runp.add_argument("--mode", choices=["fast", "realtime"], default="fast")
+    runp.add_argument("--hz", type=_rate, default=10.0, help="realtime tick rate (default 10)")
+    runp.add_argument("--network", help="start from this knowledge set instead")
+    runp.add_argument("--eta", type=_unit, help="Eq. (1)'s learning rate")
+    runp.add_argument("--epsilon", type=_unit, help="exploration rate")
+    runp.add_argument("--resume", type=_positive_int, metavar="RUN", help="resume a stored run")
+    runp.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
+    runp.add_argument("--quiet", action="store_true", help="no progress display")
+
+    runs = sub.add_parser("runs", help="list the stored runs")
+    runs.add_argument("--json", action="store_true", help="print one JSON object")
+    runs.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
     return parser
 
 
@@ -363,6 +422,20 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _experiment(args, sys.stdout, sys.stderr)
         if args.command == "qlambda-sweep":
             return _qlambda_sweep(args, sys.stdout, sys.stderr)
+        if args.command == "db":
+            from server import run_cli
+
+            return run_cli.db(args, sys.stdout)
+        if args.command == "run":
+            from server import run_cli
+
+            if args.resume is None and args.condition is None:
+                parser.error("run needs --condition (or --resume RUN)")
+            return run_cli.run(args, sys.stdout, sys.stderr)
+        if args.command == "runs":
+            from server import run_cli
+
+            return run_cli.runs(args, sys.stdout)
     except (CoreError, ValueError, OSError) as e:
         parser.exit(2, f"srlab: error: {e}\n")
     except KeyboardInterrupt:

@@ -2,10 +2,21 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
 import pytest
+from fakes import InMemoryRunStore, InspectableRunStore
+from sqlalchemy import Engine, create_engine, text
+from sqlalchemy.engine import make_url
 
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
+from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
 
 
 @pytest.fixture(scope="session")
@@ -18,3 +29,92 @@ def catalog() -> Catalog:
 def detector(catalog: Catalog) -> StimulusDetector:
     """Every logical sensor of the catalogue compiled into one function."""
     return compile_detector(catalog)
+
+
+POSTGRES_URL_VARIABLE = "SRLAB_TEST_POSTGRES_URL"
+
+
+@pytest.fixture(scope="session")
+def postgres_url() -> str:
+    """The test PostgreSQL server (`make test` starts one); skips without, fails in CI."""
+    url = os.environ.get(POSTGRES_URL_VARIABLE, "").strip()
+    if url:
+        return url
+    if os.environ.get("CI", "").lower() == "true":
+        pytest.fail(
+            f"{POSTGRES_URL_VARIABLE} is not set: CI must test storage on PostgreSQL "
+            "(`make test` starts a server with scripts/pg-test-server.sh)"
+        )
+    pytest.skip(
+        f"{POSTGRES_URL_VARIABLE} is not set: run `make test`, or "
+        f"`export {POSTGRES_URL_VARIABLE}=$(scripts/pg-test-server.sh start)`"
+    )
+
+
+@contextmanager
+def fresh_postgres_database(server_url: str) -> Iterator[str]:
+    """A new, empty database on the server of `server_url`, dropped afterwards."""
+    name = f"srlab_t_{uuid.uuid4().hex[:12]}"
+    admin = create_engine(make_url(server_url), isolation_level="AUTOCOMMIT")
+    try:
+        with admin.connect() as c:
+            c.exec_driver_sql(f'CREATE DATABASE "{name}"')
+        try:
+            yield make_url(server_url).set(database=name).render_as_string(hide_password=False)
+        finally:
+            with admin.connect() as c:
+                c.exec_driver_sql(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+    finally:
+        admin.dispose()
+
+
+@pytest.fixture(scope="module")
+def postgres_database(postgres_url: str) -> Iterator[str]:
+    """A fresh, empty PostgreSQL database for one test module."""
+    with fresh_postgres_database(postgres_url) as url:
+        yield url
+
+
+@pytest.fixture(scope="session")
+def migrated_sqlite(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A SQLite file migrated to head and seeded once, for tests to copy."""
+    path = tmp_path_factory.mktemp("template") / "srlab.db"
+    upgrade(f"sqlite:///{path}")
+    return path
+
+
+@pytest.fixture
+def sqlite_engine(migrated_sqlite: Path, tmp_path: Path) -> Iterator[Engine]:
+    """An engine on a fresh copy of the migrated SQLite database."""
+    path = tmp_path / "srlab.db"
+    shutil.copyfile(migrated_sqlite, path)
+    engine = make_engine(f"sqlite:///{path}")
+    yield engine
+    engine.dispose()
+
+
+@pytest.fixture(scope="module")
+def postgres_engine(postgres_database: str) -> Iterator[Engine]:
+    """An engine on this module's PostgreSQL database, migrated to head and seeded."""
+    upgrade(postgres_database)
+    engine = make_engine(postgres_database)
+    yield engine
+    engine.dispose()
+
+
+@pytest.fixture
+def clean_postgres_engine(postgres_engine: Engine) -> Engine:
+    """The module's PostgreSQL engine with no runs left by an earlier test."""
+    with postgres_engine.begin() as c:
+        c.execute(text("DELETE FROM runs"))
+    return postgres_engine
+
+
+@pytest.fixture(params=["memory", "sqlite", "postgresql"])
+def store(request: pytest.FixtureRequest, catalog: Catalog) -> InspectableRunStore:
+    """Each implementation of `RunStore`, for the one contract suite they all pass."""
+    if request.param == "memory":
+        return InMemoryRunStore(catalog)
+    engine_fixture = "sqlite_engine" if request.param == "sqlite" else "clean_postgres_engine"
+    engine: Engine = request.getfixturevalue(engine_fixture)
+    return SqlAlchemyRunStore(make_sessionmaker(engine))

@@ -2,12 +2,32 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+import json
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
 
 import numpy as np
 
+from core.brain.catalog import Catalog
+from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
+from core.ports import (
+    BehaviourSpec,
+    Checkpoint,
+    CommandRecord,
+    EpisodeRecord,
+    LearningUpdate,
+    Mode,
+    NetworkPair,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+    RunStore,
+    RunTotals,
+    StoredCommand,
+    StoredReward,
+    StoredRun,
+)
 from core.sim.channels import Channel
 from core.sim.track import TrackGeometry
 from core.sim.world import (
@@ -156,3 +176,203 @@ def lap_steps(
         channels = {**base.channels, Channel.PROGRESS_M: p}
         steps.append(ScriptedStep(channels, base.collision, base.violation, base.lamp))
     return steps
+
+
+def _as_json(value: Mapping[str, Any]) -> dict[str, Any]:
+    """`value` as a JSON column gives it back (tuples become lists), as the SQL store does."""
+    out: dict[str, Any] = json.loads(json.dumps(value, allow_nan=False))
+    return out
+
+
+@dataclass(slots=True)
+class _MemoryRun:
+    """One run's rows in `InMemoryRunStore`."""
+
+    spec: RunSpec
+    status: RunStatus = RunStatus.CREATED
+    error: str | None = None
+    totals: RunTotals = field(default_factory=lambda: RunTotals(0, 0, 0))
+    checkpoint: Checkpoint | None = None
+    network: dict[tuple[str, str], NetworkPair] = field(default_factory=dict)
+    ltm: dict[tuple[str, str], float] = field(default_factory=dict)
+    rltm: dict[tuple[str, str], float] = field(default_factory=dict)
+    behaviours: dict[str, BehaviourSpec] = field(default_factory=dict)
+    rewards: dict[int, StoredReward] = field(default_factory=dict)
+    commands: dict[int, StoredCommand] = field(default_factory=dict)
+    episodes: dict[int, EpisodeRecord] = field(default_factory=dict)
+
+
+class InMemoryRunStore:
+    """A `RunStore` in memory, with the read helpers of `SqlAlchemyRunStore`.
+
+    It behaves as the SQL store does (the shared contract suite in `tests/persistence` holds
+    both to it): ids increase across runs, every write is all or nothing, an unknown run
+    raises `UnknownRunError`. Given a catalogue it also rejects stimulus and behaviour names
+    it does not know (beside the run's synthesised behaviours), as the SQL store must.
+    """
+
+    def __init__(self, catalog: Catalog | None = None) -> None:
+        self._runs: dict[int, _MemoryRun] = {}
+        self._stimuli = None if catalog is None else {s.name for s in catalog.stimuli}
+        self._behaviours = None if catalog is None else {b.name for b in catalog.behaviours}
+        self._next_run = 1
+        self._next_reward = 1
+        self._next_command = 1
+
+    def _run(self, run_id: int) -> _MemoryRun:
+        try:
+            return self._runs[run_id]
+        except KeyError:
+            raise UnknownRunError(f"no run {run_id}") from None
+
+    def _check_names(self, run: _MemoryRun, pairs: Iterable[tuple[str, str]]) -> None:
+        for stimulus, behaviour in pairs:
+            if self._stimuli is not None and stimulus not in self._stimuli:
+                raise UnknownNameError(f"unknown stimulus {stimulus!r}")
+            if (
+                self._behaviours is not None
+                and behaviour not in self._behaviours
+                and behaviour not in run.behaviours
+            ):
+                raise UnknownNameError(f"unknown behaviour {behaviour!r}")
+
+    def _apply(self, run: _MemoryRun, update: LearningUpdate) -> None:
+        """Store what an update changed; checks everything before changing anything."""
+        added = {b.name: b for b in update.behaviours_added}
+        for name in added:
+            if self._behaviours is not None and name in self._behaviours:
+                raise CatalogError(f"behaviour {name!r} exists in the catalogue")
+        trial = replace(run, behaviours={**run.behaviours, **added})
+        self._check_names(
+            trial,
+            [
+                *update.ltm,
+                *update.rltm,
+                *((p.stimulus, p.behaviour) for p in update.network_upserts),
+                *update.network_removals,
+            ],
+        )
+        run.behaviours.update(added)
+        run.ltm.update(update.ltm)
+        run.rltm.update(update.rltm)
+        for pair in update.network_upserts:
+            run.network[(pair.stimulus, pair.behaviour)] = pair
+        for key in update.network_removals:
+            run.network.pop(key, None)
+
+    def _stored(self, run_id: int, run: _MemoryRun) -> StoredRun:
+        after = -1 if run.checkpoint is None else run.checkpoint.tick
+        return StoredRun(
+            id=run_id,
+            spec=run.spec,
+            status=run.status,
+            totals=run.totals,
+            checkpoint=run.checkpoint,
+            rewards_after=tuple(r for r in run.rewards.values() if r.record.tick > after),
+            commands_after=tuple(c for c in run.commands.values() if c.record.tick > after),
+            error=run.error,
+        )
+
+    def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
+        """Store a new run (status created) with its starting network; returns its id."""
+        run = _MemoryRun(spec=replace(spec, mode=Mode(spec.mode), params=_as_json(spec.params)))
+        self._check_names(run, ((p.stimulus, p.behaviour) for p in network))
+        run.network = {(p.stimulus, p.behaviour): p for p in network}
+        run_id = self._next_run
+        self._next_run += 1
+        self._runs[run_id] = run
+        return run_id
+
+    def load_run(self, run_id: int) -> StoredRun:
+        """A stored run; raises `UnknownRunError` when there is none."""
+        return self._stored(run_id, self._run(run_id))
+
+    def set_status(self, run_id: int, status: RunStatus, error: str | None = None) -> None:
+        """Change a run's status (and error message)."""
+        run = self._run(run_id)
+        run.status = status
+        run.error = error
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        """Append a reward to the log; returns its id."""
+        run = self._run(run_id)
+        reward_id = self._next_reward
+        self._next_reward += 1
+        run.rewards[reward_id] = StoredReward(reward_id, reward, applied=False)
+        return reward_id
+
+    def apply_reward(
+        self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
+    ) -> None:
+        """Mark a logged reward applied and store what it changed."""
+        run = self._run(run_id)
+        if reward_id not in run.rewards:
+            raise StorageError(f"run {run_id} has no reward {reward_id}")
+        self._apply(run, update)
+        run.rewards[reward_id] = replace(run.rewards[reward_id], applied=True, credited=credited)
+
+    def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
+        """Append a command to the log and store what it changed; returns its id."""
+        run = self._run(run_id)
+        stored = CommandRecord(command.tick, command.kind, _as_json(command.payload))
+        self._apply(run, update)
+        command_id = self._next_command
+        self._next_command += 1
+        run.commands[command_id] = StoredCommand(command_id, stored)
+        return command_id
+
+    def end_episode(
+        self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
+    ) -> None:
+        """Store an episode, the checkpoint after it and the totals."""
+        run = self._run(run_id)
+        if episode.episode in run.episodes:
+            raise StorageError(f"run {run_id} has an episode {episode.episode} already")
+        run.episodes[episode.episode] = episode
+        run.checkpoint = checkpoint
+        run.totals = totals
+
+    def ltm(self, run_id: int) -> dict[tuple[str, str], float]:
+        """The run's LTM reliabilities by (stimulus, behaviour)."""
+        return dict(self._run(run_id).ltm)
+
+    def rltm(self, run_id: int) -> dict[tuple[str, str], float]:
+        """The run's RLTM reliabilities by (stimulus, behaviour)."""
+        return dict(self._run(run_id).rltm)
+
+    def network(self, run_id: int) -> tuple[NetworkPair, ...]:
+        """The run's live behaviour network, in insertion order."""
+        return tuple(self._run(run_id).network.values())
+
+    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]:
+        """The behaviours the run synthesised, in the order they were added."""
+        return tuple(self._run(run_id).behaviours.values())
+
+    def rewards(self, run_id: int) -> list[StoredReward]:
+        """The run's whole reward log, in log order."""
+        return list(self._run(run_id).rewards.values())
+
+    def commands(self, run_id: int) -> list[StoredCommand]:
+        """The run's whole command log, in log order."""
+        return list(self._run(run_id).commands.values())
+
+    def episodes(self, run_id: int) -> list[EpisodeRecord]:
+        """The run's episodes, by episode number."""
+        return sorted(self._run(run_id).episodes.values(), key=lambda e: e.episode)
+
+    def list_runs(self) -> list[StoredRun]:
+        """Every run, by id."""
+        return [self._stored(i, r) for i, r in sorted(self._runs.items())]
+
+
+class InspectableRunStore(RunStore, Protocol):
+    """A `RunStore` with the read helpers `InMemoryRunStore` and `SqlAlchemyRunStore` share."""
+
+    def ltm(self, run_id: int) -> dict[tuple[str, str], float]: ...
+    def rltm(self, run_id: int) -> dict[tuple[str, str], float]: ...
+    def network(self, run_id: int) -> tuple[NetworkPair, ...]: ...
+    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]: ...
+    def rewards(self, run_id: int) -> list[StoredReward]: ...
+    def commands(self, run_id: int) -> list[StoredCommand]: ...
+    def episodes(self, run_id: int) -> list[EpisodeRecord]: ...
+    def list_runs(self) -> list[StoredRun]: ...

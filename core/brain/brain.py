@@ -101,6 +101,11 @@ class Brain:
         self._running_priority = -1
 
     @property
+    def rng(self) -> np.random.Generator:
+        """The brain's random generator (exploration)."""
+        return self.selector.rng
+
+    @property
     def last(self) -> Decision:
         """The decision of the latest tick."""
         return self._last
@@ -175,13 +180,17 @@ class Brain:
         self._running_priority = self._priority[s] if s >= 0 else -1
 
     def reward(self, reward_tick: int, value: float) -> RewardOutcome:
-        """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network."""
+        """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network.
+
+        The reward arrives at the boundary before tick `reward_tick`: it credits the STM
+        records of earlier ticks, each at ``d_k = reward_tick - record tick``.
+        """
         if not self.config.learning.enabled:
-            self.stm.clear()
+            self.stm.pop_before(reward_tick)
             if self.kp is not None:
                 self.kp.reset_episode()
             return RewardOutcome((), ())
-        credits = self.ltm.apply(self.stm.pop_all(), reward_tick, value)
+        credits = self.ltm.apply(self.stm.pop_before(reward_tick), reward_tick, value)
         if value < 0.0 and credits and credits[0].d_k == 1:
             self.selector.retry(credits[0].stimulus)
         threshold = self.config.learning.insert_threshold

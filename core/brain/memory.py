@@ -67,6 +67,17 @@ class ShortTermMemory:
         self._records.clear()
         return out
 
+    def pop_before(self, tick: int) -> list[tuple[int, int, int]]:
+        """Pop the records made before `tick`, newest first; later ones stay."""
+        records = self._records
+        if not records or records[-1][0] < tick:
+            return self.pop_all()
+        keep = [r for r in records if r[0] >= tick]
+        out = [r for r in reversed(records) if r[0] < tick]
+        records.clear()
+        records.extend(keep)
+        return out
+
     def clear(self) -> None:
         """Forget everything."""
         self._records.clear()
@@ -90,6 +101,12 @@ class LongTermMemory:
     def reliability(self, stimulus: int, behaviour: int) -> float:
         """V of a pair (0 if never recorded)."""
         return self._v.get((stimulus, behaviour), 0.0)
+
+    def set(self, stimulus: int, behaviour: int, v: float) -> None:
+        """Set a pair's reliability (restoring a checkpoint)."""
+        if not 0.0 <= v <= 1.0:
+            raise ValueError("a reliability is in [0, 1]")
+        self._v[(stimulus, behaviour)] = v
 
     def items(self) -> Iterable[tuple[Pair, float]]:
         """Every (pair, V)."""

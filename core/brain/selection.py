@@ -123,6 +123,11 @@ class Selector:
         """Learnable stimuli met in the current encounter -> behaviour tried (-1: none)."""
 
     @property
+    def rng(self) -> np.random.Generator:
+        """The generator exploration draws from."""
+        return self._rng
+
+    @property
     def priority(self) -> tuple[int, ...]:
         """Priority layer of each stimulus."""
         return self._priority

@@ -1,0 +1,125 @@
+"""Checkpoints: a simulation's learning state at an episode boundary, as compressed JSON.
+
+Resuming a run rebuilds its simulation from the last checkpoint and replays the command
+log after it, so the state needs only what an episode boundary does not reset: LTM, RLTM,
+the behaviour network, synthesised behaviours, STM, the exploration generator and the
+counters. Names, not ids, so a checkpoint survives a catalogue that grew.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+from typing import Any
+
+from core.brain.catalog import Behaviour, Catalog
+from core.brain.network import Association, BehaviourNetwork
+from core.conditions import Condition
+from core.errors import CoreError
+from core.sim.world import WorldConfig
+from core.simulation import Simulation
+
+VERSION = 1
+
+
+class CheckpointError(CoreError):
+    """A checkpoint that cannot be read."""
+
+
+def export_state(sim: Simulation) -> dict[str, Any]:
+    """The learning state of a simulation between episodes."""
+    brain = sim.brain
+    cat = brain.catalog
+    s = [x.name for x in cat.stimuli]
+    b = [x.name for x in cat.behaviours]
+    kp = brain.kp
+    return {
+        "version": VERSION,
+        "episode": sim.episode,
+        "tick": sim.tick_count,
+        "ltm": [[s[i], b[j], v] for (i, j), v in brain.ltm.items()],
+        "rltm": [[s[i], b[j], v] for (i, j), v in (kp.rltm.items() if kp else ())],
+        "network": [
+            [s[a.stimulus], b[a.behaviour], a.strength, a.source, a.locked] for a in brain.network
+        ],
+        "synthesized": [
+            {
+                "name": x.name,
+                "family": x.family,
+                "speed_mps": x.speed_mps,
+                "turn_dps": x.turn_dps,
+                "ticks": x.ticks,
+                "mode": x.mode,
+            }
+            for x in cat.behaviours
+            if x.synthesized
+        ],
+        "stm": [[t, s[i], b[j]] for t, i, j in brain.stm],
+        "rng": brain.rng.bit_generator.state,
+    }
+
+
+def encode(state: dict[str, Any]) -> bytes:
+    """Compressed JSON of a state."""
+    return zlib.compress(json.dumps(state, separators=(",", ":")).encode(), 6)
+
+
+def decode(blob: bytes) -> dict[str, Any]:
+    """The state in a compressed JSON blob."""
+    try:
+        state: dict[str, Any] = json.loads(zlib.decompress(blob))
+    except (zlib.error, ValueError) as e:
+        raise CheckpointError(f"unreadable checkpoint: {e}") from e
+    if state.get("version") != VERSION:
+        raise CheckpointError(f"checkpoint version {state.get('version')!r} is not {VERSION}")
+    return state
+
+
+def restore_simulation(
+    condition: Condition,
+    seed: int,
+    state: dict[str, Any],
+    catalog: Catalog,
+    *,
+    world_config: WorldConfig | None = None,
+    defer_rewards: bool = False,
+) -> Simulation:
+    """A simulation in the state `export_state` gave.
+
+    Its next `reset()` starts the episode after the checkpointed one.
+    """
+    for spec in state["synthesized"]:
+        if not any(x.name == spec["name"] for x in catalog.behaviours):
+            catalog = catalog.with_behaviour(Behaviour(id=-1, synthesized=True, **spec))
+    sid = {x.name: x.id for x in catalog.stimuli}
+    bid = {x.name: x.id for x in catalog.behaviours}
+    try:
+        network = BehaviourNetwork(
+            len(catalog.stimuli),
+            (
+                Association(sid[st], bid[be], strength, source, locked)
+                for st, be, strength, source, locked in state["network"]
+            ),
+        )
+        sim = Simulation(
+            condition,
+            seed,
+            world_config=world_config,
+            catalog=catalog,
+            network=network,
+            defer_rewards=defer_rewards,
+        )
+        brain = sim.brain
+        for st, be, v in state["ltm"]:
+            brain.ltm.set(sid[st], bid[be], v)
+        if brain.kp is not None:
+            for st, be, v in state["rltm"]:
+                brain.kp.rltm[(sid[st], bid[be])] = v
+        for t, st, be in state["stm"]:
+            brain.stm.push((t, sid[st], bid[be]))
+    except KeyError as e:
+        raise CheckpointError(f"the checkpoint names {e} which the catalogue lacks") from e
+    brain.rng.bit_generator.state = state["rng"]
+    sim.episode = int(state["episode"])
+    sim.tick_count = int(state["tick"])
+    return sim

@@ -1,0 +1,873 @@
+"""The engine: the paper's two threads as two asyncio tasks around one simulation.
+
+The **tick task** paces ticks (realtime: drift-free deadlines; fast: no sleeping) and at
+each tick boundary makes sure every reward stamped with that boundary has been applied,
+then applies commands (association edits), then runs the tick (sense, perceive, select,
+KP percept, motor, STM). The **reward task** takes rewards off a queue in order, logs
+external ones durably (that is the acknowledgement), applies them (pop STM, Eq. (1),
+network insertions, KP) and commits what they changed before it takes the next one.
+
+A reward is stamped with the boundary it arrives before and credits exactly the STM
+records of earlier ticks, so a run is reproducible from its seed and command log: in fast
+mode it gives the same LTM as the plain headless loop, and a resumed run replays its log
+from the last checkpoint. Storage is reached only through `core.ports.RunStore`, from a
+worker thread; subscribers read events through bounded queues that drop their oldest
+event rather than ever block the tick task.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from core.brain.brain import BrainConfig, RewardOutcome
+from core.brain.catalog import Catalog, load_catalog
+from core.brain.network import Association
+from core.checkpoint import decode, encode, export_state, restore_simulation
+from core.commands import EditAssociation, InjectReward
+from core.conditions import Condition, get_condition
+from core.errors import RunStateError, StorageError
+from core.events import (
+    AssociationDemoted,
+    AssociationPromoted,
+    EpisodeEnded,
+    Outcome,
+    RewardApplied,
+    RewardDue,
+)
+from core.ports import (
+    BehaviourSpec,
+    Checkpoint,
+    CommandRecord,
+    EpisodeRecord,
+    LearningUpdate,
+    Mode,
+    NetworkPair,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+    RunStore,
+    RunTotals,
+    StoredRun,
+)
+from core.sim.world import WorldConfig
+from core.simulation import Simulation, Snapshot
+from core.trace import TraceRecorder
+
+_T = TypeVar("_T")
+
+FAST_YIELD_TICKS = 128
+"""In fast mode the tick task yields to the event loop this often, so commands get in."""
+
+
+@dataclass(frozen=True, slots=True)
+class RewardAck:
+    """What a trainer's reward was stored as."""
+
+    id: int
+    tick: int
+    episode: int
+    value: float
+
+
+@dataclass(frozen=True, slots=True)
+class StatusChanged:
+    """The run's status changed."""
+
+    run_id: int
+    status: RunStatus
+    error: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TickPublished:
+    """A tick's snapshot, as subscribers see it (throttled to their rate)."""
+
+    run_id: int
+    snapshot: Snapshot
+
+
+class Subscription:
+    """A bounded queue of engine events; when full, the oldest event is dropped.
+
+    Args:
+        maxsize: how many events it holds.
+        tick_hz: at most this many tick snapshots per second (0: none).
+    """
+
+    def __init__(self, maxsize: int = 256, tick_hz: float = 0.0) -> None:
+        self.queue: asyncio.Queue[object] = asyncio.Queue(maxsize)
+        self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
+        self.next_tick_at = 0.0
+        self.dropped = 0
+        self.closed = False
+
+    def offer(self, event: object) -> bool:
+        """Queue an event without blocking; False when an older one had to go."""
+        dropped = False
+        if self.queue.full():
+            self.queue.get_nowait()
+            self.dropped += 1
+            dropped = True
+        self.queue.put_nowait(event)
+        return not dropped
+
+    async def get(self) -> object:
+        """The next event."""
+        return await self.queue.get()
+
+    async def __aiter__(self) -> AsyncIterator[object]:
+        while not (self.closed and self.queue.empty()):
+            yield await self.queue.get()
+
+
+@dataclass
+class EngineStats:
+    """Pacing and storage figures, for benchmarks and the live view."""
+
+    ticks: int = 0
+    overruns: int = 0
+    """Tick periods skipped because a tick ran past its deadline."""
+    lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=200_000))
+    """How late each realtime tick started after its deadline."""
+    reward_commit_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    """Time to commit each reward's learning."""
+    reward_ack_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    """Time from a trainer's reward arriving to its acknowledgement."""
+
+    @staticmethod
+    def percentile(values: deque[float], q: float) -> float:
+        """The q-th percentile (0-100) of some samples, nan if none."""
+        if not values:
+            return math.nan
+        ordered = sorted(values)
+        return ordered[min(len(ordered) - 1, max(0, math.ceil(q / 100 * len(ordered)) - 1))]
+
+
+@dataclass
+class _RewardJob:
+    stamp: int
+    episode: int
+    reward: InjectReward
+    external: bool
+    applied: asyncio.Event = field(default_factory=asyncio.Event)
+    ack: asyncio.Future[RewardAck] | None = None
+    arrived: float = 0.0
+    logged_id: int | None = None
+    committed: bool = False
+    """Its learning is already in storage (a replayed reward applied before a crash)."""
+
+
+@dataclass
+class _CommandJob:
+    stamp: int
+    command: EditAssociation
+    ack: asyncio.Future[int] | None = None
+    update: LearningUpdate | None = None
+
+
+@dataclass
+class _EpisodeJob:
+    record: EpisodeRecord
+    checkpoint: Checkpoint
+    totals: RunTotals
+
+
+_CLOSE = object()
+
+
+class Engine:
+    """One run: a simulation driven by a tick task and a reward task.
+
+    Build it with `Engine.create` (a new run) or `Engine.restore` (a stored one), then
+    `await engine.run()`. While it runs, `reward`, `edit`, `pause`, `resume`, `stop`,
+    `set_rate` and `subscribe` are safe to call from the same event loop.
+    """
+
+    def __init__(
+        self,
+        run_id: int,
+        spec: RunSpec,
+        store: RunStore,
+        sim: Simulation,
+        *,
+        replay: StoredRun | None = None,
+        totals: RunTotals | None = None,
+        trace: bool = True,
+    ) -> None:
+        self.run_id = run_id
+        self.spec = spec
+        self.store = store
+        self.sim = sim
+        self.stats = EngineStats()
+        self.status = RunStatus.CREATED
+        self.error: str | None = None
+        self._replay = replay
+        t = totals or RunTotals(0, 0, sim.tick_count)
+        self._episodes_done = t.episodes
+        self._successes = t.successes
+        self._episode_rewards = 0
+        self._hz = spec.hz
+        self._trace = TraceRecorder() if trace else None
+        self._due: deque[_RewardJob] = deque()
+        self._commands: deque[_CommandJob] = deque()
+        self._queue: asyncio.Queue[object] = asyncio.Queue()
+        self._subscribers: list[Subscription] = []
+        self._tick_subscribers = 0
+        self._paused = False
+        self._resumed = asyncio.Event()
+        self._resumed.set()
+        self._stop = False
+        self._interrupt = False
+        self._episode_start_tick = sim.tick_count
+        self._need_reset = True
+        self._logged_internal: dict[tuple[int, str, float], deque[Any]] = {}
+        self._until_tick: int | None = None
+        self._last_external_id = 0
+        self._replay_skip_upto = 0
+
+    # --- construction ---------------------------------------------------------------
+
+    @staticmethod
+    def _condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
+        condition = get_condition(spec.condition)
+        if condition.agent != "brain":
+            raise RunStateError(f"condition {condition.name!r} is not run by the engine")
+        params = dict(spec.params)
+        unknown = set(params) - {"eta", "epsilon", "synthesize"}
+        if unknown:
+            raise ValueError(f"unknown learning parameters: {', '.join(sorted(unknown))}")
+        if "epsilon" in params:
+            from dataclasses import replace
+
+            condition = replace(condition, epsilon=float(params["epsilon"]))
+        config = condition.brain_config(
+            eta=float(params.get("eta", 0.1)), synthesize=bool(params.get("synthesize", False))
+        )
+        return condition, config
+
+    @classmethod
+    def create(
+        cls,
+        spec: RunSpec,
+        store: RunStore,
+        *,
+        catalog: Catalog | None = None,
+        world_config: WorldConfig | None = None,
+        network: tuple[Association, ...] | None = None,
+        trace: bool = True,
+    ) -> Engine:
+        """A new run, stored with status created."""
+        catalog = catalog or load_catalog()
+        condition, config = cls._condition(spec)
+        from core.brain.network import BehaviourNetwork
+
+        net = None if network is None else BehaviourNetwork(len(catalog.stimuli), network)
+        if net is None and spec.network is not None:
+            net = BehaviourNetwork.from_specs(
+                catalog, catalog.knowledge_set(spec.network).associations
+            )
+        sim = Simulation(
+            condition,
+            spec.seed,
+            catalog=catalog,
+            world_config=world_config,
+            network=net,
+            brain_config=config,
+            defer_rewards=True,
+        )
+        pairs = tuple(_pair(sim, a) for a in sim.brain.network)
+        run_id = store.create_run(spec, pairs)
+        return cls(run_id, spec, store, sim, trace=trace)
+
+    @classmethod
+    def restore(
+        cls,
+        run_id: int,
+        store: RunStore,
+        *,
+        catalog: Catalog | None = None,
+        world_config: WorldConfig | None = None,
+        trace: bool = True,
+        mode: Mode | None = None,
+    ) -> Engine:
+        """A stored run, rebuilt from its last checkpoint; `run()` replays its log first."""
+        stored = store.load_run(run_id)
+        if stored.status in (RunStatus.FINISHED, RunStatus.RUNNING):
+            raise RunStateError(f"run {run_id} is {stored.status.value}: nothing to resume")
+        catalog = catalog or load_catalog()
+        spec = stored.spec
+        if mode is not None:
+            from dataclasses import replace
+
+            spec = replace(spec, mode=mode)
+        condition, config = cls._condition(spec)
+        skip = 0
+        if stored.checkpoint is not None:
+            state = decode(stored.checkpoint.state)
+            skip = int(state.get("last_external_reward_id", 0))
+            sim = restore_simulation(
+                condition,
+                spec.seed,
+                state,
+                catalog,
+                world_config=world_config,
+                defer_rewards=True,
+            )
+            totals = stored.totals
+        else:
+            net = None
+            if spec.network is not None:
+                from core.brain.network import BehaviourNetwork
+
+                net = BehaviourNetwork.from_specs(
+                    catalog, catalog.knowledge_set(spec.network).associations
+                )
+            sim = Simulation(
+                condition,
+                spec.seed,
+                catalog=catalog,
+                world_config=world_config,
+                network=net,
+                brain_config=config,
+                defer_rewards=True,
+            )
+            totals = RunTotals(0, 0, 0)
+        engine = cls(run_id, spec, store, sim, replay=stored, totals=totals, trace=trace)
+        engine._replay_skip_upto = skip
+        engine._last_external_id = skip
+        return engine
+
+    # --- the outside's calls --------------------------------------------------------
+
+    def subscribe(self, maxsize: int = 256, tick_hz: float = 0.0) -> Subscription:
+        """A bounded queue of this run's events (ticks at most `tick_hz` per second)."""
+        sub = Subscription(maxsize, tick_hz)
+        self._subscribers.append(sub)
+        self._tick_subscribers += tick_hz > 0
+        return sub
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        """Stop feeding a subscription."""
+        if sub in self._subscribers:
+            self._subscribers.remove(sub)
+            self._tick_subscribers -= sub.tick_period < math.inf
+            sub.closed = True
+
+    async def reward(self, value: float, note: str = "", source: str = "trainer") -> RewardAck:
+        """Inject a reward; returns once it is in the reward log (durable).
+
+        It is stamped with the next tick boundary, so it credits every STM record so far.
+        """
+        if self.status is not RunStatus.RUNNING:
+            raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+        job = _RewardJob(
+            self.sim.tick_count + 1,
+            self.sim.episode,
+            InjectReward(value, note, source),
+            external=True,
+            ack=asyncio.get_running_loop().create_future(),
+            arrived=time.perf_counter(),
+        )
+        self._due.append(job)
+        self._queue.put_nowait(job)
+        assert job.ack is not None
+        return await job.ack
+
+    async def edit(self, command: EditAssociation) -> int:
+        """Change the running robot's network at the next tick boundary; returns the log id."""
+        if self.status not in (RunStatus.RUNNING, RunStatus.PAUSED):
+            raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+        cat = self.sim.brain.catalog
+        cat.stimulus(command.stimulus)
+        cat.behaviour(command.behaviour)
+        job = _CommandJob(
+            self.sim.tick_count + 1, command, asyncio.get_running_loop().create_future()
+        )
+        self._commands.append(job)
+        if self._paused:
+            self._apply_commands(job.stamp)
+        assert job.ack is not None
+        return await job.ack
+
+    def pause(self) -> None:
+        """Stop ticking at the next boundary until `resume`."""
+        if self.status is RunStatus.RUNNING:
+            self._paused = True
+            self._resumed.clear()
+            self._set_status(RunStatus.PAUSED)
+
+    def resume(self) -> None:
+        """Tick again after a pause."""
+        if self.status is RunStatus.PAUSED:
+            self._paused = False
+            self._set_status(RunStatus.RUNNING)
+            self._resumed.set()
+
+    def stop(self) -> None:
+        """End the run at the next tick boundary (status stopped)."""
+        self._stop = True
+        self._resumed.set()
+
+    def interrupt(self) -> None:
+        """End the run at the next tick boundary (status interrupted: it can be resumed)."""
+        self._interrupt = True
+        self.stop()
+
+    def set_rate(self, hz: float) -> None:
+        """Change the realtime tick rate."""
+        if not 0.0 < hz <= 1000.0:
+            raise ValueError("hz must be in (0, 1000]")
+        self._hz = hz
+
+    @property
+    def hz(self) -> float:
+        """The realtime tick rate."""
+        return self._hz
+
+    @property
+    def totals(self) -> RunTotals:
+        """Episodes, successes and ticks so far."""
+        return RunTotals(self._episodes_done, self._successes, self.sim.tick_count)
+
+    # --- running --------------------------------------------------------------------
+
+    async def run(self, until_tick: int | None = None) -> RunStatus:
+        """Run until the episodes are done or the run is stopped; returns the final status.
+
+        `until_tick` stops the run (status stopped) once that many ticks have run.
+        """
+        self._until_tick = until_tick
+        try:
+            return await self._run()
+        except asyncio.CancelledError:
+            await asyncio.shield(self._finish(RunStatus.INTERRUPTED))
+            raise
+
+    async def _run(self) -> RunStatus:
+        await self._io(self.store.set_status, self.run_id, RunStatus.RUNNING, None)
+        self._set_status(RunStatus.RUNNING)
+        failure: BaseException | None = None
+        try:
+            async with asyncio.TaskGroup() as tg:
+                tg.create_task(self._reward_task(), name=f"run {self.run_id} rewards")
+                tg.create_task(self._tick_task(), name=f"run {self.run_id} ticks")
+        except* StorageError as group:
+            failure = group.exceptions[0]
+            self.error = str(failure)
+            self._fail_pending(failure)
+            await self._finish(RunStatus.FAILED, persist=False)
+        except* Exception as group:
+            failure = group.exceptions[0]
+            self.error = f"{type(failure).__name__}: {failure}"
+            self._fail_pending(failure)
+            await self._finish(RunStatus.FAILED)
+        if failure is not None:
+            raise failure
+        if self._interrupt:
+            status = RunStatus.INTERRUPTED
+        elif self._stop:
+            status = RunStatus.STOPPED
+        else:
+            status = RunStatus.FINISHED
+        await self._finish(status)
+        return status
+
+    async def _finish(self, status: RunStatus, persist: bool = True) -> None:
+        if persist:
+            try:
+                await self._io(self.store.set_status, self.run_id, status, self.error)
+            except StorageError as e:
+                self.error = self.error or str(e)
+                status = RunStatus.FAILED
+        self._set_status(status)
+        for sub in self._subscribers:
+            sub.closed = True
+
+    def _fail_pending(self, error: BaseException) -> None:
+        for job in self._due:
+            if job.ack is not None and not job.ack.done():
+                job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
+        for c in self._commands:
+            if c.ack is not None and not c.ack.done():
+                c.ack.set_exception(StorageError(f"the edit was not stored: {error}"))
+
+    def _set_status(self, status: RunStatus) -> None:
+        self.status = status
+        self._publish(StatusChanged(self.run_id, status, self.error))
+
+    def _publish(self, event: object) -> None:
+        for sub in self._subscribers:
+            sub.offer(event)
+
+    async def _io(self, fn: Callable[..., _T], *args: Any) -> _T:
+        return await asyncio.to_thread(fn, *args)
+
+    # --- the tick task --------------------------------------------------------------
+
+    async def _tick_task(self) -> None:
+        try:
+            if self._replay is not None:
+                await self._replay_log(self._replay)
+                self._replay = None
+            if self.spec.mode is Mode.REALTIME:
+                await self._realtime()
+            else:
+                await self._fast()
+        finally:
+            self._queue.put_nowait(_CLOSE)
+
+    def _episodes_left(self) -> bool:
+        limit = self.spec.episodes
+        return limit is None or self._episodes_done < limit
+
+    def _more(self) -> bool:
+        """Whether the tick task should run another tick."""
+        if self._until_tick is not None and self.sim.tick_count >= self._until_tick:
+            self._stop = True
+        return not self._stop and (not self._need_reset or self._episodes_left())
+
+    async def _fast(self) -> None:
+        n = 0
+        while self._more():
+            n += 1
+            if n % FAST_YIELD_TICKS == 0 or self._due or self._commands:
+                await asyncio.sleep(0)
+                if self._paused:
+                    await self._resumed.wait()
+                    continue
+            await self._step()
+
+    async def _realtime(self) -> None:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time()
+        while self._more():
+            now = loop.time()
+            if now < deadline:
+                await asyncio.sleep(deadline - now)
+            if self._paused:
+                await self._resumed.wait()
+                deadline = loop.time()
+                continue
+            if self._stop:
+                break
+            self.stats.lateness_s.append(max(0.0, loop.time() - deadline))
+            await self._step()
+            period = 1.0 / self._hz
+            deadline += period
+            behind = loop.time() - deadline
+            if behind > 0:
+                # An overrun: skip the missed periods instead of bursting to catch up.
+                missed = math.floor(behind / period) + 1
+                self.stats.overruns += missed
+                deadline += missed * period
+
+    async def _step(self) -> None:
+        """One tick, with its boundary before and its episode's end after."""
+        sim = self.sim
+        if self._need_reset:
+            self._start_episode()
+        if self._due or self._commands:
+            await self._settle(sim.tick_count + 1)
+        result = sim.tick()
+        self.stats.ticks += 1
+        snap = result.snapshot
+        if self._trace is not None:
+            self._trace.add(
+                snap.tick,
+                snap.x,
+                snap.y,
+                snap.heading_rad,
+                snap.behaviour,
+                snap.how.value,
+                int(snap.lamp),
+                snap.stimuli,
+            )
+        if self._tick_subscribers:
+            self._publish_tick(snap)
+        ended: EpisodeEnded | None = None
+        for e in result.events:
+            if isinstance(e, RewardDue):
+                self._enqueue_internal(e)
+            elif isinstance(e, EpisodeEnded):
+                ended = e
+            else:
+                self._publish(e)
+        if ended is not None:
+            if self._due or self._commands:
+                await self._settle(sim.tick_count + 1)
+            self._end_episode(ended)
+
+    def _start_episode(self) -> None:
+        self.sim.reset()
+        self._need_reset = False
+        self._episode_start_tick = self.sim.tick_count
+        self._episode_rewards = 0
+
+    def _publish_tick(self, snap: Snapshot) -> None:
+        now = time.monotonic()
+        event = TickPublished(self.run_id, snap)
+        for sub in self._subscribers:
+            if sub.tick_period < math.inf and now >= sub.next_tick_at:
+                sub.next_tick_at = now + sub.tick_period
+                sub.offer(event)
+
+    def _enqueue_internal(self, e: RewardDue) -> None:
+        job = _RewardJob(e.tick, e.episode, InjectReward(e.value, e.note, e.source), False)
+        logged = self._logged_internal.get((e.tick, e.source, e.value))
+        if logged:
+            stored = logged.popleft()
+            job.logged_id, job.committed = stored.id, stored.applied
+        self._due.append(job)
+        self._queue.put_nowait(job)
+
+    async def _settle(self, boundary: int) -> None:
+        """Before the tick after `boundary - 1`: its rewards applied, then its commands."""
+        due = self._due
+        while due and due[0].stamp <= boundary:
+            await due[0].applied.wait()
+            due.popleft()
+        if self._commands:
+            self._apply_commands(boundary)
+
+    def _apply_commands(self, boundary: int) -> None:
+        while self._commands and self._commands[0].stamp <= boundary:
+            job = self._commands.popleft()
+            job.update = self._apply_edit(job.command)
+            self._queue.put_nowait(job)
+
+    def _apply_edit(self, edit: EditAssociation) -> LearningUpdate:
+        brain = self.sim.brain
+        s = brain.catalog.stimulus(edit.stimulus).id
+        b = brain.catalog.behaviour(edit.behaviour).id
+        if edit.strength is None:
+            brain.network.remove(s, b, force=True)
+            return LearningUpdate(network_removals=((edit.stimulus, edit.behaviour),))
+        from core.brain.catalog import SOURCES
+
+        source = edit.source if edit.source in SOURCES else "dp"
+        assoc = Association(s, b, edit.strength, source, edit.locked)
+        brain.network.put(assoc, force=True)
+        return LearningUpdate(network_upserts=(_pair(self.sim, assoc),))
+
+    def _end_episode(self, ended: EpisodeEnded) -> None:
+        sim = self.sim
+        self._episodes_done += 1
+        self._successes += ended.outcome is Outcome.SUCCESS
+        trace = self._trace.pack() if self._trace is not None else b""
+        record = EpisodeRecord(
+            episode=ended.episode,
+            outcome=ended.outcome.value,
+            cause=ended.cause.value if ended.cause else None,
+            ticks=ended.ticks,
+            start_tick=self._episode_start_tick,
+            rewards=self._episode_rewards,
+            trace=trace,
+        )
+        state = export_state(sim)
+        # Trainer rewards stamped with the next boundary may already be in this state;
+        # replay skips those the checkpoint includes.
+        state["last_external_reward_id"] = self._last_external_id
+        checkpoint = Checkpoint(sim.episode + 1, sim.tick_count, encode(state))
+        self._queue.put_nowait(_EpisodeJob(record, checkpoint, self.totals))
+        self._need_reset = True
+        self._publish(ended)
+
+    # --- replay ---------------------------------------------------------------------
+
+    async def _replay_log(self, stored: StoredRun) -> None:
+        """Re-run the ticks after the checkpoint, applying the log at its stamps.
+
+        Trainer rewards and edits come from the log. The task's and the reinforcement
+        program's rewards are produced again by the replayed ticks and matched with the log,
+        so each is stored once; a logged reward whose learning was never committed (the
+        process died in between) is committed now.
+        """
+        internal = ("task", "program")
+        skip = self._replay_skip_upto
+        rewards = deque(
+            r for r in stored.rewards_after if r.record.source not in internal and r.id > skip
+        )
+        self._logged_internal = {}
+        for r in stored.rewards_after:
+            if r.record.source in internal:
+                key = (r.record.tick, r.record.source, r.record.value)
+                self._logged_internal.setdefault(key, deque()).append(r)
+        commands = deque(stored.commands_after)
+        last = max(
+            [r.record.tick for r in stored.rewards_after] + [c.record.tick for c in commands],
+            default=0,
+        )
+        sim = self.sim
+        while sim.tick_count + 1 <= last and self._more():
+            if self._need_reset:
+                if not self._episodes_left():
+                    break
+                self._start_episode()
+            boundary = sim.tick_count + 1
+            while rewards and rewards[0].record.tick <= boundary:
+                r = rewards.popleft()
+                job = _RewardJob(
+                    r.record.tick,
+                    r.record.episode,
+                    InjectReward(r.record.value, r.record.note, r.record.source),
+                    external=True,
+                    logged_id=r.id,
+                    committed=r.applied,
+                )
+                self._due.append(job)
+                self._queue.put_nowait(job)
+            while commands and commands[0].record.tick <= boundary:
+                c = commands.popleft()
+                p = c.record.payload
+                strength = p.get("strength")
+                self._apply_edit(
+                    EditAssociation(
+                        str(p["stimulus"]),
+                        str(p["behaviour"]),
+                        None if strength is None else float(strength),
+                        str(p.get("source", "dp")),
+                        bool(p.get("locked", False)),
+                    )
+                )
+            await self._step()
+            if sim.tick_count % FAST_YIELD_TICKS == 0:
+                await asyncio.sleep(0)
+        self._logged_internal = {}
+
+    # --- the reward task ------------------------------------------------------------
+
+    async def _reward_task(self) -> None:
+        while True:
+            job = await self._queue.get()
+            if job is _CLOSE:
+                break
+            if isinstance(job, _RewardJob):
+                await self._process_reward(job)
+            elif isinstance(job, _CommandJob):
+                assert job.update is not None
+                c = job.command
+                record = CommandRecord(
+                    job.stamp,
+                    "edit_association",
+                    {
+                        "stimulus": c.stimulus,
+                        "behaviour": c.behaviour,
+                        "strength": c.strength,
+                        "source": c.source,
+                        "locked": c.locked,
+                    },
+                )
+                command_id = await self._io(self.store.log_command, self.run_id, record, job.update)
+                if job.ack is not None and not job.ack.done():
+                    job.ack.set_result(command_id)
+            elif isinstance(job, _EpisodeJob):
+                await self._io(
+                    self.store.end_episode, self.run_id, job.record, job.checkpoint, job.totals
+                )
+
+    async def _process_reward(self, job: _RewardJob) -> None:
+        record = RewardRecord(
+            job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
+        )
+        if job.external and job.logged_id is None:
+            job.logged_id = await self._io(self.store.log_reward, self.run_id, record)
+            if job.ack is not None and not job.ack.done():
+                self.stats.reward_ack_s.append(time.perf_counter() - job.arrived)
+                job.ack.set_result(
+                    RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
+                )
+        outcome = self._apply_in_memory(job)
+        if job.committed:
+            return
+        update = self._learning_update(outcome)
+        started = time.perf_counter()
+        if job.logged_id is None:
+            job.logged_id = await self._io(self._log_and_apply, record, update, outcome)
+        else:
+            await self._io(
+                self.store.apply_reward,
+                self.run_id,
+                job.logged_id,
+                update,
+                len(outcome.credits),
+            )
+        self.stats.reward_commit_s.append(time.perf_counter() - started)
+
+    def _log_and_apply(self, record: RewardRecord, update: LearningUpdate, o: RewardOutcome) -> int:
+        reward_id = self.store.log_reward(self.run_id, record)
+        self.store.apply_reward(self.run_id, reward_id, update, len(o.credits))
+        return reward_id
+
+    def _apply_in_memory(self, job: _RewardJob) -> RewardOutcome:
+        if job.external and job.logged_id is not None:
+            self._last_external_id = max(self._last_external_id, job.logged_id)
+        event, outcome = self.sim.apply_reward(job.reward, job.stamp, job.episode)
+        job.applied.set()
+        if job.episode == self.sim.episode:
+            self._episode_rewards += 1
+        self._publish(event)
+        for change in outcome.changes:
+            self._publish(change)
+        return outcome
+
+    def _learning_update(self, outcome: RewardOutcome) -> LearningUpdate:
+        brain = self.sim.brain
+        cat = brain.catalog
+        s = [x.name for x in cat.stimuli]
+        b = [x.name for x in cat.behaviours]
+        ltm = {
+            (s[c.stimulus], b[c.behaviour]): brain.ltm.reliability(c.stimulus, c.behaviour)
+            for c in outcome.credits
+        }
+        rltm = {(s[p.stimulus], b[p.behaviour]): p.after for p in outcome.propagated}
+        upserts: list[NetworkPair] = []
+        removals: list[tuple[str, str]] = []
+        for ch in outcome.changes:
+            if isinstance(ch, AssociationPromoted):
+                a = brain.network.get(ch.stimulus, ch.behaviour)
+                if a is not None:
+                    upserts.append(_pair(self.sim, a))
+            elif isinstance(ch, AssociationDemoted):
+                removals.append((s[ch.stimulus], b[ch.behaviour]))
+        # Strength changes of pairs already in the network follow their reliability.
+        for (st, be), v in {**ltm, **rltm}.items():
+            a = brain.network.get(cat.stimulus(st).id, cat.behaviour(be).id)
+            if a is not None and a.source in ("learned", "kp") and a.strength == v:
+                pair = _pair(self.sim, a)
+                if pair not in upserts:
+                    upserts.append(pair)
+        added = tuple(
+            BehaviourSpec(x.name, x.family, x.speed_mps, x.turn_dps, x.ticks, x.mode)
+            for p in outcome.propagated
+            if p.synthesized
+            for x in (cat.behaviours[p.behaviour],)
+        )
+        return LearningUpdate(ltm, rltm, tuple(upserts), tuple(removals), added)
+
+
+def _pair(sim: Simulation, a: Association) -> NetworkPair:
+    cat = sim.brain.catalog
+    return NetworkPair(
+        cat.stimuli[a.stimulus].name,
+        cat.behaviours[a.behaviour].name,
+        a.strength,
+        a.source,
+        a.locked,
+    )
+
+
+__all__ = [
+    "Engine",
+    "EngineStats",
+    "RewardAck",
+    "StatusChanged",
+    "Subscription",
+    "TickPublished",
+]
+_ = RewardApplied  # re-exported type of published reward events

@@ -1,0 +1,227 @@
+"""What the engine needs from the outside: storage and event sinks, as Protocols.
+
+`server/persistence` implements `RunStore` with SQLAlchemy; `tests/fakes.py` with memory.
+Every method is synchronous and durable when it returns; the engine calls them from a
+worker thread so the event loop never blocks on I/O.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, Protocol
+
+
+class RunStatus(StrEnum):
+    """Where a run stands."""
+
+    CREATED = "created"
+    RUNNING = "running"
+    PAUSED = "paused"
+    FINISHED = "finished"
+    STOPPED = "stopped"
+    INTERRUPTED = "interrupted"
+    FAILED = "failed"
+
+
+class Mode(StrEnum):
+    """How the engine's tick task is paced."""
+
+    FAST = "fast"
+    REALTIME = "realtime"
+
+
+@dataclass(frozen=True, slots=True)
+class RunSpec:
+    """What a run is: everything needed to reproduce it with its command log.
+
+    Attributes:
+        condition: the condition's name (core.conditions).
+        seed: the run's seed.
+        episodes: how many episodes to run, or None to run until stopped.
+        mode: fast or realtime.
+        hz: the realtime tick rate.
+        network: the knowledge set or stored network the run starts from (None: the
+            condition's own).
+        params: learning parameters that override the condition's (eta, epsilon, ...).
+    """
+
+    condition: str
+    seed: int
+    episodes: int | None = None
+    mode: Mode = Mode.FAST
+    hz: float = 10.0
+    network: str | None = None
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class NetworkPair:
+    """An association of a run's behaviour network, by names."""
+
+    stimulus: str
+    behaviour: str
+    strength: float
+    source: str
+    locked: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class BehaviourSpec:
+    """A behaviour a run synthesised (knowledge propagation), to store beside the catalogue."""
+
+    name: str
+    family: str
+    speed_mps: float
+    turn_dps: float
+    ticks: int
+    mode: str
+
+
+@dataclass(frozen=True, slots=True)
+class LearningUpdate:
+    """What one reward (or edit) changed, by names: LTM, RLTM and the network.
+
+    `ltm` and `rltm` hold the new reliability of every pair the reward touched;
+    `network_upserts` and `network_removals` the run network's changes.
+    """
+
+    ltm: Mapping[tuple[str, str], float] = field(default_factory=dict)
+    rltm: Mapping[tuple[str, str], float] = field(default_factory=dict)
+    network_upserts: tuple[NetworkPair, ...] = ()
+    network_removals: tuple[tuple[str, str], ...] = ()
+    behaviours_added: tuple[BehaviourSpec, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class RewardRecord:
+    """A reward as the log keeps it: stamped with the tick boundary it applies at."""
+
+    tick: int
+    episode: int
+    value: float
+    source: str
+    note: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class StoredReward:
+    """A logged reward with its id and whether its learning was committed."""
+
+    id: int
+    record: RewardRecord
+    applied: bool
+    credited: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class CommandRecord:
+    """A state-changing command other than a reward (an association edit), stamped."""
+
+    tick: int
+    kind: str
+    payload: Mapping[str, Any]
+
+
+@dataclass(frozen=True, slots=True)
+class StoredCommand:
+    """A logged command with its id."""
+
+    id: int
+    record: CommandRecord
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeRecord:
+    """An episode's summary and its compressed trace (for replay)."""
+
+    episode: int
+    outcome: str
+    cause: str | None
+    ticks: int
+    start_tick: int
+    rewards: int
+    trace: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Checkpoint:
+    """The run's state at an episode boundary: resuming replays the log from here.
+
+    `state` is the engine's own opaque, compressed serialisation of the brain (LTM, RLTM,
+    network, synthesised behaviours, STM, random generator).
+    """
+
+    episode: int
+    tick: int
+    state: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class RunTotals:
+    """Counters kept on the run's row."""
+
+    episodes: int
+    successes: int
+    ticks: int
+
+
+@dataclass(frozen=True, slots=True)
+class StoredRun:
+    """A run as stored: its spec, status, last checkpoint and the log after it."""
+
+    id: int
+    spec: RunSpec
+    status: RunStatus
+    totals: RunTotals
+    checkpoint: Checkpoint | None
+    rewards_after: tuple[StoredReward, ...]
+    """Rewards stamped after the checkpoint's tick, in log order (applied or not)."""
+    commands_after: tuple[StoredCommand, ...]
+    """Commands stamped after the checkpoint's tick, in log order."""
+    error: str | None = None
+
+
+class RunStore(Protocol):
+    """Durable storage of runs, their learning, episodes and the reward log."""
+
+    def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
+        """Store a new run (status created) with its starting network; returns its id."""
+        ...
+
+    def load_run(self, run_id: int) -> StoredRun:
+        """A stored run; raises `UnknownRunError` when there is none."""
+        ...
+
+    def set_status(self, run_id: int, status: RunStatus, error: str | None = None) -> None:
+        """Change a run's status (and error message)."""
+        ...
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        """Append a reward to the log, committed before returning its id."""
+        ...
+
+    def apply_reward(
+        self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
+    ) -> None:
+        """In one transaction: mark a logged reward applied and store what it changed."""
+        ...
+
+    def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
+        """In one transaction: append a command to the log and store what it changed."""
+        ...
+
+    def end_episode(
+        self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
+    ) -> None:
+        """In one transaction: store an episode, the checkpoint after it and the totals."""
+        ...
+
+
+class EventSink(Protocol):
+    """A subscriber to the engine's events (live stream, 3D view, metrics)."""
+
+    def offer(self, event: object) -> bool:
+        """Take an event without blocking; False when it had to be dropped."""
+        ...

@@ -1,0 +1,43 @@
+"""Run Alembic's migrations from code (the server's start, tests) and seed the catalogue."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+
+from server.persistence.db import database_url, make_engine, make_sessionmaker
+from server.persistence.seed import SeedReport, seed_catalog
+
+ROOT = Path(__file__).resolve().parents[2]
+"""The repository: alembic.ini and migrations/ live there."""
+
+
+def alembic_config(url: str | None = None) -> Config:
+    """Alembic's configuration for `url` (default: `database_url()`)."""
+    ini = ROOT / "alembic.ini"
+    config = Config(str(ini)) if ini.exists() else Config()
+    config.set_main_option("script_location", str(ROOT / "migrations"))
+    # ConfigParser interpolates '%': a password with one must not break the URL.
+    config.set_main_option("sqlalchemy.url", (url or database_url()).replace("%", "%%"))
+    config.attributes["configure_logger"] = False
+    return config
+
+
+def upgrade(url: str | None = None, *, seed: bool = True) -> SeedReport | None:
+    """Migrate the database to the newest schema, then seed the catalogue into it."""
+    url = url or database_url()
+    command.upgrade(alembic_config(url), "head")
+    if not seed:
+        return None
+    engine = make_engine(url)
+    try:
+        return seed_catalog(make_sessionmaker(engine))
+    finally:
+        engine.dispose()
+
+
+def downgrade(url: str | None, revision: str) -> None:
+    """Migrate the database down to `revision` (``base`` empties it)."""
+    command.downgrade(alembic_config(url), revision)

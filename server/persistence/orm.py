@@ -1,0 +1,307 @@
+"""The database schema as SQLAlchemy 2.0 typed models; `migrations/` creates it."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, ClassVar
+
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    CheckConstraint,
+    DateTime,
+    ForeignKey,
+    Index,
+    LargeBinary,
+    MetaData,
+    String,
+    Text,
+    UniqueConstraint,
+    false,
+    func,
+    text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+NAMING_CONVENTION = {
+    "ix": "ix_%(column_0_label)s",
+    "uq": "uq_%(table_name)s_%(column_0_N_name)s",
+    "ck": "ck_%(table_name)s_%(constraint_name)s",
+    "fk": "fk_%(table_name)s_%(column_0_name)s_%(referred_table_name)s",
+    "pk": "pk_%(table_name)s",
+}
+
+SOURCES = ("innate", "dp", "learned", "kp", "expert", "designed")
+RUN_STATUSES = ("created", "running", "paused", "finished", "stopped", "interrupted", "failed")
+RUN_MODES = ("fast", "realtime")
+BEHAVIOUR_MODES = ("align", "steer", "constant")
+
+
+def _one_of(column: str, values: tuple[str, ...]) -> str:
+    return f"{column} IN ({', '.join(repr(v) for v in values)})"
+
+
+NAME = String(100)
+
+
+class Base(DeclarativeBase):
+    """The one declarative base; its naming convention names every constraint."""
+
+    metadata = MetaData(naming_convention=NAMING_CONVENTION)
+    type_annotation_map: ClassVar[dict[Any, Any]] = {
+        dict[str, Any]: JSON,
+        bytes: LargeBinary,
+        datetime: DateTime(timezone=True),
+    }
+
+
+def _created() -> Mapped[datetime]:
+    return mapped_column(server_default=func.now())
+
+
+def _run_fk() -> Mapped[int]:
+    return mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), index=True)
+
+
+class LogicalSensorRow(Base):
+    """A logical sensor of the catalogue."""
+
+    __tablename__ = "logical_sensors"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(NAME, unique=True)
+    position: Mapped[int]
+    physical: Mapped[list[str]] = mapped_column(JSON)
+    processing: Mapped[str] = mapped_column(String(40))
+    objective: Mapped[str] = mapped_column(NAME)
+    level: Mapped[str] = mapped_column(String(10))
+    priority: Mapped[int]
+    weight: Mapped[float]
+
+    __table_args__ = (CheckConstraint("level IN ('low', 'high')", name="level"),)
+
+
+class StimulusRow(Base):
+    """A stimulus a logical sensor emits, with its rule."""
+
+    __tablename__ = "stimuli"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(NAME, unique=True)
+    position: Mapped[int]
+    sensor_id: Mapped[int] = mapped_column(ForeignKey("logical_sensors.id"), index=True)
+    objective: Mapped[str] = mapped_column(NAME)
+    level: Mapped[str] = mapped_column(String(10))
+    priority: Mapped[int]
+    rule: Mapped[list[Any]] = mapped_column(JSON)
+
+    __table_args__ = (CheckConstraint("level IN ('low', 'high')", name="level"),)
+
+
+class BehaviourRow(Base):
+    """A motor primitive: designed (no run) or synthesised by a run's knowledge propagation.
+
+    Designed names are unique; a run's synthesised names are unique within the run.
+    """
+
+    __tablename__ = "behaviours"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(NAME)
+    position: Mapped[int]
+    family: Mapped[str] = mapped_column(String(40))
+    speed_mps: Mapped[float]
+    turn_dps: Mapped[float]
+    ticks: Mapped[int]
+    mode: Mapped[str] = mapped_column(String(20))
+    synthesized: Mapped[bool] = mapped_column(server_default=false())
+    run_id: Mapped[int | None] = mapped_column(
+        ForeignKey("runs.id", ondelete="CASCADE"), index=True
+    )
+
+    __table_args__ = (
+        UniqueConstraint("run_id", "name"),
+        Index(
+            "uq_behaviours_designed_name",
+            "name",
+            unique=True,
+            sqlite_where=text("run_id IS NULL"),
+            postgresql_where=text("run_id IS NULL"),
+        ),
+        CheckConstraint(_one_of("mode", BEHAVIOUR_MODES), name="mode"),
+        CheckConstraint("ticks >= 1", name="ticks"),
+    )
+
+
+class NetworkRow(Base):
+    """A named behaviour network (a knowledge set the editor edits)."""
+
+    __tablename__ = "networks"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(NAME, unique=True)
+    description: Mapped[str] = mapped_column(Text, default="")
+    builtin: Mapped[bool] = mapped_column(server_default=false())
+    version: Mapped[int] = mapped_column(server_default=text("1"))
+    created_at: Mapped[datetime] = _created()
+    updated_at: Mapped[datetime] = mapped_column(server_default=func.now(), onupdate=func.now())
+
+
+class AssociationRow(Base):
+    """An S-R association of a named network."""
+
+    __tablename__ = "associations"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    network_id: Mapped[int] = mapped_column(
+        ForeignKey("networks.id", ondelete="CASCADE"), index=True
+    )
+    stimulus_id: Mapped[int] = mapped_column(ForeignKey("stimuli.id"))
+    behaviour_id: Mapped[int] = mapped_column(ForeignKey("behaviours.id"))
+    strength: Mapped[float]
+    source: Mapped[str] = mapped_column(String(20))
+    locked: Mapped[bool] = mapped_column(server_default=false())
+
+    __table_args__ = (
+        UniqueConstraint("network_id", "stimulus_id", "behaviour_id"),
+        CheckConstraint(_one_of("source", SOURCES), name="source"),
+    )
+
+
+class NetworkVersionRow(Base):
+    """One version of a network's edit history: the whole network as JSON."""
+
+    __tablename__ = "network_versions"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    network_id: Mapped[int] = mapped_column(
+        ForeignKey("networks.id", ondelete="CASCADE"), index=True
+    )
+    version: Mapped[int]
+    snapshot: Mapped[dict[str, Any]]
+    note: Mapped[str] = mapped_column(Text, default="")
+    created_at: Mapped[datetime] = _created()
+
+    __table_args__ = (UniqueConstraint("network_id", "version"),)
+
+
+class RunRow(Base):
+    """A run: its spec, status, counters and last checkpoint."""
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    condition: Mapped[str] = mapped_column(NAME)
+    seed: Mapped[int] = mapped_column(BigInteger)
+    episodes: Mapped[int | None]
+    mode: Mapped[str] = mapped_column(String(20))
+    hz: Mapped[float]
+    network: Mapped[str | None] = mapped_column(NAME)
+    params: Mapped[dict[str, Any]]
+    status: Mapped[str] = mapped_column(String(20), index=True)
+    error: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = _created()
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+    episodes_done: Mapped[int] = mapped_column(server_default=text("0"))
+    successes: Mapped[int] = mapped_column(server_default=text("0"))
+    ticks: Mapped[int] = mapped_column(BigInteger, server_default=text("0"))
+    checkpoint_episode: Mapped[int | None]
+    checkpoint_tick: Mapped[int | None] = mapped_column(BigInteger)
+    checkpoint: Mapped[bytes | None]
+
+    __table_args__ = (
+        CheckConstraint(_one_of("status", RUN_STATUSES), name="status"),
+        CheckConstraint(_one_of("mode", RUN_MODES), name="mode"),
+        {"sqlite_autoincrement": True},
+    )
+
+
+class RunAssociationRow(Base):
+    """An association of a run's live behaviour network."""
+
+    __tablename__ = "run_associations"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = _run_fk()
+    stimulus_id: Mapped[int] = mapped_column(ForeignKey("stimuli.id"))
+    behaviour_id: Mapped[int] = mapped_column(ForeignKey("behaviours.id"))
+    strength: Mapped[float]
+    source: Mapped[str] = mapped_column(String(20))
+    locked: Mapped[bool] = mapped_column(server_default=false())
+
+    __table_args__ = (
+        UniqueConstraint("run_id", "stimulus_id", "behaviour_id"),
+        CheckConstraint(_one_of("source", SOURCES), name="source"),
+    )
+
+
+class LtmRow(Base):
+    """A run's long-term memory: the reliability of one S-R pair."""
+
+    __tablename__ = "ltm"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), primary_key=True)
+    stimulus_id: Mapped[int] = mapped_column(ForeignKey("stimuli.id"), primary_key=True)
+    behaviour_id: Mapped[int] = mapped_column(ForeignKey("behaviours.id"), primary_key=True)
+    reliability: Mapped[float]
+
+
+class RltmRow(Base):
+    """A run's relational long-term memory (knowledge propagation's reliabilities)."""
+
+    __tablename__ = "rltm"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), primary_key=True)
+    stimulus_id: Mapped[int] = mapped_column(ForeignKey("stimuli.id"), primary_key=True)
+    behaviour_id: Mapped[int] = mapped_column(ForeignKey("behaviours.id"), primary_key=True)
+    reliability: Mapped[float]
+
+
+class EpisodeRow(Base):
+    """An episode's summary and compressed trace."""
+
+    __tablename__ = "episodes"
+
+    run_id: Mapped[int] = mapped_column(ForeignKey("runs.id", ondelete="CASCADE"), primary_key=True)
+    episode: Mapped[int] = mapped_column(primary_key=True, autoincrement=False)
+    outcome: Mapped[str] = mapped_column(String(40))
+    cause: Mapped[str | None] = mapped_column(String(100))
+    ticks: Mapped[int]
+    start_tick: Mapped[int] = mapped_column(BigInteger)
+    rewards: Mapped[int]
+    trace: Mapped[bytes]
+
+
+class RewardRow(Base):
+    """The reward log: every reward as received, and whether its learning was committed."""
+
+    __tablename__ = "rewards"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = _run_fk()
+    tick: Mapped[int] = mapped_column(BigInteger)
+    episode: Mapped[int]
+    value: Mapped[float]
+    source: Mapped[str] = mapped_column(String(40))
+    note: Mapped[str] = mapped_column(Text, default="")
+    applied: Mapped[bool] = mapped_column(server_default=false())
+    credited: Mapped[int] = mapped_column(server_default=text("0"))
+    created_at: Mapped[datetime] = _created()
+
+    __table_args__ = ({"sqlite_autoincrement": True},)
+
+
+class RunCommandRow(Base):
+    """The command log: association edits and other state-changing commands, stamped."""
+
+    __tablename__ = "run_commands"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    run_id: Mapped[int] = _run_fk()
+    tick: Mapped[int] = mapped_column(BigInteger)
+    kind: Mapped[str] = mapped_column(String(40))
+    payload: Mapped[dict[str, Any]]
+    created_at: Mapped[datetime] = _created()
+
+    __table_args__ = ({"sqlite_autoincrement": True},)

@@ -1,0 +1,484 @@
+"""`RunStore` on SQLAlchemy: every write is one transaction, committed when it returns."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager, suppress
+from typing import Any, TypeVar
+
+from sqlalchemy import exc as sa_exc
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, aliased
+
+from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
+from core.ports import (
+    BehaviourSpec,
+    Checkpoint,
+    CommandRecord,
+    EpisodeRecord,
+    LearningUpdate,
+    Mode,
+    NetworkPair,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+    RunTotals,
+    StoredCommand,
+    StoredReward,
+    StoredRun,
+)
+from server.persistence.db import IMMEDIATE
+from server.persistence.orm import (
+    BehaviourRow,
+    EpisodeRow,
+    LtmRow,
+    RewardRow,
+    RltmRow,
+    RunAssociationRow,
+    RunCommandRow,
+    RunRow,
+    StimulusRow,
+)
+
+_DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
+_FINAL = frozenset({RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.INTERRUPTED, RunStatus.FAILED})
+_Pair = tuple[str, str]
+_Row = TypeVar("_Row", LtmRow, RltmRow)
+
+
+def _json(value: Mapping[str, Any]) -> dict[str, Any]:
+    """`value` as JSON will give it back (tuples become lists); TypeError if it cannot."""
+    out: dict[str, Any] = json.loads(json.dumps(value, allow_nan=False))
+    return out
+
+
+class _Names:
+    """Stimulus and behaviour names <-> ids within one session, for one run."""
+
+    def __init__(self, store: SqlAlchemyRunStore, session: Session, run_id: int | None) -> None:
+        self._store = store
+        self._session = session
+        self._run_id = run_id
+        self._synth: dict[str, int] | None = None
+
+    def stimulus(self, name: str) -> int:
+        found = self._store._stimulus_ids(self._session).get(name)
+        if found is None:
+            found = self._store._stimulus_ids(self._session, refresh=True).get(name)
+        if found is None:
+            raise UnknownNameError(f"unknown stimulus {name!r}")
+        return found
+
+    def behaviour(self, name: str) -> int:
+        found = self._store._behaviour_ids(self._session).get(name)
+        if found is not None:
+            return found
+        if self._synth is None:
+            query = select(BehaviourRow.name, BehaviourRow.id).where(
+                BehaviourRow.run_id == self._run_id
+            )
+            self._synth = dict(self._session.execute(query).all())
+        found = self._synth.get(name)
+        if found is None:
+            found = self._store._behaviour_ids(self._session, refresh=True).get(name)
+        if found is None:
+            raise UnknownNameError(f"unknown behaviour {name!r}")
+        return found
+
+    def pair(self, key: _Pair) -> tuple[int, int]:
+        return self.stimulus(key[0]), self.behaviour(key[1])
+
+    def added(self, name: str, behaviour_id: int) -> None:
+        if self._synth is not None:
+            self._synth[name] = behaviour_id
+
+
+class SqlAlchemyRunStore:
+    """Runs, their learning, episodes and reward log in a SQL database.
+
+    Stimuli and behaviours are rows (seeded by `server.persistence.seed`); the ports speak
+    names, so this maps names to ids, caching the catalogue's and looking a run's
+    synthesised behaviours up per transaction. Database failures come out as
+    `StorageError` after the transaction is rolled back, so nothing committed before is
+    touched and nothing half-written remains.
+    """
+
+    def __init__(self, sessions: Callable[[], Session]) -> None:
+        self._sessions = sessions
+        self._stimuli: dict[str, int] = {}
+        self._behaviours: dict[str, int] = {}
+
+    def _stimulus_ids(self, session: Session, *, refresh: bool = False) -> dict[str, int]:
+        if refresh or not self._stimuli:
+            self._stimuli = dict(session.execute(select(StimulusRow.name, StimulusRow.id)).all())
+        return self._stimuli
+
+    def _behaviour_ids(self, session: Session, *, refresh: bool = False) -> dict[str, int]:
+        if refresh or not self._behaviours:
+            rows = session.execute(
+                select(BehaviourRow.name, BehaviourRow.id).where(BehaviourRow.run_id.is_(None))
+            ).all()
+            self._behaviours = dict(rows)
+        return self._behaviours
+
+    @contextmanager
+    def _transaction(self, what: str, *, write: bool) -> Iterator[Session]:
+        """A session whose work is committed at the end or rolled back on any error."""
+        session = self._sessions()
+        try:
+            if write:
+                session.connection(execution_options={IMMEDIATE: True})
+            yield session
+            session.commit()
+        except _DB_ERRORS as e:
+            with suppress(*_DB_ERRORS):
+                session.rollback()
+            detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
+            raise StorageError(f"storage failed while {what}: {detail}") from e
+        except BaseException:
+            session.rollback()
+            raise
+        finally:
+            session.close()
+
+    @staticmethod
+    def _run_row(session: Session, run_id: int) -> RunRow:
+        row = session.get(RunRow, run_id)
+        if row is None:
+            raise UnknownRunError(f"no run {run_id}")
+        return row
+
+    @staticmethod
+    def _require_run(session: Session, run_id: int) -> None:
+        if session.scalar(select(RunRow.id).where(RunRow.id == run_id)) is None:
+            raise UnknownRunError(f"no run {run_id}")
+
+    def _apply(self, session: Session, run_id: int, change: LearningUpdate) -> None:
+        """Store what an update changed: synthesised behaviours first, then what names them."""
+        names = _Names(self, session, run_id)
+        for spec in change.behaviours_added:
+            self._add_behaviour(session, run_id, spec, names)
+        self._upsert_memory(session, LtmRow, run_id, change.ltm, names)
+        self._upsert_memory(session, RltmRow, run_id, change.rltm, names)
+        if change.network_upserts or change.network_removals:
+            existing = {
+                (r.stimulus_id, r.behaviour_id): r
+                for r in session.scalars(
+                    select(RunAssociationRow).where(RunAssociationRow.run_id == run_id)
+                )
+            }
+            for pair in change.network_upserts:
+                key = names.pair((pair.stimulus, pair.behaviour))
+                row = existing.get(key)
+                if row is None:
+                    row = RunAssociationRow(run_id=run_id, stimulus_id=key[0], behaviour_id=key[1])
+                    session.add(row)
+                    existing[key] = row
+                row.strength = pair.strength
+                row.source = pair.source
+                row.locked = pair.locked
+            session.flush()
+            for removal in change.network_removals:
+                key = names.pair(removal)
+                if (row := existing.pop(key, None)) is not None:
+                    session.delete(row)
+
+    def _add_behaviour(
+        self, session: Session, run_id: int, spec: BehaviourSpec, names: _Names
+    ) -> None:
+        row = session.scalar(
+            select(BehaviourRow).where(
+                BehaviourRow.run_id == run_id, BehaviourRow.name == spec.name
+            )
+        )
+        if row is None:
+            if spec.name in self._behaviour_ids(session):
+                raise CatalogError(f"behaviour {spec.name!r} exists in the catalogue")
+            last = session.scalar(select(func.max(BehaviourRow.position)))
+            row = BehaviourRow(name=spec.name, run_id=run_id, position=(last or 0) + 1)
+            session.add(row)
+        row.family = spec.family
+        row.speed_mps = spec.speed_mps
+        row.turn_dps = spec.turn_dps
+        row.ticks = spec.ticks
+        row.mode = spec.mode
+        row.synthesized = True
+        session.flush()
+        names.added(spec.name, row.id)
+
+    @staticmethod
+    def _upsert_memory(
+        session: Session,
+        table: type[_Row],
+        run_id: int,
+        values: Mapping[_Pair, float],
+        names: _Names,
+    ) -> None:
+        if not values:
+            return
+        rows = {
+            (r.stimulus_id, r.behaviour_id): r
+            for r in session.scalars(select(table).where(table.run_id == run_id))
+        }
+        for key, reliability in values.items():
+            ids = names.pair(key)
+            row = rows.get(ids)
+            if row is None:
+                row = table(run_id=run_id, stimulus_id=ids[0], behaviour_id=ids[1])
+                session.add(row)
+                rows[ids] = row
+            row.reliability = reliability
+
+    def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
+        """Store a new run (status created) with its starting network; returns its id."""
+        params = _json(spec.params)
+        with self._transaction("creating a run", write=True) as s:
+            row = RunRow(
+                condition=spec.condition,
+                seed=spec.seed,
+                episodes=spec.episodes,
+                mode=Mode(spec.mode).value,
+                hz=spec.hz,
+                network=spec.network,
+                params=params,
+                status=RunStatus.CREATED.value,
+            )
+            s.add(row)
+            s.flush()
+            names = _Names(self, s, row.id)
+            seen: dict[tuple[int, int], RunAssociationRow] = {}
+            for pair in network:
+                key = names.pair((pair.stimulus, pair.behaviour))
+                assoc = seen.get(key)
+                if assoc is None:
+                    assoc = RunAssociationRow(
+                        run_id=row.id, stimulus_id=key[0], behaviour_id=key[1]
+                    )
+                    s.add(assoc)
+                    seen[key] = assoc
+                assoc.strength = pair.strength
+                assoc.source = pair.source
+                assoc.locked = pair.locked
+            return row.id
+
+    def load_run(self, run_id: int) -> StoredRun:
+        """A stored run; raises `UnknownRunError` when there is none."""
+        with self._transaction(f"loading run {run_id}", write=False) as s:
+            return self._stored(s, self._run_row(s, run_id))
+
+    def set_status(self, run_id: int, status: RunStatus, error: str | None = None) -> None:
+        """Change a run's status (and error message), stamping when it started and ended."""
+        status = RunStatus(status)
+        values: dict[str, Any] = {"status": status.value, "error": error}
+        if status is RunStatus.RUNNING:
+            values["started_at"] = func.coalesce(RunRow.started_at, func.now())
+        if status in _FINAL:
+            values["finished_at"] = func.now()
+        with self._transaction(f"setting the status of run {run_id}", write=True) as s:
+            row = self._run_row(s, run_id)
+            for name, value in values.items():
+                setattr(row, name, value)
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        """Append a reward to the log, committed before returning its id."""
+        with self._transaction(f"logging a reward for run {run_id}", write=True) as s:
+            self._require_run(s, run_id)
+            row = RewardRow(
+                run_id=run_id,
+                tick=reward.tick,
+                episode=reward.episode,
+                value=reward.value,
+                source=reward.source,
+                note=reward.note,
+                applied=False,
+                credited=0,
+            )
+            s.add(row)
+            s.flush()
+            return row.id
+
+    def apply_reward(
+        self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
+    ) -> None:
+        """In one transaction: mark a logged reward applied and store what it changed."""
+        with self._transaction(f"applying reward {reward_id} of run {run_id}", write=True) as s:
+            self._require_run(s, run_id)
+            row = s.get(RewardRow, reward_id)
+            if row is None or row.run_id != run_id:
+                raise StorageError(f"run {run_id} has no reward {reward_id}")
+            self._apply(s, run_id, update)
+            row.applied = True
+            row.credited = credited
+
+    def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
+        """In one transaction: append a command to the log and store what it changed."""
+        payload = _json(command.payload)
+        with self._transaction(f"logging a command for run {run_id}", write=True) as s:
+            self._require_run(s, run_id)
+            self._apply(s, run_id, update)
+            row = RunCommandRow(
+                run_id=run_id, tick=command.tick, kind=command.kind, payload=payload
+            )
+            s.add(row)
+            s.flush()
+            return row.id
+
+    def end_episode(
+        self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
+    ) -> None:
+        """In one transaction: store an episode, the checkpoint after it and the totals."""
+        what = f"ending episode {episode.episode} of run {run_id}"
+        with self._transaction(what, write=True) as s:
+            run = self._run_row(s, run_id)
+            if s.get(EpisodeRow, (run_id, episode.episode)) is not None:
+                raise StorageError(f"run {run_id} has an episode {episode.episode} already")
+            s.add(
+                EpisodeRow(
+                    run_id=run_id,
+                    episode=episode.episode,
+                    outcome=episode.outcome,
+                    cause=episode.cause,
+                    ticks=episode.ticks,
+                    start_tick=episode.start_tick,
+                    rewards=episode.rewards,
+                    trace=episode.trace,
+                )
+            )
+            run.checkpoint_episode = checkpoint.episode
+            run.checkpoint_tick = checkpoint.tick
+            run.checkpoint = checkpoint.state
+            run.episodes_done = totals.episodes
+            run.successes = totals.successes
+            run.ticks = totals.ticks
+
+    def _stored(self, s: Session, run: RunRow) -> StoredRun:
+        checkpoint = None
+        after = -1
+        if run.checkpoint_tick is not None:
+            assert run.checkpoint_episode is not None and run.checkpoint is not None
+            after = run.checkpoint_tick
+            checkpoint = Checkpoint(run.checkpoint_episode, after, bytes(run.checkpoint))
+        rewards = s.scalars(
+            select(RewardRow)
+            .where(RewardRow.run_id == run.id, RewardRow.tick > after)
+            .order_by(RewardRow.id)
+        )
+        commands = s.scalars(
+            select(RunCommandRow)
+            .where(RunCommandRow.run_id == run.id, RunCommandRow.tick > after)
+            .order_by(RunCommandRow.id)
+        )
+        return StoredRun(
+            id=run.id,
+            spec=RunSpec(
+                condition=run.condition,
+                seed=run.seed,
+                episodes=run.episodes,
+                mode=Mode(run.mode),
+                hz=run.hz,
+                network=run.network,
+                params=dict(run.params),
+            ),
+            status=RunStatus(run.status),
+            totals=RunTotals(run.episodes_done, run.successes, run.ticks),
+            checkpoint=checkpoint,
+            rewards_after=tuple(_reward(r) for r in rewards),
+            commands_after=tuple(_command(c) for c in commands),
+            error=run.error,
+        )
+
+    def _pairs(self, s: Session, table: type[_Row], run_id: int) -> dict[_Pair, float]:
+        self._require_run(s, run_id)
+        query = (
+            select(StimulusRow.name, BehaviourRow.name, table.reliability)
+            .join(StimulusRow, StimulusRow.id == table.stimulus_id)
+            .join(BehaviourRow, BehaviourRow.id == table.behaviour_id)
+            .where(table.run_id == run_id)
+        )
+        return {(st, be): r for st, be, r in s.execute(query)}
+
+    def ltm(self, run_id: int) -> dict[_Pair, float]:
+        """The run's LTM reliabilities by (stimulus, behaviour)."""
+        with self._transaction(f"reading the LTM of run {run_id}", write=False) as s:
+            return self._pairs(s, LtmRow, run_id)
+
+    def rltm(self, run_id: int) -> dict[_Pair, float]:
+        """The run's RLTM reliabilities by (stimulus, behaviour)."""
+        with self._transaction(f"reading the RLTM of run {run_id}", write=False) as s:
+            return self._pairs(s, RltmRow, run_id)
+
+    def network(self, run_id: int) -> tuple[NetworkPair, ...]:
+        """The run's live behaviour network, in insertion order."""
+        with self._transaction(f"reading the network of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            a = aliased(RunAssociationRow)
+            query = (
+                select(StimulusRow.name, BehaviourRow.name, a.strength, a.source, a.locked)
+                .join(StimulusRow, StimulusRow.id == a.stimulus_id)
+                .join(BehaviourRow, BehaviourRow.id == a.behaviour_id)
+                .where(a.run_id == run_id)
+                .order_by(a.id)
+            )
+            return tuple(NetworkPair(*row) for row in s.execute(query).all())
+
+    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]:
+        """The behaviours the run synthesised, in the order they were added."""
+        with self._transaction(f"reading the behaviours of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            rows = s.scalars(
+                select(BehaviourRow).where(BehaviourRow.run_id == run_id).order_by(BehaviourRow.id)
+            )
+            return tuple(
+                BehaviourSpec(b.name, b.family, b.speed_mps, b.turn_dps, b.ticks, b.mode)
+                for b in rows
+            )
+
+    def rewards(self, run_id: int) -> list[StoredReward]:
+        """The run's whole reward log, in log order."""
+        with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            rows = s.scalars(
+                select(RewardRow).where(RewardRow.run_id == run_id).order_by(RewardRow.id)
+            )
+            return [_reward(r) for r in rows]
+
+    def commands(self, run_id: int) -> list[StoredCommand]:
+        """The run's whole command log, in log order."""
+        with self._transaction(f"reading the commands of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            rows = s.scalars(
+                select(RunCommandRow)
+                .where(RunCommandRow.run_id == run_id)
+                .order_by(RunCommandRow.id)
+            )
+            return [_command(c) for c in rows]
+
+    def episodes(self, run_id: int) -> list[EpisodeRecord]:
+        """The run's episodes, by episode number."""
+        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            rows = s.scalars(
+                select(EpisodeRow).where(EpisodeRow.run_id == run_id).order_by(EpisodeRow.episode)
+            )
+            return [
+                EpisodeRecord(
+                    e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards, bytes(e.trace)
+                )
+                for e in rows
+            ]
+
+    def list_runs(self) -> list[StoredRun]:
+        """Every run, by id."""
+        with self._transaction("listing runs", write=False) as s:
+            return [self._stored(s, r) for r in s.scalars(select(RunRow).order_by(RunRow.id))]
+
+
+def _reward(r: RewardRow) -> StoredReward:
+    return StoredReward(
+        r.id, RewardRecord(r.tick, r.episode, r.value, r.source, r.note), r.applied, r.credited
+    )
+
+
+def _command(c: RunCommandRow) -> StoredCommand:
+    return StoredCommand(c.id, CommandRecord(c.tick, c.kind, dict(c.payload)))

@@ -1,0 +1,335 @@
+"""The asyncio engine: two tasks, stamped rewards and commands, replay, shutdown, storage."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Coroutine
+from dataclasses import replace
+from typing import Any
+
+import pytest
+from fakes import InMemoryRunStore
+
+from core.brain.catalog import Catalog, load_catalog
+from core.commands import EditAssociation
+from core.conditions import get_condition
+from core.engine import Engine, StatusChanged, Subscription, TickPublished
+from core.errors import RunStateError, StorageError
+from core.events import EpisodeEnded, RewardApplied
+from core.ports import LearningUpdate, Mode, RunSpec, RunStatus
+from core.runner import run as headless_run
+
+CATALOG: Catalog = load_catalog()
+
+
+def fast(condition: str, seed: int, episodes: int, **params: Any) -> RunSpec:
+    return RunSpec(condition, seed, episodes, Mode.FAST, params=params)
+
+
+def realtime(condition: str, seed: int, hz: float = 200.0) -> RunSpec:
+    return RunSpec(condition, seed, None, Mode.REALTIME, hz=hz)
+
+
+async def drive(engine: Engine, script: Callable[[Engine], Coroutine[Any, Any, None]]) -> RunStatus:
+    """Run the engine and a script beside it; the script must stop the engine."""
+    async with asyncio.TaskGroup() as tg:
+        runner = tg.create_task(engine.run())
+        tg.create_task(script(engine))
+    return runner.result()
+
+
+async def wait_ticks(engine: Engine, n: int) -> None:
+    target = engine.sim.tick_count + n
+    while engine.sim.tick_count < target:
+        await asyncio.sleep(0.001)
+
+
+@pytest.mark.parametrize("condition", ["kp", "rp", "delayed", "dp"])
+def test_fast_mode_gives_the_same_ltm_as_the_headless_loop(condition: str) -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(fast(condition, 3, 12), store, catalog=CATALOG)
+    assert asyncio.run(engine.run()) is RunStatus.FINISHED
+    plain = headless_run(get_condition(condition), 3, 12, catalog=CATALOG)
+    assert engine.sim.brain.ltm.as_dict() == plain.ltm
+    assert engine.totals.ticks == plain.ticks
+    assert engine.totals.successes == plain.successes
+    stored = store.ltm(engine.run_id)
+    names = engine.sim.brain.catalog
+    expected = {
+        (names.stimuli[s].name, names.behaviours[b].name): v for (s, b), v in plain.ltm.items()
+    }
+    assert stored == expected
+    assert len(store.episodes(engine.run_id)) == 12
+    assert all(r.applied for r in store.rewards(engine.run_id))
+
+
+def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("delayed", 1, hz=500.0), store, catalog=CATALOG)
+    sub = engine.subscribe(maxsize=10_000)
+    acks = []
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 30)
+        acks.append(await e.reward(1.0, note="good"))
+        await wait_ticks(e, 5)
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    ack = acks[0]
+    applied = [ev for ev in drain(sub) if isinstance(ev, RewardApplied) and ev.source == "trainer"]
+    assert len(applied) == 1
+    event = applied[0]
+    assert event.tick == ack.tick
+    assert event.credits, "the reward found STM records"
+    assert all(c.tick < ack.tick for c in event.credits)
+    assert all(c.d_k == ack.tick - c.tick for c in event.credits)
+    assert min(c.d_k for c in event.credits) == 1
+    # Records made after the reward's stamp stay in STM for the next reward.
+    assert all(t >= ack.tick for t, _, _ in engine.sim.brain.stm)
+    logged = store.rewards(engine.run_id)
+    assert [(r.id, r.record.tick, r.record.note, r.applied) for r in logged] == [
+        (ack.id, ack.tick, "good", True)
+    ]
+
+
+def drain(sub: Subscription) -> list[object]:
+    out = []
+    while not sub.queue.empty():
+        out.append(sub.queue.get_nowait())
+    return out
+
+
+def test_a_run_replays_from_its_seed_and_command_log() -> None:
+    """Rewards and edits at arbitrary moments of a realtime run, replayed in fast mode."""
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
+
+    async def script(e: Engine) -> None:
+        for i in range(6):
+            await wait_ticks(e, 40 + 13 * i)
+            await e.reward(1.0 if i % 2 else -0.5)
+        await e.edit(EditAssociation("Obstacle_M_M", "rightturn30", 1.0, "dp", locked=True))
+        await wait_ticks(e, 50)
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    ticks = engine.sim.tick_count
+    # A second store holding only the first run's spec and its log of trainer commands.
+    replay_store = InMemoryRunStore(CATALOG)
+    spec = replace(store.load_run(engine.run_id).spec, mode=Mode.FAST)
+    replay_id = replay_store.create_run(spec, ())
+    for r in store.rewards(engine.run_id):
+        if r.record.source == "trainer":
+            replay_store.log_reward(replay_id, r.record)
+    for c in store.commands(engine.run_id):
+        replay_store.log_command(replay_id, c.record, LearningUpdate())
+    replay_store.set_status(replay_id, RunStatus.INTERRUPTED)
+    again = Engine.restore(replay_id, replay_store, catalog=CATALOG)
+    assert asyncio.run(again.run(until_tick=ticks)) is RunStatus.STOPPED
+
+    assert again.sim.tick_count == ticks
+    assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
+    assert list(again.sim.brain.network) == list(engine.sim.brain.network)
+    assert engine.sim.brain.ltm.as_dict(), "the first run learned something"
+    assert len(replay_store.rewards(replay_id)) == len(store.rewards(engine.run_id))
+
+
+def test_shutdown_with_a_pending_reward_commits_it_and_leaves_no_task() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("delayed", 2, hz=50.0), store, catalog=CATALOG)
+
+    async def main() -> None:
+        runner = asyncio.create_task(engine.run())
+        await wait_ticks(engine, 3)
+        reward = asyncio.create_task(engine.reward(0.5))
+        await asyncio.sleep(0)
+        engine.stop()
+        ack = await reward
+        assert await runner is RunStatus.STOPPED
+        assert [t for t in asyncio.all_tasks() if t is not asyncio.current_task()] == []
+        stored = store.rewards(engine.run_id)
+        assert [(r.id, r.applied) for r in stored] == [(ack.id, True)]
+
+    asyncio.run(main())
+    assert store.load_run(engine.run_id).status is RunStatus.STOPPED
+
+
+def test_pause_resume_and_rewards_need_a_running_run() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("delayed", 4, hz=500.0), store, catalog=CATALOG)
+    sub = engine.subscribe(maxsize=1000)
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 5)
+        e.pause()
+        await asyncio.sleep(0.01)
+        frozen = e.sim.tick_count
+        with pytest.raises(RunStateError):
+            await e.reward(1.0)
+        await asyncio.sleep(0.05)
+        assert e.sim.tick_count == frozen
+        e.resume()
+        await wait_ticks(e, 5)
+        e.stop()
+
+    assert asyncio.run(drive(engine, script)) is RunStatus.STOPPED
+    statuses = [ev.status for ev in drain(sub) if isinstance(ev, StatusChanged)]
+    assert statuses == [
+        RunStatus.RUNNING,
+        RunStatus.PAUSED,
+        RunStatus.RUNNING,
+        RunStatus.STOPPED,
+    ]
+
+    async def not_running() -> None:
+        with pytest.raises(RunStateError):
+            await engine.reward(1.0)
+
+    asyncio.run(not_running())
+
+
+def test_an_edit_reaches_the_robot_at_the_next_boundary_and_is_logged() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("kp", 5, hz=500.0), store, catalog=CATALOG)
+    red, stop = CATALOG.stimulus("Red").id, CATALOG.behaviour("stop").id
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 3)
+        assert e.sim.brain.network.get(red, stop) is None
+        command_id = await e.edit(EditAssociation("Red", "stop", 1.0, "dp", locked=True))
+        assert command_id >= 1
+        assoc = e.sim.brain.network.get(red, stop)
+        assert assoc is not None and assoc.locked and assoc.source == "dp"
+        await e.edit(EditAssociation("Red", "stop", None))
+        assert e.sim.brain.network.get(red, stop) is None
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    commands = store.commands(engine.run_id)
+    assert [c.record.payload["strength"] for c in commands] == [1.0, None]
+    assert ("Red", "stop") not in {(p.stimulus, p.behaviour) for p in store.network(engine.run_id)}
+
+
+def test_edit_of_an_unknown_stimulus_is_refused() -> None:
+    engine = Engine.create(realtime("kp", 5), InMemoryRunStore(CATALOG), catalog=CATALOG)
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 1)
+        with pytest.raises(Exception, match="unknown stimulus"):
+            await e.edit(EditAssociation("Purple", "stop", 1.0))
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+
+
+def test_a_slow_subscriber_never_stalls_the_tick_task() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(fast("delayed", 6, 20), store, catalog=CATALOG)
+    slow = engine.subscribe(maxsize=2, tick_hz=1e6)
+    assert asyncio.run(engine.run()) is RunStatus.FINISHED
+    assert engine.totals.episodes == 20
+    assert slow.dropped > 0
+    assert slow.queue.qsize() == 2
+
+
+def test_tick_snapshots_are_throttled_per_subscriber() -> None:
+    engine = Engine.create(realtime("delayed", 8, hz=500.0), InMemoryRunStore(CATALOG))
+    few = engine.subscribe(maxsize=10_000, tick_hz=20.0)
+    none = engine.subscribe(maxsize=10_000)
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 100)
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    ticks = [ev for ev in drain(few) if isinstance(ev, TickPublished)]
+    assert 1 <= len(ticks) < engine.stats.ticks / 2
+    assert not any(isinstance(ev, TickPublished) for ev in drain(none))
+
+
+class FailingStore(InMemoryRunStore):
+    """A store whose disk fills up at the n-th reward commit."""
+
+    def __init__(self, fail_at: int) -> None:
+        super().__init__(CATALOG)
+        self.fail_at = fail_at
+        self.commits = 0
+
+    def apply_reward(
+        self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
+    ) -> None:
+        self.commits += 1
+        if self.commits >= self.fail_at:
+            raise StorageError("database or disk is full")
+        super().apply_reward(run_id, reward_id, update, credited)
+
+
+def test_a_storage_error_ends_the_run_with_a_clear_error_and_keeps_what_was_committed() -> None:
+    store = FailingStore(fail_at=3)
+    engine = Engine.create(fast("delayed", 1, 200), store, catalog=CATALOG)
+    with pytest.raises(StorageError, match="disk is full"):
+        asyncio.run(engine.run())
+    assert engine.status is RunStatus.FAILED
+    assert engine.error is not None and "disk is full" in engine.error
+    applied = [r for r in store.rewards(engine.run_id) if r.applied]
+    assert len(applied) == 2
+    assert store.episodes(engine.run_id), "episodes before the failure are kept"
+
+
+def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
+    store = InMemoryRunStore(CATALOG)
+    spec = fast("kp", 9, 16)
+    engine = Engine.create(spec, store, catalog=CATALOG)
+
+    async def stop_midway(e: Engine) -> None:
+        while e.totals.episodes < 7:
+            await asyncio.sleep(0)
+        e.interrupt()
+
+    assert asyncio.run(drive(engine, stop_midway)) is RunStatus.INTERRUPTED
+    assert store.load_run(engine.run_id).status is RunStatus.INTERRUPTED
+    resumed = Engine.restore(engine.run_id, store, catalog=CATALOG)
+    assert asyncio.run(resumed.run()) is RunStatus.FINISHED
+    whole = Engine.create(spec, InMemoryRunStore(CATALOG), catalog=CATALOG)
+    asyncio.run(whole.run())
+    assert resumed.sim.brain.ltm.as_dict() == whole.sim.brain.ltm.as_dict()
+    assert resumed.totals == whole.totals
+    assert len(store.episodes(engine.run_id)) == 16
+
+
+def test_a_finished_run_cannot_be_resumed_and_unknown_params_are_refused() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(fast("innate", 1, 1), store, catalog=CATALOG)
+    asyncio.run(engine.run())
+    with pytest.raises(RunStateError, match="finished"):
+        Engine.restore(engine.run_id, store, catalog=CATALOG)
+    with pytest.raises(ValueError, match="unknown learning parameters: gamma"):
+        Engine.create(fast("kp", 1, 1, gamma=0.5), store, catalog=CATALOG)
+    with pytest.raises(RunStateError, match="qlambda"):
+        Engine.create(fast("qlambda", 1, 1), store, catalog=CATALOG)
+
+
+def test_realtime_pacing_is_measured() -> None:
+    engine = Engine.create(realtime("delayed", 1, hz=100.0), InMemoryRunStore(CATALOG))
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 20)
+        e.set_rate(200.0)
+        assert e.hz == 200.0
+        with pytest.raises(ValueError):
+            e.set_rate(0.0)
+        await wait_ticks(e, 10)
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    assert len(engine.stats.lateness_s) >= 30
+    assert all(x >= 0.0 for x in engine.stats.lateness_s)
+
+
+def test_episode_end_events_reach_subscribers() -> None:
+    engine = Engine.create(fast("expert", 2, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
+    sub = engine.subscribe(maxsize=100)
+    asyncio.run(engine.run())
+    ended = [ev for ev in drain(sub) if isinstance(ev, EpisodeEnded)]
+    assert [e.episode for e in ended] == [0, 1, 2]

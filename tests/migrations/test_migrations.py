@@ -1,0 +1,118 @@
+"""The migrations build exactly the ORM's schema, on SQLite and PostgreSQL, and run both ways."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+from alembic import command
+from alembic.autogenerate import compare_metadata
+from alembic.config import Config
+from alembic.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from conftest import fresh_postgres_database
+from sqlalchemy import inspect
+
+from server.persistence import Base, alembic_config, downgrade, make_engine, upgrade
+from server.persistence.migrate import ROOT
+
+TABLES = {
+    "logical_sensors",
+    "stimuli",
+    "behaviours",
+    "networks",
+    "associations",
+    "network_versions",
+    "runs",
+    "run_associations",
+    "ltm",
+    "rltm",
+    "episodes",
+    "rewards",
+    "run_commands",
+}
+
+
+def drift(url: str) -> list[Any]:
+    """What autogenerate would change to make the database match the ORM (nothing, we hope)."""
+    engine = make_engine(url)
+    try:
+        with engine.connect() as connection:
+            context = MigrationContext.configure(
+                connection, opts={"compare_type": True, "compare_server_default": True}
+            )
+            return list(compare_metadata(context, Base.metadata))
+    finally:
+        engine.dispose()
+
+
+def tables(url: str) -> set[str]:
+    engine = make_engine(url)
+    try:
+        return set(inspect(engine).get_table_names())
+    finally:
+        engine.dispose()
+
+
+@pytest.fixture
+def sqlite_url(tmp_path: Path) -> str:
+    return f"sqlite:///{tmp_path / 'srlab.db'}"
+
+
+def test_there_is_one_head() -> None:
+    script = ScriptDirectory.from_config(alembic_config("sqlite://"))
+
+    assert len(script.get_heads()) == 1
+
+
+def test_upgrade_head_on_sqlite_matches_the_models(sqlite_url: str) -> None:
+    upgrade(sqlite_url, seed=False)
+
+    assert tables(sqlite_url) == TABLES | {"alembic_version"}
+    assert drift(sqlite_url) == []
+
+
+def test_downgrade_to_base_and_upgrade_again_on_sqlite(sqlite_url: str) -> None:
+    first = upgrade(sqlite_url)
+
+    downgrade(sqlite_url, "base")
+    emptied = tables(sqlite_url)
+    again = upgrade(sqlite_url)
+
+    assert emptied == {"alembic_version"}
+    assert first is not None and again is not None and again.added == first.added
+    assert drift(sqlite_url) == []
+
+
+def test_upgrade_twice_changes_nothing(sqlite_url: str) -> None:
+    upgrade(sqlite_url)
+
+    report = upgrade(sqlite_url)
+
+    assert report is not None and not report.changed
+
+
+def test_alembic_ini_takes_the_url_from_the_environment(
+    sqlite_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SRLAB_DATABASE_URL", sqlite_url)
+    config = Config(str(ROOT / "alembic.ini"))
+    config.attributes["configure_logger"] = False
+
+    command.upgrade(config, "head")
+
+    assert drift(sqlite_url) == []
+
+
+def test_upgrade_head_on_postgres_matches_the_models_and_round_trips(postgres_url: str) -> None:
+    with fresh_postgres_database(postgres_url) as url:
+        upgrade(url)
+        assert tables(url) == TABLES | {"alembic_version"}
+        assert drift(url) == []
+
+        downgrade(url, "base")
+        assert tables(url) == {"alembic_version"}
+
+        upgrade(url)
+        assert drift(url) == []

@@ -1,0 +1,421 @@
+"""One contract for every `RunStore`: the in-memory fake, SQLite and PostgreSQL."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import pytest
+from fakes import InspectableRunStore
+
+from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
+from core.ports import (
+    BehaviourSpec,
+    Checkpoint,
+    CommandRecord,
+    EpisodeRecord,
+    LearningUpdate,
+    Mode,
+    NetworkPair,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+    RunTotals,
+)
+
+NETWORK = (
+    NetworkPair("Corner", "leftturn90", 1.0, "innate", locked=True),
+    NetworkPair("LeftWall", "leftwallavoid", 1.0, "innate"),
+    NetworkPair("Red", "stop", 0.8, "dp"),
+)
+SPEC = RunSpec(
+    condition="dp",
+    seed=7,
+    episodes=20,
+    mode=Mode.REALTIME,
+    hz=12.5,
+    network="dp",
+    params={"eta": 0.2, "epsilon": 0.05},
+)
+SLOWER = BehaviourSpec("kp_slow_left", "synthesized", 0.05, 20.0, 3, "constant")
+
+
+def reward(tick: int, value: float = 1.0, episode: int = 0) -> RewardRecord:
+    return RewardRecord(tick=tick, episode=episode, value=value, source="human", note=f"t{tick}")
+
+
+def edit(tick: int) -> CommandRecord:
+    return CommandRecord(tick, "edit_association", {"stimulus": "Red", "behaviour": "stop"})
+
+
+def episode(n: int, start_tick: int = 0) -> EpisodeRecord:
+    return EpisodeRecord(n, "success", None, 100, start_tick, 2, b"\x00trace" + bytes([n]))
+
+
+def new_run(store: InspectableRunStore) -> int:
+    return store.create_run(SPEC, NETWORK)
+
+
+def test_create_run_stores_spec_network_and_created_status(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    run = store.load_run(run_id)
+    assert run.id == run_id
+    assert run.spec == SPEC
+    assert run.status is RunStatus.CREATED
+    assert run.error is None
+    assert run.totals == RunTotals(0, 0, 0)
+    assert run.checkpoint is None
+    assert run.rewards_after == () and run.commands_after == ()
+    assert store.network(run_id) == NETWORK
+    assert store.ltm(run_id) == {} and store.rltm(run_id) == {}
+    assert store.episodes(run_id) == [] and store.rewards(run_id) == []
+
+
+def test_create_run_with_defaults_and_no_network(store: InspectableRunStore) -> None:
+    spec = RunSpec("innate", seed=2**40)
+
+    run_id = store.create_run(spec, ())
+
+    assert store.load_run(run_id).spec == spec
+    assert store.network(run_id) == ()
+
+
+def test_create_run_params_come_back_as_json(store: InspectableRunStore) -> None:
+    spec = RunSpec("kp", 1, params={"sensors": ("signal", "camera"), "nested": {"a": 1}})
+
+    run_id = store.create_run(spec, ())
+
+    assert store.load_run(run_id).spec.params == {
+        "sensors": ["signal", "camera"],
+        "nested": {"a": 1},
+    }
+
+
+def test_create_run_ids_increase_and_list_runs_is_by_id(store: InspectableRunStore) -> None:
+    ids = [new_run(store) for _ in range(3)]
+
+    assert ids == sorted(ids) and len(set(ids)) == 3
+    assert [r.id for r in store.list_runs()] == ids
+    assert all(r.spec == SPEC for r in store.list_runs())
+
+
+def test_create_run_with_an_unknown_name_raises_and_stores_nothing(
+    store: InspectableRunStore,
+) -> None:
+    with pytest.raises(UnknownNameError):
+        store.create_run(SPEC, (NetworkPair("Nowhere", "stop", 1.0, "dp"),))
+
+    assert store.list_runs() == []
+
+
+@pytest.mark.parametrize(
+    "status", [RunStatus.RUNNING, RunStatus.PAUSED, RunStatus.FINISHED, RunStatus.STOPPED]
+)
+def test_set_status_changes_status(store: InspectableRunStore, status: RunStatus) -> None:
+    run_id = new_run(store)
+
+    store.set_status(run_id, status)
+
+    assert store.load_run(run_id).status is status
+
+
+def test_set_status_stores_and_clears_the_error(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    store.set_status(run_id, RunStatus.FAILED, "disk full")
+    failed = store.load_run(run_id)
+    store.set_status(run_id, RunStatus.INTERRUPTED)
+
+    assert (failed.status, failed.error) == (RunStatus.FAILED, "disk full")
+    assert store.load_run(run_id).error is None
+
+
+def test_log_reward_returns_increasing_ids_in_log_order(store: InspectableRunStore) -> None:
+    a, b = new_run(store), new_run(store)
+
+    ids = [
+        store.log_reward(a, reward(10)),
+        store.log_reward(b, reward(11)),
+        store.log_reward(a, reward(5, -1.0)),
+    ]
+
+    assert ids == sorted(ids) and len(set(ids)) == 3
+    assert [(r.id, r.record, r.applied, r.credited) for r in store.rewards(a)] == [
+        (ids[0], reward(10), False, 0),
+        (ids[2], reward(5, -1.0), False, 0),
+    ]
+    assert [r.id for r in store.rewards(b)] == [ids[1]]
+
+
+def test_apply_reward_marks_it_applied_and_stores_ltm_and_rltm(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    first = store.log_reward(run_id, reward(10))
+    second = store.log_reward(run_id, reward(20))
+
+    store.apply_reward(
+        run_id,
+        first,
+        LearningUpdate(
+            ltm={("Red", "stop"): 0.6, ("Green", "goforward3"): 0.55},
+            rltm={("Obstacle_M_M", "leftturn45"): 0.7},
+        ),
+        credited=3,
+    )
+
+    rewards = store.rewards(run_id)
+    assert [(r.id, r.applied, r.credited) for r in rewards] == [
+        (first, True, 3),
+        (second, False, 0),
+    ]
+    assert store.ltm(run_id) == {("Red", "stop"): 0.6, ("Green", "goforward3"): 0.55}
+    assert store.rltm(run_id) == {("Obstacle_M_M", "leftturn45"): 0.7}
+
+
+def test_apply_reward_overwrites_reliabilities_it_touches(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    first = store.log_reward(run_id, reward(1))
+    second = store.log_reward(run_id, reward(2))
+    store.apply_reward(
+        run_id, first, LearningUpdate(ltm={("Red", "stop"): 0.6, ("Left", "rightturn15"): 0.5}), 1
+    )
+
+    store.apply_reward(run_id, second, LearningUpdate(ltm={("Red", "stop"): 0.65625}), 1)
+
+    assert store.ltm(run_id) == {("Red", "stop"): 0.65625, ("Left", "rightturn15"): 0.5}
+
+
+def test_apply_reward_upserts_and_removes_network_pairs(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    reward_id = store.log_reward(run_id, reward(3))
+
+    store.apply_reward(
+        run_id,
+        reward_id,
+        LearningUpdate(
+            network_upserts=(
+                NetworkPair("Red", "stop", 0.9, "learned", locked=True),
+                NetworkPair("Obstacle_M_M", "leftturn45", 0.5, "kp"),
+            ),
+            network_removals=(("LeftWall", "leftwallavoid"), ("Yellow", "stop")),
+        ),
+        credited=1,
+    )
+
+    assert store.network(run_id) == (
+        NETWORK[0],
+        NetworkPair("Red", "stop", 0.9, "learned", locked=True),
+        NetworkPair("Obstacle_M_M", "leftturn45", 0.5, "kp"),
+    )
+
+
+def test_apply_reward_stores_synthesised_behaviours_it_names(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    other = new_run(store)
+    reward_id = store.log_reward(run_id, reward(3))
+
+    store.apply_reward(
+        run_id,
+        reward_id,
+        LearningUpdate(
+            ltm={("Obstacle_L_M", SLOWER.name): 0.5},
+            rltm={("Obstacle_L_M", SLOWER.name): 0.5},
+            network_upserts=(NetworkPair("Obstacle_L_M", SLOWER.name, 0.5, "kp"),),
+            behaviours_added=(SLOWER,),
+        ),
+        credited=1,
+    )
+
+    assert store.behaviours(run_id) == (SLOWER,)
+    assert store.network(run_id)[-1].behaviour == SLOWER.name
+    assert store.ltm(run_id) == {("Obstacle_L_M", SLOWER.name): 0.5}
+    assert store.behaviours(other) == ()
+    with pytest.raises(UnknownNameError):
+        store.log_command(other, edit(4), LearningUpdate(ltm={("Red", SLOWER.name): 0.5}))
+
+
+def test_apply_reward_adding_a_behaviour_again_updates_it(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    first = store.log_reward(run_id, reward(1))
+    second = store.log_reward(run_id, reward(2))
+    faster = BehaviourSpec(SLOWER.name, "synthesized", 0.1, 20.0, 3, "constant")
+    store.apply_reward(run_id, first, LearningUpdate(behaviours_added=(SLOWER,)), 0)
+
+    store.apply_reward(run_id, second, LearningUpdate(behaviours_added=(faster,)), 0)
+
+    assert store.behaviours(run_id) == (faster,)
+
+
+def test_apply_reward_rejects_a_synthesised_name_of_the_catalogue(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    reward_id = store.log_reward(run_id, reward(1))
+    clash = BehaviourSpec("stop", "synthesized", 0.0, 0.0, 1, "constant")
+
+    with pytest.raises(CatalogError):
+        store.apply_reward(run_id, reward_id, LearningUpdate(behaviours_added=(clash,)), 0)
+
+    assert store.behaviours(run_id) == ()
+
+
+def test_apply_reward_with_an_unknown_name_changes_nothing(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    reward_id = store.log_reward(run_id, reward(1))
+    update = LearningUpdate(
+        ltm={("Red", "stop"): 0.6},
+        network_upserts=(NetworkPair("Red", "teleport", 1.0, "learned"),),
+        behaviours_added=(SLOWER,),
+    )
+
+    with pytest.raises(UnknownNameError):
+        store.apply_reward(run_id, reward_id, update, 1)
+
+    assert store.ltm(run_id) == {}
+    assert store.network(run_id) == NETWORK
+    assert store.behaviours(run_id) == ()
+    assert not store.rewards(run_id)[0].applied
+
+
+def test_apply_reward_of_an_unknown_reward_raises_storage_error(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    other = new_run(store)
+    others_reward = store.log_reward(other, reward(1))
+
+    with pytest.raises(StorageError):
+        store.apply_reward(run_id, others_reward + 1000, LearningUpdate(), 0)
+    with pytest.raises(StorageError):
+        store.apply_reward(run_id, others_reward, LearningUpdate(ltm={("Red", "stop"): 1.0}), 0)
+
+    assert not store.rewards(other)[0].applied
+    assert store.ltm(run_id) == {}
+
+
+def test_log_command_stores_command_and_its_update(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    first = store.log_command(
+        run_id,
+        edit(5),
+        LearningUpdate(network_upserts=(NetworkPair("Red", "stop", 0.3, "designed", True),)),
+    )
+    second = store.log_command(
+        run_id, edit(6), LearningUpdate(network_removals=(("Corner", "leftturn90"),))
+    )
+
+    assert first < second
+    assert [(c.id, c.record) for c in store.commands(run_id)] == [
+        (first, edit(5)),
+        (second, edit(6)),
+    ]
+    assert store.network(run_id) == (
+        NETWORK[1],
+        NetworkPair("Red", "stop", 0.3, "designed", True),
+    )
+
+
+def test_end_episode_stores_episode_checkpoint_and_totals(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    store.end_episode(run_id, episode(0), Checkpoint(0, 100, b"state-0"), RunTotals(1, 1, 100))
+    store.end_episode(run_id, episode(1, 100), Checkpoint(1, 250, b"state-1"), RunTotals(2, 1, 250))
+
+    run = store.load_run(run_id)
+    assert run.checkpoint == Checkpoint(1, 250, b"state-1")
+    assert run.totals == RunTotals(2, 1, 250)
+    assert store.episodes(run_id) == [episode(0), episode(1, 100)]
+
+
+def test_end_episode_twice_for_one_episode_raises_and_keeps_the_first(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    store.end_episode(run_id, episode(0), Checkpoint(0, 100, b"first"), RunTotals(1, 1, 100))
+
+    with pytest.raises(StorageError):
+        store.end_episode(run_id, episode(0), Checkpoint(0, 120, b"again"), RunTotals(9, 9, 9))
+
+    run = store.load_run(run_id)
+    assert run.checkpoint == Checkpoint(0, 100, b"first")
+    assert run.totals == RunTotals(1, 1, 100)
+    assert store.episodes(run_id) == [episode(0)]
+
+
+def test_load_run_without_checkpoint_returns_the_whole_log(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    r1 = store.log_reward(run_id, reward(30))
+    c1 = store.log_command(run_id, edit(10), LearningUpdate())
+    r2 = store.log_reward(run_id, reward(20))
+    store.apply_reward(run_id, r2, LearningUpdate(), 2)
+
+    run = store.load_run(run_id)
+
+    assert [(r.id, r.applied) for r in run.rewards_after] == [(r1, False), (r2, True)]
+    assert [c.id for c in run.commands_after] == [c1]
+
+
+def test_load_run_returns_only_rewards_and_commands_after_the_checkpoint(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    store.log_reward(run_id, reward(50))
+    at_checkpoint = store.log_reward(run_id, reward(100))
+    store.log_command(run_id, edit(99), LearningUpdate())
+    store.end_episode(run_id, episode(0), Checkpoint(0, 100, b"s"), RunTotals(1, 0, 100))
+    after = [store.log_reward(run_id, reward(t)) for t in (101, 150)]
+    command = store.log_command(run_id, edit(101), LearningUpdate())
+
+    run = store.load_run(run_id)
+
+    assert [r.id for r in run.rewards_after] == after
+    assert at_checkpoint not in {r.id for r in run.rewards_after}
+    assert [(c.id, c.record) for c in run.commands_after] == [(command, edit(101))]
+    assert len(store.rewards(run_id)) == 4
+
+
+def test_runs_keep_their_learning_apart(store: InspectableRunStore) -> None:
+    a, b = new_run(store), new_run(store)
+    ra = store.log_reward(a, reward(1))
+
+    store.apply_reward(
+        a,
+        ra,
+        LearningUpdate(ltm={("Red", "stop"): 0.9}, network_removals=(("Red", "stop"),)),
+        1,
+    )
+
+    assert store.ltm(b) == {} and store.network(b) == NETWORK
+    assert store.ltm(a) == {("Red", "stop"): 0.9}
+
+
+UNKNOWN = 987_654
+CALLS: dict[str, Callable[[InspectableRunStore], object]] = {
+    "load_run": lambda s: s.load_run(UNKNOWN),
+    "set_status": lambda s: s.set_status(UNKNOWN, RunStatus.RUNNING),
+    "log_reward": lambda s: s.log_reward(UNKNOWN, reward(1)),
+    "apply_reward": lambda s: s.apply_reward(UNKNOWN, 1, LearningUpdate(), 0),
+    "log_command": lambda s: s.log_command(UNKNOWN, edit(1), LearningUpdate()),
+    "end_episode": lambda s: s.end_episode(
+        UNKNOWN, episode(0), Checkpoint(0, 1, b""), RunTotals(1, 0, 1)
+    ),
+    "ltm": lambda s: s.ltm(UNKNOWN),
+    "rltm": lambda s: s.rltm(UNKNOWN),
+    "network": lambda s: s.network(UNKNOWN),
+    "behaviours": lambda s: s.behaviours(UNKNOWN),
+    "rewards": lambda s: s.rewards(UNKNOWN),
+    "commands": lambda s: s.commands(UNKNOWN),
+    "episodes": lambda s: s.episodes(UNKNOWN),
+}
+
+
+@pytest.mark.parametrize("call", CALLS.values(), ids=CALLS.keys())
+def test_an_unknown_run_raises_unknown_run_error(
+    store: InspectableRunStore, call: Callable[[InspectableRunStore], object]
+) -> None:
+    new_run(store)
+
+    with pytest.raises(UnknownRunError):
+        call(store)
