@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -24,6 +25,7 @@ from core.engine import Engine, EngineStats
 from core.ports import Mode, RunSpec
 from core.runner import run
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
+from server.tuning import configure_process
 
 
 def _store(folder: Path, name: str) -> SqlAlchemyRunStore:
@@ -32,19 +34,27 @@ def _store(folder: Path, name: str) -> SqlAlchemyRunStore:
     return SqlAlchemyRunStore(make_sessionmaker(make_engine(url)))
 
 
-def fast(folder: Path, condition: str, episodes: int) -> tuple[float, float, int]:
+def fast(folder: Path, condition: str, episodes: int, repeats: int) -> tuple[float, float, int]:
+    """Median ticks/s of the plain loop and of the engine with storage, alternated."""
     catalog = load_catalog()
-    run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up
-    started = time.perf_counter()
-    plain = run(get_condition(condition), 1, episodes, catalog=catalog)
-    plain_rate = plain.ticks / (time.perf_counter() - started)
-    engine = Engine.create(
-        RunSpec(condition, 1, episodes, Mode.FAST), _store(folder, "fast.db"), catalog=catalog
-    )
-    started = time.perf_counter()
-    asyncio.run(engine.run())
-    engine_rate = engine.totals.ticks / (time.perf_counter() - started)
-    return plain_rate, engine_rate, engine.totals.ticks
+    store = _store(folder, "fast.db")
+    run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of both paths
+    asyncio.run(Engine.create(RunSpec(condition, 0, 3, Mode.FAST), store, catalog=catalog).run())
+    plain_rates, engine_rates = [], []
+    ticks = 0
+    for seed in range(1, repeats + 1):
+        started = time.perf_counter()
+        plain = run(get_condition(condition), seed, episodes, catalog=catalog)
+        plain_rates.append(plain.ticks / (time.perf_counter() - started))
+        engine = Engine.create(
+            RunSpec(condition, seed, episodes, Mode.FAST), store, catalog=catalog
+        )
+        started = time.perf_counter()
+        asyncio.run(engine.run())
+        engine_rates.append(engine.totals.ticks / (time.perf_counter() - started))
+        assert engine.totals.ticks == plain.ticks, "the engine ran what the plain loop ran"
+        ticks += plain.ticks
+    return statistics.median(plain_rates), statistics.median(engine_rates), ticks
 
 
 def realtime(folder: Path, seconds: float, hz: float) -> EngineStats:
@@ -76,13 +86,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--hz", type=float, default=20.0)
-    parser.add_argument("--episodes", type=int, default=150)
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--condition", default="kp")
     args = parser.parse_args()
+    configure_process()  # as `srlab run` and `srlab serve` do
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        plain, engine, ticks = fast(folder, args.condition, args.episodes)
-        print(f"fast mode, {args.condition}, {args.episodes} episodes ({ticks:,} ticks):")
+        plain, engine, ticks = fast(folder, args.condition, args.episodes, args.repeats)
+        print(
+            f"fast mode, {args.condition}, {args.repeats} x {args.episodes} episodes "
+            f"({ticks:,} ticks each way), medians:"
+        )
         print(f"  plain headless loop        {plain:10,.0f} ticks/s")
         print(f"  engine + SQLite storage    {engine:10,.0f} ticks/s")
         print(f"  ratio                      {engine / plain:10.2f}   (goal: >= 0.67)")

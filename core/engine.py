@@ -61,6 +61,11 @@ from core.trace import TraceRecorder
 
 _T = TypeVar("_T")
 
+EPISODE_BATCH_S = 0.05
+"""How long the episode writer gathers episodes before it commits them together."""
+EPISODE_BATCH_MAX = 64
+"""The most episodes it commits in one transaction."""
+
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
 
@@ -155,11 +160,14 @@ class _RewardJob:
     episode: int
     reward: InjectReward
     external: bool
+    release: asyncio.Event = field(default_factory=asyncio.Event)
+    """Set by the tick task at the job's boundary: only then is it applied."""
     applied: asyncio.Event = field(default_factory=asyncio.Event)
+    committed: asyncio.Event = field(default_factory=asyncio.Event)
     ack: asyncio.Future[RewardAck] | None = None
     arrived: float = 0.0
     logged_id: int | None = None
-    committed: bool = False
+    committed_before: bool = False
     """Its learning is already in storage (a replayed reward applied before a crash)."""
 
 
@@ -176,6 +184,8 @@ class _EpisodeJob:
     record: EpisodeRecord
     checkpoint: Checkpoint
     totals: RunTotals
+    after: _RewardJob | None
+    """The last reward applied before the checkpoint: it is committed first."""
 
 
 _CLOSE = object()
@@ -217,6 +227,8 @@ class Engine:
         self._due: deque[_RewardJob] = deque()
         self._commands: deque[_CommandJob] = deque()
         self._queue: asyncio.Queue[object] = asyncio.Queue()
+        self._episode_queue: asyncio.Queue[object] = asyncio.Queue()
+        self._last_reward_job: _RewardJob | None = None
         self._subscribers: list[Subscription] = []
         self._tick_subscribers = 0
         self._paused = False
@@ -230,6 +242,7 @@ class Engine:
         self._until_tick: int | None = None
         self._last_external_id = 0
         self._replay_skip_upto = 0
+        self._closing = False
 
     # --- construction ---------------------------------------------------------------
 
@@ -364,7 +377,7 @@ class Engine:
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
         """
-        if self.status is not RunStatus.RUNNING:
+        if self.status is not RunStatus.RUNNING or self._closing:
             raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
         job = _RewardJob(
             self.sim.tick_count + 1,
@@ -381,7 +394,7 @@ class Engine:
 
     async def edit(self, command: EditAssociation) -> int:
         """Change the running robot's network at the next tick boundary; returns the log id."""
-        if self.status not in (RunStatus.RUNNING, RunStatus.PAUSED):
+        if self.status not in (RunStatus.RUNNING, RunStatus.PAUSED) or self._closing:
             raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
         cat = self.sim.brain.catalog
         cat.stimulus(command.stimulus)
@@ -456,12 +469,13 @@ class Engine:
         try:
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._reward_task(), name=f"run {self.run_id} rewards")
+                tg.create_task(self._episode_task(), name=f"run {self.run_id} episodes")
                 tg.create_task(self._tick_task(), name=f"run {self.run_id} ticks")
         except* StorageError as group:
             failure = group.exceptions[0]
             self.error = str(failure)
             self._fail_pending(failure)
-            await self._finish(RunStatus.FAILED, persist=False)
+            await self._finish(RunStatus.FAILED)  # best effort: storage may be down
         except* Exception as group:
             failure = group.exceptions[0]
             self.error = f"{type(failure).__name__}: {failure}"
@@ -519,8 +533,12 @@ class Engine:
                 await self._realtime()
             else:
                 await self._fast()
+            # Rewards that arrived after the last tick apply at the boundary after it.
+            await self._settle(self.sim.tick_count + 1, until=math.inf)
         finally:
+            self._closing = True
             self._queue.put_nowait(_CLOSE)
+            self._episode_queue.put_nowait(_CLOSE)
 
     def _episodes_left(self) -> bool:
         limit = self.spec.episodes
@@ -541,7 +559,16 @@ class Engine:
                 if self._paused:
                     await self._resumed.wait()
                     continue
-            await self._step()
+                await self._step()
+                continue
+            # The common case needs no await: a plain call is the fast path.
+            if self._need_reset:
+                self._start_episode()
+            ended = self._tick()
+            if ended is not None:
+                if self._due:
+                    await self._settle(self.sim.tick_count + 1, internal_only=True)
+                self._end_episode(ended)
 
     async def _realtime(self) -> None:
         loop = asyncio.get_running_loop()
@@ -574,34 +601,33 @@ class Engine:
             self._start_episode()
         if self._due or self._commands:
             await self._settle(sim.tick_count + 1)
-        result = sim.tick()
+        ended = self._tick()
+        if ended is not None:
+            if self._due:
+                # The episode's own rewards (the task's, the program's) apply before it
+                # ends; a trainer's reward arriving now applies after the next reset.
+                await self._settle(sim.tick_count + 1, internal_only=True)
+            self._end_episode(ended)
+
+    def _tick(self) -> EpisodeEnded | None:
+        """Run one tick of the simulation and hand its events on."""
+        result = self.sim.tick()
         self.stats.ticks += 1
         snap = result.snapshot
         if self._trace is not None:
-            self._trace.add(
-                snap.tick,
-                snap.x,
-                snap.y,
-                snap.heading_rad,
-                snap.behaviour,
-                snap.how.value,
-                int(snap.lamp),
-                snap.stimuli,
-            )
+            self._trace.add(snap)
         if self._tick_subscribers:
             self._publish_tick(snap)
         ended: EpisodeEnded | None = None
-        for e in result.events:
-            if isinstance(e, RewardDue):
-                self._enqueue_internal(e)
-            elif isinstance(e, EpisodeEnded):
-                ended = e
-            else:
-                self._publish(e)
-        if ended is not None:
-            if self._due or self._commands:
-                await self._settle(sim.tick_count + 1)
-            self._end_episode(ended)
+        if result.events:
+            for e in result.events:
+                if isinstance(e, RewardDue):
+                    self._enqueue_internal(e)
+                elif isinstance(e, EpisodeEnded):
+                    ended = e
+                else:
+                    self._publish(e)
+        return ended
 
     def _start_episode(self) -> None:
         self.sim.reset()
@@ -622,17 +648,27 @@ class Engine:
         logged = self._logged_internal.get((e.tick, e.source, e.value))
         if logged:
             stored = logged.popleft()
-            job.logged_id, job.committed = stored.id, stored.applied
+            job.logged_id, job.committed_before = stored.id, stored.applied
         self._due.append(job)
         self._queue.put_nowait(job)
 
-    async def _settle(self, boundary: int) -> None:
-        """Before the tick after `boundary - 1`: its rewards applied, then its commands."""
+    async def _settle(
+        self, boundary: int, *, internal_only: bool = False, until: float | None = None
+    ) -> None:
+        """At the boundary before tick `boundary`: apply its rewards, then its commands.
+
+        `until` widens the stamps taken (shutdown takes every reward still due).
+        """
+        limit = boundary if until is None else until
         due = self._due
-        while due and due[0].stamp <= boundary:
-            await due[0].applied.wait()
+        while due and due[0].stamp <= limit:
+            job = due[0]
+            if internal_only and job.external:
+                break
+            job.release.set()
+            await job.applied.wait()
             due.popleft()
-        if self._commands:
+        if self._commands and not internal_only:
             self._apply_commands(boundary)
 
     def _apply_commands(self, boundary: int) -> None:
@@ -674,7 +710,9 @@ class Engine:
         # replay skips those the checkpoint includes.
         state["last_external_reward_id"] = self._last_external_id
         checkpoint = Checkpoint(sim.episode + 1, sim.tick_count, encode(state))
-        self._queue.put_nowait(_EpisodeJob(record, checkpoint, self.totals))
+        self._episode_queue.put_nowait(
+            _EpisodeJob(record, checkpoint, self.totals, self._last_reward_job)
+        )
         self._need_reset = True
         self._publish(ended)
 
@@ -718,7 +756,7 @@ class Engine:
                     InjectReward(r.record.value, r.record.note, r.record.source),
                     external=True,
                     logged_id=r.id,
-                    committed=r.applied,
+                    committed_before=r.applied,
                 )
                 self._due.append(job)
                 self._queue.put_nowait(job)
@@ -766,10 +804,50 @@ class Engine:
                 command_id = await self._io(self.store.log_command, self.run_id, record, job.update)
                 if job.ack is not None and not job.ack.done():
                     job.ack.set_result(command_id)
-            elif isinstance(job, _EpisodeJob):
-                await self._io(
-                    self.store.end_episode, self.run_id, job.record, job.checkpoint, job.totals
-                )
+
+    async def _episode_task(self) -> None:
+        """Commits episodes and checkpoints, each after the rewards applied before it.
+
+        Episodes are nobody's acknowledgement and a lost one is replayed from the log, so
+        the writer gathers what arrives within `EPISODE_BATCH_S` and commits it at once:
+        in fast mode that is one transaction for many episodes.
+        """
+        loop = asyncio.get_running_loop()
+        closing = False
+        while not closing:
+            job = await self._episode_queue.get()
+            batch: list[_EpisodeJob] = []
+            deadline = loop.time() + EPISODE_BATCH_S
+            while True:
+                if job is _CLOSE:
+                    closing = True
+                    break
+                assert isinstance(job, _EpisodeJob)
+                batch.append(job)
+                if len(batch) >= EPISODE_BATCH_MAX:
+                    break
+                if self._episode_queue.empty():
+                    try:
+                        # asyncio.timeout, not wait_for: 3.11's wait_for can swallow the
+                        # cancellation of a task group whose other task failed.
+                        async with asyncio.timeout_at(deadline):
+                            job = await self._episode_queue.get()
+                    except TimeoutError:
+                        break
+                else:
+                    job = self._episode_queue.get_nowait()
+            if not batch:
+                continue
+            last = batch[-1]
+            if last.after is not None:
+                await last.after.committed.wait()
+            await self._io(
+                self.store.end_episodes,
+                self.run_id,
+                tuple(j.record for j in batch),
+                last.checkpoint,
+                last.totals,
+            )
 
     async def _process_reward(self, job: _RewardJob) -> None:
         record = RewardRecord(
@@ -782,13 +860,17 @@ class Engine:
                 job.ack.set_result(
                     RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
                 )
+        await job.release.wait()
         outcome = self._apply_in_memory(job)
-        if job.committed:
+        if job.committed_before:
+            job.committed.set()
             return
         update = self._learning_update(outcome)
         started = time.perf_counter()
         if job.logged_id is None:
-            job.logged_id = await self._io(self._log_and_apply, record, update, outcome)
+            job.logged_id = await self._io(
+                self.store.record_reward, self.run_id, record, update, len(outcome.credits)
+            )
         else:
             await self._io(
                 self.store.apply_reward,
@@ -798,13 +880,10 @@ class Engine:
                 len(outcome.credits),
             )
         self.stats.reward_commit_s.append(time.perf_counter() - started)
-
-    def _log_and_apply(self, record: RewardRecord, update: LearningUpdate, o: RewardOutcome) -> int:
-        reward_id = self.store.log_reward(self.run_id, record)
-        self.store.apply_reward(self.run_id, reward_id, update, len(o.credits))
-        return reward_id
+        job.committed.set()
 
     def _apply_in_memory(self, job: _RewardJob) -> RewardOutcome:
+        self._last_reward_job = job
         if job.external and job.logged_id is not None:
             self._last_external_id = max(self._last_external_id, job.logged_id)
         event, outcome = self.sim.apply_reward(job.reward, job.stamp, job.episode)

@@ -7,7 +7,7 @@ worker thread so the event loop never blocks on I/O.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Protocol
@@ -208,6 +208,16 @@ class RunStore(Protocol):
         """In one transaction: mark a logged reward applied and store what it changed."""
         ...
 
+    def record_reward(
+        self, run_id: int, reward: RewardRecord, update: LearningUpdate, credited: int
+    ) -> int:
+        """In one transaction: log a reward already applied and store what it changed.
+
+        For the task's and a program's rewards, which nobody waits to acknowledge.
+        Returns the reward's id.
+        """
+        ...
+
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """In one transaction: append a command to the log and store what it changed."""
         ...
@@ -216,6 +226,16 @@ class RunStore(Protocol):
         self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
     ) -> None:
         """In one transaction: store an episode, the checkpoint after it and the totals."""
+        ...
+
+    def end_episodes(
+        self,
+        run_id: int,
+        episodes: Sequence[EpisodeRecord],
+        checkpoint: Checkpoint,
+        totals: RunTotals,
+    ) -> None:
+        """`end_episode` for several episodes at once (a writer that fell behind)."""
         ...
 
 

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from core.simulation import Snapshot
 
 MAGIC = b"SRT1"
 _DTYPE = np.dtype(
@@ -21,6 +25,7 @@ _DTYPE = np.dtype(
     ]
 )
 HOWS = ("released", "default", "explored", "continued", "commanded")
+_HOW_INDEX = {h: i for i, h in enumerate(HOWS)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -38,34 +43,30 @@ class TraceRow:
 
 
 class TraceRecorder:
-    """Collects an episode's ticks cheaply and packs them at the end."""
+    """Collects an episode's snapshots cheaply and packs them at the end."""
 
     def __init__(self) -> None:
-        self._rows: list[tuple[int, float, float, float, int, int, int, int]] = []
+        self._rows: list[Snapshot] = []
 
-    def add(
-        self,
-        tick: int,
-        x: float,
-        y: float,
-        heading: float,
-        behaviour: int,
-        how: str,
-        lamp: int,
-        stimuli: tuple[int, ...],
-    ) -> None:
-        """Record one tick."""
-        mask = 0
-        for s in stimuli:
-            mask |= 1 << s
-        self._rows.append((tick, x, y, heading, behaviour, HOWS.index(how), lamp, mask))
+    def add(self, snapshot: Snapshot) -> None:
+        """Record one tick (snapshots are immutable, so keeping them is enough)."""
+        self._rows.append(snapshot)
 
     def __len__(self) -> int:
         return len(self._rows)
 
     def pack(self) -> bytes:
         """The trace as compressed bytes; the recorder is emptied."""
-        arr = np.array(self._rows, dtype=_DTYPE)
+        rows = []
+        for s in self._rows:
+            mask = 0
+            for i in s.stimuli:
+                mask |= 1 << i
+            rows.append(
+                (s.tick, s.x, s.y, s.heading_rad, s.behaviour, _HOW_INDEX[s.how.value],
+                 int(s.lamp), mask)
+            )  # fmt: skip
+        arr = np.array(rows, dtype=_DTYPE)
         self._rows = []
         return MAGIC + zlib.compress(arr.tobytes(), 1)
 

@@ -428,7 +428,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return run_cli.db(args, sys.stdout)
         if args.command == "run":
             from server import run_cli
+            from server.tuning import configure_process
 
+            configure_process()
             if args.resume is None and args.condition is None:
                 parser.error("run needs --condition (or --resume RUN)")
             return run_cli.run(args, sys.stdout, sys.stderr)

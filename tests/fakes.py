@@ -311,6 +311,16 @@ class InMemoryRunStore:
         self._apply(run, update)
         run.rewards[reward_id] = replace(run.rewards[reward_id], applied=True, credited=credited)
 
+    def record_reward(
+        self, run_id: int, reward: RewardRecord, update: LearningUpdate, credited: int
+    ) -> int:
+        """Log an already applied reward and store what it changed, all or nothing."""
+        run = self._run(run_id)
+        self._apply(run, update)
+        reward_id = self.log_reward(run_id, reward)
+        run.rewards[reward_id] = replace(run.rewards[reward_id], applied=True, credited=credited)
+        return reward_id
+
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """Append a command to the log and store what it changed; returns its id."""
         run = self._run(run_id)
@@ -325,10 +335,23 @@ class InMemoryRunStore:
         self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
     ) -> None:
         """Store an episode, the checkpoint after it and the totals."""
+        self.end_episodes(run_id, (episode,), checkpoint, totals)
+
+    def end_episodes(
+        self,
+        run_id: int,
+        episodes: Sequence[EpisodeRecord],
+        checkpoint: Checkpoint,
+        totals: RunTotals,
+    ) -> None:
+        """Store episodes, the checkpoint after the last and the totals, all or nothing."""
         run = self._run(run_id)
-        if episode.episode in run.episodes:
-            raise StorageError(f"run {run_id} has an episode {episode.episode} already")
-        run.episodes[episode.episode] = episode
+        numbers = [e.episode for e in episodes]
+        for n in numbers:
+            if n in run.episodes or numbers.count(n) > 1:
+                raise StorageError(f"run {run_id} has an episode {n} already")
+        for e in episodes:
+            run.episodes[e.episode] = e
         run.checkpoint = checkpoint
         run.totals = totals
 

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from typing import Any, TypeVar
 
+from sqlalchemy import bindparam, delete, func, insert, select
 from sqlalchemy import exc as sa_exc
-from sqlalchemy import func, select
+from sqlalchemy import update as sql_update
+from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
 
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
@@ -45,6 +47,28 @@ _DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
 _FINAL = frozenset({RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.INTERRUPTED, RunStatus.FAILED})
 _Pair = tuple[str, str]
 _Row = TypeVar("_Row", LtmRow, RltmRow)
+
+
+_END_RUN = (
+    sql_update(RunRow)
+    .where(RunRow.id == bindparam("rid"))
+    .values(
+        checkpoint_episode=bindparam("checkpoint_episode"),
+        checkpoint_tick=bindparam("checkpoint_tick"),
+        checkpoint=bindparam("checkpoint"),
+        episodes_done=bindparam("episodes_done"),
+        successes=bindparam("successes"),
+        ticks=bindparam("ticks"),
+    )
+)
+_INSERT_EPISODE = insert(EpisodeRow)
+
+
+def _upsert(session: Session, table: Any) -> Any:
+    """INSERT for the session's dialect, with ON CONFLICT support."""
+    dialect = session.get_bind().dialect.name
+    module = postgresql if dialect == "postgresql" else sqlite
+    return module.insert(table)
 
 
 def _json(value: Mapping[str, Any]) -> dict[str, Any]:
@@ -108,6 +132,21 @@ class SqlAlchemyRunStore:
         self._sessions = sessions
         self._stimuli: dict[str, int] = {}
         self._behaviours: dict[str, int] = {}
+        self._upserts: dict[tuple[str, str], Any] = {}
+
+    def _upsert_stmt(self, session: Session, table: Any, values: tuple[str, ...]) -> Any:
+        """An INSERT ... ON CONFLICT DO UPDATE for executemany, built once per dialect."""
+        dialect = session.get_bind().dialect.name
+        key = (dialect, table.name)
+        stmt = self._upserts.get(key)
+        if stmt is None:
+            base = _upsert(session, table)
+            stmt = base.on_conflict_do_update(
+                index_elements=["run_id", "stimulus_id", "behaviour_id"],
+                set_={v: base.excluded[v] for v in values},
+            )
+            self._upserts[key] = stmt
+        return stmt
 
     def _stimulus_ids(self, session: Session, *, refresh: bool = False) -> dict[str, int]:
         if refresh or not self._stimuli:
@@ -161,28 +200,33 @@ class SqlAlchemyRunStore:
             self._add_behaviour(session, run_id, spec, names)
         self._upsert_memory(session, LtmRow, run_id, change.ltm, names)
         self._upsert_memory(session, RltmRow, run_id, change.rltm, names)
-        if change.network_upserts or change.network_removals:
-            existing = {
-                (r.stimulus_id, r.behaviour_id): r
-                for r in session.scalars(
-                    select(RunAssociationRow).where(RunAssociationRow.run_id == run_id)
-                )
-            }
+        if change.network_upserts:
+            rows = []
             for pair in change.network_upserts:
-                key = names.pair((pair.stimulus, pair.behaviour))
-                row = existing.get(key)
-                if row is None:
-                    row = RunAssociationRow(run_id=run_id, stimulus_id=key[0], behaviour_id=key[1])
-                    session.add(row)
-                    existing[key] = row
-                row.strength = pair.strength
-                row.source = pair.source
-                row.locked = pair.locked
-            session.flush()
-            for removal in change.network_removals:
-                key = names.pair(removal)
-                if (row := existing.pop(key, None)) is not None:
-                    session.delete(row)
+                st, be = names.pair((pair.stimulus, pair.behaviour))
+                rows.append(
+                    {
+                        "run_id": run_id,
+                        "stimulus_id": st,
+                        "behaviour_id": be,
+                        "strength": pair.strength,
+                        "source": pair.source,
+                        "locked": pair.locked,
+                    }
+                )
+            stmt = self._upsert_stmt(
+                session, RunAssociationRow.__table__, ("strength", "source", "locked")
+            )
+            session.connection().execute(stmt, rows)
+        for removal in change.network_removals:
+            st, be = names.pair(removal)
+            session.execute(
+                delete(RunAssociationRow).where(
+                    RunAssociationRow.run_id == run_id,
+                    RunAssociationRow.stimulus_id == st,
+                    RunAssociationRow.behaviour_id == be,
+                )
+            )
 
     def _add_behaviour(
         self, session: Session, run_id: int, spec: BehaviourSpec, names: _Names
@@ -207,28 +251,30 @@ class SqlAlchemyRunStore:
         session.flush()
         names.added(spec.name, row.id)
 
-    @staticmethod
     def _upsert_memory(
+        self,
         session: Session,
         table: type[_Row],
         run_id: int,
         values: Mapping[_Pair, float],
         names: _Names,
     ) -> None:
+        """Insert or update reliabilities with one statement (ON CONFLICT DO UPDATE)."""
         if not values:
             return
-        rows = {
-            (r.stimulus_id, r.behaviour_id): r
-            for r in session.scalars(select(table).where(table.run_id == run_id))
-        }
+        rows = []
         for key, reliability in values.items():
-            ids = names.pair(key)
-            row = rows.get(ids)
-            if row is None:
-                row = table(run_id=run_id, stimulus_id=ids[0], behaviour_id=ids[1])
-                session.add(row)
-                rows[ids] = row
-            row.reliability = reliability
+            st, be = names.pair(key)
+            rows.append(
+                {
+                    "run_id": run_id,
+                    "stimulus_id": st,
+                    "behaviour_id": be,
+                    "reliability": reliability,
+                }
+            )
+        stmt = self._upsert_stmt(session, table.__table__, ("reliability",))
+        session.connection().execute(stmt, rows)
 
     def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
         """Store a new run (status created) with its starting network; returns its id."""
@@ -280,36 +326,57 @@ class SqlAlchemyRunStore:
             for name, value in values.items():
                 setattr(row, name, value)
 
-    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
-        """Append a reward to the log, committed before returning its id."""
-        with self._transaction(f"logging a reward for run {run_id}", write=True) as s:
-            self._require_run(s, run_id)
-            row = RewardRow(
+    @staticmethod
+    def _insert_reward(
+        s: Session, run_id: int, reward: RewardRecord, applied: bool, credited: int
+    ) -> int:
+        reward_id: int | None = s.scalar(
+            insert(RewardRow)
+            .values(
                 run_id=run_id,
                 tick=reward.tick,
                 episode=reward.episode,
                 value=reward.value,
                 source=reward.source,
                 note=reward.note,
-                applied=False,
-                credited=0,
+                applied=applied,
+                credited=credited,
             )
-            s.add(row)
-            s.flush()
-            return row.id
+            .returning(RewardRow.id)
+        )
+        assert reward_id is not None
+        return reward_id
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        """Append a reward to the log, committed before returning its id."""
+        with self._transaction(f"logging a reward for run {run_id}", write=True) as s:
+            self._require_run(s, run_id)
+            return self._insert_reward(s, run_id, reward, False, 0)
 
     def apply_reward(
         self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
     ) -> None:
         """In one transaction: mark a logged reward applied and store what it changed."""
         with self._transaction(f"applying reward {reward_id} of run {run_id}", write=True) as s:
-            self._require_run(s, run_id)
-            row = s.get(RewardRow, reward_id)
-            if row is None or row.run_id != run_id:
+            done = s.execute(
+                sql_update(RewardRow)
+                .where(RewardRow.id == reward_id, RewardRow.run_id == run_id)
+                .values(applied=True, credited=credited)
+            )
+            if done.rowcount != 1:  # type: ignore[attr-defined]
+                self._require_run(s, run_id)
                 raise StorageError(f"run {run_id} has no reward {reward_id}")
             self._apply(s, run_id, update)
-            row.applied = True
-            row.credited = credited
+
+    def record_reward(
+        self, run_id: int, reward: RewardRecord, update: LearningUpdate, credited: int
+    ) -> int:
+        """In one transaction: log an already applied reward and store what it changed."""
+        with self._transaction(f"recording a reward for run {run_id}", write=True) as s:
+            self._require_run(s, run_id)
+            reward_id = self._insert_reward(s, run_id, reward, True, credited)
+            self._apply(s, run_id, update)
+            return reward_id
 
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """In one transaction: append a command to the log and store what it changed."""
@@ -328,29 +395,61 @@ class SqlAlchemyRunStore:
         self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
     ) -> None:
         """In one transaction: store an episode, the checkpoint after it and the totals."""
-        what = f"ending episode {episode.episode} of run {run_id}"
+        self.end_episodes(run_id, (episode,), checkpoint, totals)
+
+    def end_episodes(
+        self,
+        run_id: int,
+        episodes: Sequence[EpisodeRecord],
+        checkpoint: Checkpoint,
+        totals: RunTotals,
+    ) -> None:
+        """In one transaction: store episodes, the checkpoint after the last, the totals."""
+        numbers = [e.episode for e in episodes]
+        what = f"ending episodes {numbers} of run {run_id}"
         with self._transaction(what, write=True) as s:
-            run = self._run_row(s, run_id)
-            if s.get(EpisodeRow, (run_id, episode.episode)) is not None:
-                raise StorageError(f"run {run_id} has an episode {episode.episode} already")
-            s.add(
-                EpisodeRow(
-                    run_id=run_id,
-                    episode=episode.episode,
-                    outcome=episode.outcome,
-                    cause=episode.cause,
-                    ticks=episode.ticks,
-                    start_tick=episode.start_tick,
-                    rewards=episode.rewards,
-                    trace=episode.trace,
-                )
+            # Core statements on the connection: the ORM adds nothing here but time.
+            conn = s.connection()
+            done = conn.execute(
+                _END_RUN,
+                {
+                    "rid": run_id,
+                    "checkpoint_episode": checkpoint.episode,
+                    "checkpoint_tick": checkpoint.tick,
+                    "checkpoint": checkpoint.state,
+                    "episodes_done": totals.episodes,
+                    "successes": totals.successes,
+                    "ticks": totals.ticks,
+                },
             )
-            run.checkpoint_episode = checkpoint.episode
-            run.checkpoint_tick = checkpoint.tick
-            run.checkpoint = checkpoint.state
-            run.episodes_done = totals.episodes
-            run.successes = totals.successes
-            run.ticks = totals.ticks
+            if done.rowcount != 1:
+                raise UnknownRunError(f"no run {run_id}")
+            taken = conn.execute(
+                select(EpisodeRow.episode).where(
+                    EpisodeRow.run_id == run_id, EpisodeRow.episode.in_(numbers)
+                )
+            ).first()
+            duplicate = next((n for n in numbers if numbers.count(n) > 1), None)
+            if taken is not None or duplicate is not None:
+                n = taken[0] if taken is not None else duplicate
+                raise StorageError(f"run {run_id} has an episode {n} already")
+            if episodes:
+                conn.execute(
+                    _INSERT_EPISODE,
+                    [
+                        {
+                            "run_id": run_id,
+                            "episode": e.episode,
+                            "outcome": e.outcome,
+                            "cause": e.cause,
+                            "ticks": e.ticks,
+                            "start_tick": e.start_tick,
+                            "rewards": e.rewards,
+                            "trace": e.trace,
+                        }
+                        for e in episodes
+                    ],
+                )
 
     def _stored(self, s: Session, run: RunRow) -> StoredRun:
         checkpoint = None

@@ -294,6 +294,33 @@ def test_apply_reward_of_an_unknown_reward_raises_storage_error(
     assert store.ltm(run_id) == {}
 
 
+def test_record_reward_logs_it_applied_with_its_learning(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    first = store.log_reward(run_id, reward(3))
+    second = store.record_reward(
+        run_id, reward(5, value=0.5), LearningUpdate(ltm={("Red", "stop"): 0.05}), credited=2
+    )
+
+    assert second > first
+    assert [(r.id, r.record.tick, r.applied, r.credited) for r in store.rewards(run_id)] == [
+        (first, 3, False, 0),
+        (second, 5, True, 2),
+    ]
+    assert store.ltm(run_id) == {("Red", "stop"): 0.05}
+
+
+def test_record_reward_with_an_unknown_name_stores_nothing(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    with pytest.raises(UnknownNameError):
+        store.record_reward(
+            run_id, reward(1), LearningUpdate(ltm={("Red", "teleport"): 0.1}), credited=1
+        )
+
+    assert store.rewards(run_id) == []
+    assert store.ltm(run_id) == {}
+
+
 def test_log_command_stores_command_and_its_update(store: InspectableRunStore) -> None:
     run_id = new_run(store)
 
@@ -402,6 +429,7 @@ CALLS: dict[str, Callable[[InspectableRunStore], object]] = {
         UNKNOWN, episode(0), Checkpoint(0, 1, b""), RunTotals(1, 0, 1)
     ),
     "ltm": lambda s: s.ltm(UNKNOWN),
+    "record_reward": lambda s: s.record_reward(UNKNOWN, reward(1), LearningUpdate(), 0),
     "rltm": lambda s: s.rltm(UNKNOWN),
     "network": lambda s: s.network(UNKNOWN),
     "behaviours": lambda s: s.behaviours(UNKNOWN),
