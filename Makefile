@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install run test test-fast lint typecheck format bench migrate revision pg pg-stop clean
+.PHONY: help install run test test-fast lint typecheck format bench reliability migrate revision pg pg-stop clean
 
 help:
-	@echo "make run | test | test-fast | lint | typecheck | format | bench | migrate | revision m=... | pg | pg-stop | clean"
+	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | migrate | revision m=... | pg | pg-stop | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -20,9 +20,12 @@ $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
 
 install: $(BIN)/srlab
 
+# Until the service exists: migrate and seed ./var/srlab.db, a headless demo, a stored run.
 run: install
+	$(BIN)/srlab db upgrade
 	$(BIN)/srlab simulate --condition expert --episodes 20 --seed 1
-	$(BIN)/srlab simulate --condition innate --episodes 50 --seed 1
+	$(BIN)/srlab run --condition kp --seed 1 --episodes 10
+	$(BIN)/srlab runs
 
 lint: install
 	$(BIN)/ruff check .
@@ -43,9 +46,13 @@ format: install
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
+reliability: install
+	SRLAB_CRASH_KILLS=200 $(BIN)/pytest tests/reliability -q
+
 bench: install
 	$(BIN)/python -m bench.ticks
 	$(BIN)/python -m bench.experiment
+	$(BIN)/python -m bench.engine
 
 migrate: install
 	$(BIN)/python -c "from server.persistence import upgrade; upgrade()"

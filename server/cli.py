@@ -176,6 +176,16 @@ def build_parser() -> argparse.ArgumentParser:
     runp.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
     runp.add_argument("--quiet", action="store_true", help="no progress display")
 
+    serve = sub.add_parser(
+        "serve",
+        help="serve the HTTP API and the editor (migrates the database first)",
+        description="Serve the HTTP API, the S-R editor and trainer console with uvicorn "
+        "(one worker). Settings come from SRLAB_* environment variables; beyond loopback "
+        "SRLAB_TOKEN is required.",
+    )
+    serve.add_argument("--host", help="address to bind (default SRLAB_HOST or 127.0.0.1)")
+    serve.add_argument("--port", type=int, help="port (default SRLAB_PORT or 8000)")
+
     runs = sub.add_parser("runs", help="list the stored runs")
     runs.add_argument("--json", action="store_true", help="print one JSON object")
     runs.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
@@ -434,6 +444,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.resume is None and args.condition is None:
                 parser.error("run needs --condition (or --resume RUN)")
             return run_cli.run(args, sys.stdout, sys.stderr)
+        if args.command == "serve":
+            from server.serve import serve
+
+            return serve(args.host, args.port)
         if args.command == "runs":
             from server import run_cli
 

@@ -118,3 +118,9 @@ def store(request: pytest.FixtureRequest, catalog: Catalog) -> InspectableRunSto
     engine_fixture = "sqlite_engine" if request.param == "sqlite" else "clean_postgres_engine"
     engine: Engine = request.getfixturevalue(engine_fixture)
     return SqlAlchemyRunStore(make_sessionmaker(engine))
+
+
+@pytest.fixture
+def anyio_backend() -> str:
+    """API tests run on asyncio, as the service does."""
+    return "asyncio"

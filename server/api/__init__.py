@@ -1,0 +1,9 @@
+"""The HTTP API: one router per resource under /api."""
+
+from fastapi import APIRouter
+
+from server.api.routes import catalog, events, health, networks, rewards, runs
+
+api_router = APIRouter(prefix="/api")
+for module in (health, catalog, networks, runs, rewards, events):
+    api_router.include_router(module.router)

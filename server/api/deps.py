@@ -1,0 +1,74 @@
+"""Dependencies of the routes: the app's state, and the write guard."""
+
+from __future__ import annotations
+
+import hmac
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request, status
+from sqlalchemy.orm import Session, sessionmaker
+
+from core.brain.catalog import Catalog
+from server.config import Settings
+from server.engines import EngineManager
+from server.persistence import SqlAlchemyRunStore
+from server.persistence.networks import SqlAlchemyNetworkRepository
+from server.ratelimit import RateLimiter
+
+
+@dataclass
+class AppState:
+    """What `create_app`'s lifespan builds and the routes share."""
+
+    settings: Settings
+    catalog: Catalog
+    sessions: sessionmaker[Session]
+    store: SqlAlchemyRunStore
+    networks: SqlAlchemyNetworkRepository
+    engines: EngineManager
+    rewards_limiter: RateLimiter
+
+
+def _state(request: Request) -> AppState:
+    state: AppState = request.app.state.srlab
+    return state
+
+
+StateDep = Annotated[AppState, Depends(_state)]
+
+
+def _engines(state: StateDep) -> EngineManager:
+    return state.engines
+
+
+def _store(state: StateDep) -> SqlAlchemyRunStore:
+    return state.store
+
+
+def _networks(state: StateDep) -> SqlAlchemyNetworkRepository:
+    return state.networks
+
+
+EnginesDep = Annotated[EngineManager, Depends(_engines)]
+NetworksDep = Annotated[SqlAlchemyNetworkRepository, Depends(_networks)]
+StoreDep = Annotated[SqlAlchemyRunStore, Depends(_store)]
+
+
+def require_write(request: Request, state: StateDep) -> None:
+    """Writes need `Authorization: Bearer $SRLAB_TOKEN` when the service is reachable."""
+    settings = state.settings
+    if not settings.writes_need_token:
+        return
+    header = request.headers.get("authorization", "")
+    scheme, _, given = header.partition(" ")
+    token = settings.token or ""
+    if scheme.lower() != "bearer" or not hmac.compare_digest(given.encode(), token.encode()):
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "this write needs `Authorization: Bearer <SRLAB_TOKEN>`",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+
+
+WriteGuard = Depends(require_write)

@@ -1,0 +1,119 @@
+"""A run's live event stream (server-sent events)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException, Query, Request, status
+from fastapi.responses import StreamingResponse
+from starlette.concurrency import run_in_threadpool
+
+from core.brain.catalog import Catalog
+from core.engine import StatusChanged, TickPublished
+from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
+from server.api.deps import EnginesDep, StateDep, StoreDep
+from server.api.routes.runs import RunId
+
+router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
+HEARTBEAT_S = 15.0
+
+
+def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None:
+    """An engine event as an SSE event name and JSON payload (None: not streamed)."""
+    s = [x.name for x in catalog.stimuli]
+
+    def b(i: int) -> str | None:
+        return catalog.behaviours[i].name if 0 <= i < len(catalog.behaviours) else None
+
+    if isinstance(event, TickPublished):
+        snap = event.snapshot
+        return "tick", {
+            "episode": snap.episode, "tick": snap.tick, "episode_tick": snap.episode_tick,
+            "x": snap.x, "y": snap.y, "heading_rad": snap.heading_rad,
+            "stimuli": [s[i] for i in snap.stimuli], "behaviour": b(snap.behaviour),
+            "how": snap.how.value, "lamp": snap.lamp.name.lower(), "progress_m": snap.progress_m,
+        }  # fmt: skip
+    if isinstance(event, RewardApplied):
+        return "reward", {
+            "tick": event.tick, "episode": event.episode, "value": event.value,
+            "source": event.source, "note": event.note,
+            "credits": [
+                {"tick": c.tick, "stimulus": s[c.stimulus], "behaviour": b(c.behaviour),
+                 "d_k": c.d_k, "before": c.before, "after": c.after}
+                for c in event.credits[:200]
+            ],
+            "credited": len(event.credits),
+        }  # fmt: skip
+    if isinstance(event, EpisodeEnded):
+        return "episode", {
+            "episode": event.episode, "outcome": event.outcome.value,
+            "cause": event.cause.value if event.cause else None, "ticks": event.ticks,
+        }  # fmt: skip
+    if isinstance(event, AssociationPromoted | AssociationDemoted):
+        return "association", {
+            "change": "promoted" if isinstance(event, AssociationPromoted) else "demoted",
+            "stimulus": s[event.stimulus], "behaviour": b(event.behaviour),
+            "reliability": event.reliability,
+        }  # fmt: skip
+    if isinstance(event, StatusChanged):
+        return "status", {"status": event.status.value, "error": event.error}
+    return None
+
+
+@router.get(
+    "",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/event-stream": {}}, "description": "SSE stream"}},
+)
+async def stream_events(
+    run_id: RunId,
+    request: Request,
+    store: StoreDep,
+    engines: EnginesDep,
+    state: StateDep,
+    tick_hz: Annotated[
+        float, Query(ge=0.0, le=60.0, description="tick snapshots per second (0: none)")
+    ] = 2.0,
+) -> StreamingResponse:
+    """Follow a run live: ticks (throttled), rewards, episode ends, network changes, status.
+
+    Server-sent events; each has an `event:` name (tick, reward, episode, association,
+    status) and JSON `data:`. The stream ends when the run does.
+    """
+    await run_in_threadpool(store.load_run, run_id)
+    engine = engines.get(run_id)
+    if engine is None:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
+    sub = engine.subscribe(maxsize=512, tick_hz=tick_hz)
+    catalog = engine.sim.brain.catalog
+
+    async def events() -> AsyncIterator[bytes]:
+        try:
+            first = {"status": engine.status.value, "run": run_id}
+            yield f"event: status\ndata: {json.dumps(first)}\n\n".encode()
+            while True:
+                if sub.closed and sub.queue.empty():
+                    break
+                try:
+                    async with asyncio.timeout(HEARTBEAT_S):
+                        event = await sub.get()
+                except TimeoutError:
+                    if await request.is_disconnected():
+                        break
+                    yield b": heartbeat\n\n"
+                    continue
+                encoded = encode(event, catalog)
+                if encoded is not None:
+                    name, data = encoded
+                    yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()
+        finally:
+            engine.unsubscribe(sub)
+
+    return StreamingResponse(
+        events(),
+        media_type="text/event-stream",
+        headers={"Cache-Control": "no-cache", "X-Accel-Buffering": "no"},
+    )

@@ -1,0 +1,26 @@
+"""Liveness of the service and its database."""
+
+from __future__ import annotations
+
+from importlib.metadata import version
+
+from fastapi import APIRouter
+from sqlalchemy import text
+
+from server.api.deps import StateDep
+from server.schemas import Health
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/health")
+def health(state: StateDep) -> Health:
+    """Whether the service answers and its database does."""
+    with state.sessions() as s:
+        s.execute(text("select 1"))
+    return Health(
+        status="ok",
+        version=version("srlab"),
+        database=state.sessions.kw["bind"].dialect.name,
+        runs_active=state.engines.running(),
+    )

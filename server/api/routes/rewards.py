@@ -1,0 +1,57 @@
+"""Rewards: a trainer's +/- over HTTP (the RP condition by hand), and the reward log."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, HTTPException, Request, Response, status
+from starlette.concurrency import run_in_threadpool
+
+from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard
+from server.api.routes.runs import RunId
+from server.schemas import RewardAccepted, RewardCreate, RewardPublic, RewardsPublic
+
+router = APIRouter(prefix="/runs/{run_id}/rewards", tags=["rewards"])
+
+
+@router.post("", status_code=status.HTTP_202_ACCEPTED, dependencies=[WriteGuard])
+async def inject_reward(
+    run_id: RunId,
+    body: RewardCreate,
+    request: Request,
+    response: Response,
+    store: StoreDep,
+    engines: EnginesDep,
+    state: StateDep,
+) -> RewardAccepted:
+    """Reward a running run now: answered once the reward is in the reward log.
+
+    It is stamped with the next tick boundary and credits the STM records before it.
+    """
+    client = request.client.host if request.client else "unknown"
+    wait = state.rewards_limiter.allow(client)
+    if wait > 0:
+        raise HTTPException(
+            status.HTTP_429_TOO_MANY_REQUESTS,
+            f"too many rewards from {client}: at most {state.settings.reward_rate_per_s:g}/s",
+            headers={"Retry-After": str(max(1, round(wait)))},
+        )
+    engine = engines.get(run_id)
+    if engine is None:
+        run = await run_in_threadpool(store.load_run, run_id)  # 404 for an unknown run
+        raise HTTPException(
+            status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
+        )
+    ack = await engine.reward(body.value, note=body.note, source="trainer")
+    return RewardAccepted(id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value)
+
+
+@router.get("")
+def list_rewards(run_id: RunId, store: StoreDep) -> RewardsPublic:
+    """The run's reward log, oldest first: trainers', the task's and programs' rewards."""
+    data = [
+        RewardPublic(
+            id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
+            source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
+        )
+        for r in store.rewards(run_id)
+    ]  # fmt: skip
+    return RewardsPublic(data=data, count=len(data))

@@ -1,0 +1,230 @@
+"""Runs: create, list, read, control, and read what they learned."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Path, status
+from starlette.concurrency import run_in_threadpool as io
+
+from core.engine import Engine, EngineStats
+from core.ports import Mode, RunSpec, StoredRun
+from core.trace import unpack
+from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
+from server.schemas import (
+    AssociationPublic,
+    EpisodeDetail,
+    EpisodePublic,
+    EpisodesPublic,
+    LiveState,
+    MemoryPublic,
+    ReliabilityPublic,
+    RunCreate,
+    RunNetworkPublic,
+    RunPublic,
+    RunsPublic,
+    TraceRowPublic,
+)
+
+router = APIRouter(prefix="/runs", tags=["runs"])
+RunId = Annotated[int, Path(ge=1, le=2**62, description="a run's id")]
+
+
+def _public(run: StoredRun, engine: Engine | None) -> RunPublic:
+    live = None
+    status_value = run.status.value
+    episodes, successes, ticks = run.totals.episodes, run.totals.successes, run.totals.ticks
+    if engine is not None:
+        status_value = engine.status.value
+        totals = engine.totals
+        episodes, successes, ticks = totals.episodes, totals.successes, totals.ticks
+        p99 = EngineStats.percentile(engine.stats.lateness_s, 99)
+        live = LiveState(
+            tick=engine.sim.tick_count,
+            episode=max(engine.sim.episode, 0),
+            hz=engine.hz,
+            ticks_run=engine.stats.ticks,
+            lateness_p99_ms=None if p99 != p99 else p99 * 1000,
+        )
+    params = {k: v for k, v in run.spec.params.items() if isinstance(v, float | int | bool)}
+    return RunPublic(
+        id=run.id,
+        condition=run.spec.condition,
+        seed=run.spec.seed,
+        episodes=run.spec.episodes,
+        mode=run.spec.mode.value,
+        hz=run.spec.hz,
+        network=run.spec.network,
+        params=params,
+        status=status_value,
+        error=engine.error if engine is not None and engine.error else run.error,
+        episodes_done=episodes,
+        successes=successes,
+        ticks=ticks,
+        live=live,
+    )
+
+
+async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
+    # Database work runs in a thread: the event loop also paces realtime ticks.
+    return _public(await io(store.load_run, run_id), engines.get(run_id))
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteGuard])
+async def create_run(
+    body: RunCreate, store: StoreDep, engines: EnginesDep, networks: NetworksDep
+) -> RunPublic:
+    """Create a run (status created); start it with POST /api/runs/{id}/start."""
+    params = {k: v for k, v in body.params.model_dump().items() if v not in (None, False)}
+    spec = RunSpec(
+        condition=body.condition,
+        seed=body.seed,
+        episodes=body.episodes,
+        mode=Mode(body.mode),
+        hz=body.hz,
+        network=body.network,
+        params=params,
+    )
+    network = None if body.network is None else await io(networks.pairs, body.network)
+    engine = await io(engines.create, spec, network)
+    return await _run(store, engines, engine.run_id)
+
+
+@router.get("")
+async def list_runs(store: StoreDep, engines: EnginesDep) -> RunsPublic:
+    """Every stored run, oldest first."""
+    data = [_public(r, engines.get(r.id)) for r in await io(store.list_runs)]
+    return RunsPublic(data=data, count=len(data))
+
+
+@router.get("/{run_id}")
+async def get_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """A run's state, with its live figures while it runs."""
+    return await _run(store, engines, run_id)
+
+
+@router.post("/{run_id}/start", dependencies=[WriteGuard])
+async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """Start a created run, or resume a stopped or interrupted one from its checkpoint."""
+    await io(store.load_run, run_id)
+    engine = engines.get(run_id)
+    if engine is None or engine.status.value != "created":
+        await io(engines.prepare, run_id)  # from its checkpoint and log
+    engines.start(run_id)
+    return await _run(store, engines, run_id)
+
+
+def _live(engines: EnginesDep, run_id: int) -> Engine:
+    engine = engines.get(run_id)
+    if engine is None:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
+    return engine
+
+
+@router.post("/{run_id}/pause", dependencies=[WriteGuard])
+async def pause_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """Stop ticking until resumed."""
+    await io(store.load_run, run_id)
+    engine = _live(engines, run_id)
+    if engine.status.value != "running":
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
+    engine.pause()
+    return await _run(store, engines, run_id)
+
+
+@router.post("/{run_id}/resume", dependencies=[WriteGuard])
+async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """Tick again after a pause."""
+    await io(store.load_run, run_id)
+    engine = _live(engines, run_id)
+    if engine.status.value != "paused":
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
+    engine.resume()
+    return await _run(store, engines, run_id)
+
+
+@router.post("/{run_id}/stop", dependencies=[WriteGuard])
+async def stop_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """End the run at the next tick boundary (it can be started again to go on)."""
+    await io(store.load_run, run_id)
+    engine = _live(engines, run_id)
+    if engine.status.value not in ("running", "paused"):
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
+    engine.stop()
+    return await _run(store, engines, run_id)
+
+
+def _memory(values: dict[tuple[str, str], float]) -> MemoryPublic:
+    data = [
+        ReliabilityPublic(stimulus=s, behaviour=b, reliability=v)
+        for (s, b), v in sorted(values.items())
+    ]
+    return MemoryPublic(data=data, count=len(data))
+
+
+@router.get("/{run_id}/ltm")
+def get_ltm(run_id: RunId, store: StoreDep) -> MemoryPublic:
+    """The run's LTM reliabilities (as last committed)."""
+    return _memory(store.ltm(run_id))
+
+
+@router.get("/{run_id}/rltm")
+def get_rltm(run_id: RunId, store: StoreDep) -> MemoryPublic:
+    """The run's KP reliabilities (RLTM)."""
+    return _memory(store.rltm(run_id))
+
+
+@router.get("/{run_id}/network")
+def get_run_network(run_id: RunId, store: StoreDep) -> RunNetworkPublic:
+    """The run's behaviour network: its design plus what it learned."""
+    data = [
+        AssociationPublic(
+            stimulus=p.stimulus, behaviour=p.behaviour, strength=p.strength,
+            source=p.source, locked=p.locked,
+        )
+        for p in store.network(run_id)
+    ]  # fmt: skip
+    return RunNetworkPublic(data=data, count=len(data))
+
+
+@router.get("/{run_id}/episodes")
+def list_episodes(run_id: RunId, store: StoreDep) -> EpisodesPublic:
+    """The run's episodes (summaries)."""
+    data = [
+        EpisodePublic(
+            episode=e.episode, outcome=e.outcome, cause=e.cause, ticks=e.ticks,
+            start_tick=e.start_tick, rewards=e.rewards,
+        )
+        for e in store.episodes(run_id)
+    ]  # fmt: skip
+    return EpisodesPublic(data=data, count=len(data))
+
+
+@router.get("/{run_id}/episodes/{episode}")
+def get_episode(
+    run_id: RunId,
+    episode: Annotated[int, Path(ge=0, le=2**62)],
+    store: StoreDep,
+    state: StateDep,
+) -> EpisodeDetail:
+    """One episode with its trace: pose, stimuli and behaviour every tick."""
+    found = next((e for e in store.episodes(run_id) if e.episode == episode), None)
+    if found is None:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no episode {episode}")
+    stimuli = [s.name for s in state.catalog.stimuli]
+    behaviours = [b.name for b in state.catalog.behaviours]
+    extra = [b.name for b in store.behaviours(run_id)]
+    names = behaviours + extra
+    trace = [
+        TraceRowPublic(
+            tick=r.tick, x=r.x, y=r.y, heading_rad=r.heading_rad,
+            behaviour=names[r.behaviour] if 0 <= r.behaviour < len(names) else None,
+            how=r.how, lamp=r.lamp,
+            stimuli=[stimuli[i] for i in r.stimuli if i < len(stimuli)],
+        )
+        for r in (unpack(found.trace) if found.trace else [])
+    ]  # fmt: skip
+    return EpisodeDetail(
+        episode=found.episode, outcome=found.outcome, cause=found.cause, ticks=found.ticks,
+        start_tick=found.start_tick, rewards=found.rewards, trace=trace,
+    )  # fmt: skip

@@ -1,0 +1,72 @@
+"""The service's settings, from SRLAB_* environment variables."""
+
+from __future__ import annotations
+
+import ipaddress
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from server.persistence.db import DEFAULT_DATABASE_URL
+
+
+class Settings(BaseSettings):
+    """Everything `create_app` needs; tests build one directly.
+
+    Attributes:
+        database_url: SQLAlchemy URL of the database.
+        host: address `srlab serve` binds.
+        port: port `srlab serve` binds.
+        token: bearer token every write needs when the service listens beyond loopback.
+        max_runs: runs that may tick at the same time; past it, starting one is refused
+            with 429.
+        reward_rate_per_s: rewards a client may inject per second (a token bucket).
+        reward_burst: how many rewards it may inject at once.
+        max_body_bytes: larger request bodies get 413 before they are read.
+        cors_origins: origins allowed to call the API from a browser (besides the editor
+            served by the service itself).
+        allowed_hosts: Host headers accepted besides loopback names and `host`.
+        viser_port: port of the 3D view.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
+
+    database_url: str = DEFAULT_DATABASE_URL
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=1, le=65535)
+    token: str | None = None
+    max_runs: int = Field(8, ge=1)
+    reward_rate_per_s: float = Field(20.0, gt=0)
+    reward_burst: int = Field(40, ge=1)
+    max_body_bytes: int = Field(64 * 1024, ge=1024)
+    cors_origins: list[str] = Field(default_factory=list)
+    allowed_hosts: list[str] = Field(default_factory=list)
+    viser_port: int = Field(8080, ge=1, le=65535)
+
+    @field_validator("token")
+    @classmethod
+    def _no_empty_token(cls, v: str | None) -> str | None:
+        return v or None
+
+    @property
+    def loopback(self) -> bool:
+        """Whether the service listens on loopback only."""
+        if self.host in ("localhost",):
+            return True
+        try:
+            return ipaddress.ip_address(self.host).is_loopback
+        except ValueError:
+            return False
+
+    @property
+    def writes_need_token(self) -> bool:
+        """Writes need the bearer token: the service is reachable beyond this machine."""
+        return not self.loopback or self.token is not None
+
+    def check(self) -> None:
+        """Refuse to serve beyond loopback without a token."""
+        if not self.loopback and not self.token:
+            raise ValueError(
+                f"srlab listens on {self.host}, beyond loopback: set SRLAB_TOKEN so that "
+                "writes (rewards, edits, run control) need `Authorization: Bearer <token>`"
+            )

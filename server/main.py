@@ -1,0 +1,179 @@
+"""The FastAPI service: `create_app(settings)` builds everything, its lifespan owns the runs."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from importlib.metadata import version
+from pathlib import Path
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import JSONResponse
+from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from core.brain.catalog import load_catalog
+from core.errors import (
+    CatalogError,
+    CoreError,
+    LockedAssociationError,
+    RunStateError,
+    StorageError,
+    UnknownNameError,
+    UnknownRunError,
+)
+from core.ports import RunStatus
+from server.api import api_router
+from server.api.deps import AppState
+from server.config import Settings
+from server.engines import EngineManager, TooManyRunsError
+from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
+from server.persistence.networks import SqlAlchemyNetworkRepository
+from server.ratelimit import RateLimiter
+
+log = logging.getLogger("srlab.server")
+WEB = Path(__file__).resolve().parents[1] / "web"
+
+_STATUS: list[tuple[type[Exception], int]] = [
+    (TooManyRunsError, 429),
+    (UnknownRunError, 404),
+    (UnknownNameError, 404),
+    (LockedAssociationError, 409),
+    (RunStateError, 409),
+    (StorageError, 503),
+    (CatalogError, 422),
+    (CoreError, 400),
+]
+
+
+class BodyLimit:
+    """Answers 413 to a request body over `limit` bytes, before the app reads it."""
+
+    def __init__(self, app: ASGIApp, limit: int) -> None:
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Check the declared length, then count what arrives."""
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        length = dict(scope["headers"]).get(b"content-length")
+        if length is not None and (not length.isdigit() or int(length) > self.limit):
+            await self._reject(send)
+            return
+        seen = 0
+        started = False
+
+        async def counted() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.limit:
+                    raise _TooLarge
+            return message
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counted, tracking_send)
+        except _TooLarge:
+            if not started:
+                await self._reject(send)
+
+    async def _reject(self, send: Send) -> None:
+        body = b'{"detail":"the request body is larger than the limit (SRLAB_MAX_BODY_BYTES)"}'
+        await send(
+            {
+                "type": "http.response.start",
+                "status": 413,
+                "headers": [
+                    (b"content-type", b"application/json"),
+                    (b"content-length", str(len(body)).encode()),
+                    (b"connection", b"close"),
+                ],
+            }
+        )
+        await send({"type": "http.response.body", "body": body})
+
+
+class _TooLarge(Exception):
+    pass
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """The srlab service for `settings` (the environment's by default)."""
+    settings = settings or Settings()
+    settings.check()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        engine = make_engine(settings.database_url)
+        sessions = make_sessionmaker(engine)
+        store = SqlAlchemyRunStore(sessions)
+        catalog = load_catalog()
+        manager = EngineManager(store, catalog, settings.max_runs)
+        for run in store.list_runs():
+            if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
+                # Its process died: it can be resumed from its checkpoint and log.
+                store.set_status(run.id, RunStatus.INTERRUPTED, run.error)
+        app.state.srlab = AppState(
+            settings=settings,
+            catalog=catalog,
+            sessions=sessions,
+            store=store,
+            networks=SqlAlchemyNetworkRepository(sessions),
+            engines=manager,
+            rewards_limiter=RateLimiter(settings.reward_rate_per_s, settings.reward_burst),
+        )
+        try:
+            yield
+        finally:
+            await manager.shutdown()
+            engine.dispose()
+
+    app = FastAPI(
+        title="srlab",
+        summary="Behaviour-based control and learning with knowledge propagation",
+        version=version("srlab"),
+        lifespan=lifespan,
+    )
+    app.include_router(api_router)
+
+    async def core_error(request: Request, exc: Exception) -> JSONResponse:
+        for kind, code in _STATUS:
+            if isinstance(exc, kind):
+                return JSONResponse({"detail": str(exc)}, status_code=code)
+        raise exc  # pragma: no cover - registered for CoreError only
+
+    async def value_error(request: Request, exc: Exception) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=422)
+
+    app.add_exception_handler(CoreError, core_error)
+    app.add_exception_handler(ValueError, value_error)
+    _ = RequestValidationError  # FastAPI answers invalid bodies with 422 naming the field
+
+    hosts = {"127.0.0.1", "localhost", "[::1]", settings.host, *settings.allowed_hosts}
+    if settings.host in ("0.0.0.0", "::") and not settings.allowed_hosts:
+        hosts = {"*"}  # every interface: the names it is reached by are unknown
+    editor = f"http://{settings.host}:{settings.port}"
+    app.add_middleware(
+        CORSMiddleware,
+        allow_origins=[editor, *settings.cors_origins],
+        allow_methods=["GET", "POST", "PUT", "DELETE"],
+        allow_headers=["Authorization", "Content-Type"],
+    )
+    app.add_middleware(TrustedHostMiddleware, allowed_hosts=sorted(hosts))
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    if WEB.is_dir() and (WEB / "index.html").exists():
+        from fastapi.staticfiles import StaticFiles
+
+        app.mount("/", StaticFiles(directory=WEB, html=True), name="web")
+    return app

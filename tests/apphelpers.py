@@ -1,0 +1,37 @@
+"""Helpers for API tests: the real app on a migrated SQLite file, driven through httpx."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+from asgi_lifespan import LifespanManager
+from fastapi import FastAPI
+
+from server.config import Settings
+from server.main import create_app
+from server.persistence import upgrade
+
+
+def settings_for(tmp_path: Path, **overrides: Any) -> Settings:
+    """Settings on a fresh, migrated and seeded SQLite file under `tmp_path`."""
+    url = f"sqlite:///{tmp_path / 'api.db'}"
+    upgrade(url)
+    return Settings(database_url=url, **overrides)
+
+
+@asynccontextmanager
+async def client_for(
+    settings: Settings, headers: dict[str, str] | None = None
+) -> AsyncIterator[tuple[httpx.AsyncClient, FastAPI]]:
+    """An httpx client on the app with its lifespan running (ASGITransport skips it)."""
+    app = create_app(settings)
+    async with LifespanManager(app) as manager:
+        transport = httpx.ASGITransport(app=manager.app)
+        async with httpx.AsyncClient(
+            transport=transport, base_url="http://127.0.0.1", headers=headers or {}
+        ) as client:
+            yield client, app

@@ -1,0 +1,231 @@
+"""Runs, rewards and events over HTTP, happy and error paths side by side."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from apphelpers import client_for, settings_for
+
+pytestmark = pytest.mark.anyio
+
+
+async def create(client: httpx.AsyncClient, **body: Any) -> dict[str, Any]:
+    r = await client.post("/api/runs", json=body)
+    assert r.status_code == 201, r.text
+    out: dict[str, Any] = r.json()
+    return out
+
+
+async def until(
+    client: httpx.AsyncClient, run_id: int, status: str, timeout: float = 30
+) -> dict[str, Any]:
+    async with asyncio.timeout(timeout):
+        while True:
+            run: dict[str, Any] = (await client.get(f"/api/runs/{run_id}")).json()
+            if run["status"] == status:
+                return run
+            await asyncio.sleep(0.02)
+
+
+async def test_create_run_and_run_it_in_fast_mode(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="kp", seed=3, episodes=4)
+        assert (run["status"], run["episodes"], run["mode"]) == ("created", 4, "fast")
+        r = await client.post(f"/api/runs/{run['id']}/start")
+        assert r.status_code == 200
+        done = await until(client, run["id"], "finished")
+        assert done["episodes_done"] == 4 and done["ticks"] > 0
+        episodes = (await client.get(f"/api/runs/{run['id']}/episodes")).json()
+        assert episodes["count"] == 4
+        detail = (await client.get(f"/api/runs/{run['id']}/episodes/0")).json()
+        assert len(detail["trace"]) == detail["ticks"]
+        assert detail["trace"][0]["behaviour"] == "goforward3"
+        ltm = (await client.get(f"/api/runs/{run['id']}/ltm")).json()
+        assert ltm["count"] > 0
+        network = (await client.get(f"/api/runs/{run['id']}/network")).json()
+        assert {"stimulus": "Corner", "behaviour": "leftturn90"}.items() <= network["data"][
+            0
+        ].items()
+        rltm = (await client.get(f"/api/runs/{run['id']}/rltm")).json()
+        assert rltm["count"] >= 0
+        listed = (await client.get("/api/runs")).json()
+        assert listed["count"] == 1 and listed["data"][0]["id"] == run["id"]
+
+
+@pytest.mark.parametrize(
+    ("body", "field"),
+    [
+        ({"condition": "telepathy"}, "condition"),
+        ({"condition": "qlambda"}, "condition"),
+        ({"condition": "kp", "seed": -1}, "seed"),
+        ({"condition": "kp", "episodes": 0}, "episodes"),
+        ({"condition": "kp", "mode": "warp"}, "mode"),
+        ({"condition": "kp", "hz": 0}, "hz"),
+        ({"condition": "kp", "params": {"eta": 2}}, "eta"),
+        ({"condition": "kp", "colour": "red"}, "colour"),
+        ({}, "condition"),
+    ],
+)
+async def test_create_run_with_a_bad_body_is_422_naming_the_field(
+    tmp_path: Path, body: dict[str, Any], field: str
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.post("/api/runs", json=body)
+    assert r.status_code == 422
+    assert field in json.dumps(r.json()["detail"])
+
+
+async def test_create_run_from_an_unknown_network_is_404(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.post("/api/runs", json={"condition": "kp", "network": "nope"})
+    assert r.status_code == 404 and "nope" in r.json()["detail"]
+
+
+@pytest.mark.parametrize("path", ["/api/runs/99", "/api/runs/99/ltm", "/api/runs/99/rltm",
+                                  "/api/runs/99/network", "/api/runs/99/episodes",
+                                  "/api/runs/99/rewards", "/api/runs/99/episodes/0",
+                                  "/api/runs/99/events"])  # fmt: skip
+async def test_an_unknown_run_is_404(tmp_path: Path, path: str) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.get(path)
+    assert r.status_code == 404
+
+
+@pytest.mark.parametrize("action", ["start", "pause", "resume", "stop"])
+async def test_control_of_an_unknown_run_is_404(tmp_path: Path, action: str) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.post(f"/api/runs/99/{action}")
+    assert r.status_code == 404
+
+
+async def test_a_realtime_run_takes_rewards_whose_ltm_shows_them(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="delayed", mode="realtime", hz=100)
+        run_id = run["id"]
+        early = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1})
+        assert early.status_code == 409 and "not running" in early.json()["detail"]
+        await client.post(f"/api/runs/{run_id}/start")
+        await until(client, run_id, "running")
+        await asyncio.sleep(0.3)
+        r = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1, "note": "good"})
+        assert r.status_code == 202, r.text
+        ack = r.json()
+        assert ack["tick"] >= 1 and ack["value"] == 1.0
+        bad = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.5})
+        assert bad.status_code == 422 and "value" in json.dumps(bad.json())
+        async with asyncio.timeout(10):
+            while True:
+                log = (await client.get(f"/api/runs/{run_id}/rewards")).json()["data"]
+                if log and log[0]["applied"]:
+                    break
+                await asyncio.sleep(0.02)
+        assert log[0]["id"] == ack["id"] and log[0]["note"] == "good" and log[0]["credited"] > 0
+        ltm = (await client.get(f"/api/runs/{run_id}/ltm")).json()["data"]
+        assert any(p["stimulus"] == "Middle" and p["reliability"] > 0 for p in ltm)
+        # pause, resume, stop
+        assert (await client.post(f"/api/runs/{run_id}/pause")).json()["status"] == "paused"
+        paused = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1})
+        assert paused.status_code == 409
+        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 409
+        assert (await client.post(f"/api/runs/{run_id}/resume")).json()["status"] == "running"
+        assert (await client.post(f"/api/runs/{run_id}/stop")).status_code == 200
+        await until(client, run_id, "stopped")
+        assert (await client.post(f"/api/runs/{run_id}/stop")).status_code == 409
+
+
+async def test_rewards_are_rate_limited_per_client(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, reward_rate_per_s=1.0, reward_burst=3)
+    async with client_for(settings) as (client, _):
+        run = await create(client, condition="delayed", mode="realtime", hz=200)
+        await client.post(f"/api/runs/{run['id']}/start")
+        await until(client, run["id"], "running")
+        codes = [
+            (await client.post(f"/api/runs/{run['id']}/rewards", json={"value": 0.5})).status_code
+            for _ in range(5)
+        ]
+        assert codes[:3] == [202, 202, 202]
+        assert 429 in codes[3:]
+        await client.post(f"/api/runs/{run['id']}/stop")
+
+
+async def test_too_many_runs_is_429(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path, max_runs=1)) as (client, _):
+        a = await create(client, condition="delayed", mode="realtime", hz=20)
+        b = await create(client, condition="delayed", mode="realtime", hz=20)
+        assert (await client.post(f"/api/runs/{a['id']}/start")).status_code == 200
+        r = await client.post(f"/api/runs/{b['id']}/start")
+        assert r.status_code == 429 and "SRLAB_MAX_RUNS" in r.json()["detail"]
+        again = await client.post(f"/api/runs/{a['id']}/start")
+        assert again.status_code == 409
+        await client.post(f"/api/runs/{a['id']}/stop")
+
+
+async def test_a_stopped_run_starts_again_from_its_checkpoint(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="kp", episodes=40, seed=2)
+        await client.post(f"/api/runs/{run['id']}/start")
+        await asyncio.sleep(0.05)
+        await client.post(f"/api/runs/{run['id']}/stop")
+        stopped = await until(client, run["id"], "stopped")
+        assert stopped["episodes_done"] < 40
+        await client.post(f"/api/runs/{run['id']}/start")
+        done = await until(client, run["id"], "finished")
+        assert done["episodes_done"] == 40
+
+
+async def test_the_event_stream_delivers_an_episode_end(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="expert", episodes=2, seed=1)
+        events: list[tuple[str, dict[str, Any]]] = []
+
+        async def follow() -> None:
+            async with client.stream("GET", f"/api/runs/{run['id']}/events?tick_hz=0") as r:
+                assert r.status_code == 200
+                assert r.headers["content-type"].startswith("text/event-stream")
+                name = ""
+                async for line in r.aiter_lines():
+                    if line.startswith("event: "):
+                        name = line[7:]
+                    elif line.startswith("data: "):
+                        events.append((name, json.loads(line[6:])))
+
+        async with asyncio.timeout(30):
+            follower = asyncio.create_task(follow())
+            await asyncio.sleep(0.1)
+            await client.post(f"/api/runs/{run['id']}/start")
+            await follower
+    names = [n for n, _ in events]
+    assert "episode" in names and names[-1] == "status"
+    episode = next(d for n, d in events if n == "episode")
+    assert episode["outcome"] in ("success", "failure")
+    assert events[-1][1]["status"] == "finished"
+    assert "tick" not in names  # tick_hz=0
+
+
+async def test_writes_need_the_token_when_one_is_set(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, token="s3cret")
+    async with client_for(settings) as (client, _):
+        r = await client.post("/api/runs", json={"condition": "kp"})
+        assert r.status_code == 401 and "Bearer" in r.json()["detail"]
+        wrong = await client.post(
+            "/api/runs", json={"condition": "kp"}, headers={"authorization": "Bearer nope"}
+        )
+        assert wrong.status_code == 401
+        ok = await client.post(
+            "/api/runs", json={"condition": "kp"}, headers={"authorization": "Bearer s3cret"}
+        )
+        assert ok.status_code == 201
+        assert (await client.get("/api/runs")).status_code == 200  # reads stay open
+
+
+async def test_beyond_loopback_every_write_needs_the_token(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, host="0.0.0.0", token="t0k3n")
+    async with client_for(settings) as (client, _):
+        for path in ("/api/runs", "/api/runs/1/start", "/api/runs/1/rewards", "/api/runs/1/stop"):
+            r = await client.post(path, json={"condition": "kp", "value": 1})
+            assert r.status_code == 401, path
