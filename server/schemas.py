@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from core.brain.catalog import Source
 from core.conditions import CONDITIONS
 
 EngineCondition = Literal["innate", "delayed", "dp", "rp", "kp", "expert"]
@@ -83,7 +85,10 @@ class LiveState(BaseModel):
     episode: int
     hz: float
     ticks_run: int
-    lateness_p99_ms: float | None
+    lateness_p99_ms: float | None = Field(description="realtime tick lateness, 99th percentile")
+    lateness_max_ms: float | None
+    overruns: int = Field(description="tick periods skipped because a tick ran late")
+    reward_ack_p99_ms: float | None
 
 
 class RunPublic(BaseModel):
@@ -187,3 +192,168 @@ class TraceRowPublic(BaseModel):
 
 class EpisodeDetail(EpisodePublic):
     trace: list[TraceRowPublic]
+
+
+# --- networks: the DP S-R editor ------------------------------------------------------
+
+NETWORK_NAME = r"^[A-Za-z0-9_-]{1,64}$"
+NETWORK_FORMAT = "srlab-network/1"
+
+
+class ErrorPublic(BaseModel):
+    """An error, for a person to read."""
+
+    detail: str
+
+
+class AssociationCreate(Strict):
+    """An S-R association to add: stimulus -> behaviour with a strength, source and lock."""
+
+    stimulus: str = Field(min_length=1, max_length=100, description="a name of GET /api/stimuli")
+    behaviour: str = Field(
+        min_length=1, max_length=100, description="a name of GET /api/behaviours"
+    )
+    strength: float = Field(1.0, ge=0.0, le=1.0, allow_inf_nan=False)
+    source: Source = "dp"
+    locked: bool = Field(
+        False, description="the editor's lock: a locked association changes only with force"
+    )
+
+
+class AssociationUpdate(Strict):
+    """New values for an association; an omitted one stays (a new association: 1, dp, no)."""
+
+    strength: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
+    source: Source | None = None
+    locked: bool | None = Field(None, description="false unlocks it (with force=true)")
+
+
+class NetworkCreate(Strict):
+    """A new network: a copy of `base` with `associations` over it."""
+
+    name: str = Field(pattern=NETWORK_NAME, description="1-64 letters, digits, '-' and '_'; unique")
+    description: str = Field("", max_length=2000)
+    base: str | None = Field(
+        "innate", max_length=100, description="the network to copy (null: start empty)"
+    )
+    associations: list[AssociationCreate] = Field(
+        default_factory=list,
+        max_length=2000,
+        description="added to the base's, replacing its association of the same pair",
+    )
+
+
+class NetworkSummaryPublic(BaseModel):
+    """A stored network without its associations."""
+
+    name: str
+    description: str
+    builtin: bool = Field(description="shipped with srlab, read-only: copy it to edit it")
+    version: int = Field(description="bumped by every change (see /versions)")
+    association_count: int
+    created_at: datetime
+    updated_at: datetime
+
+
+class NetworksPublic(BaseModel):
+    """Every stored network."""
+
+    data: list[NetworkSummaryPublic]
+    count: int
+
+
+class NetworkPublic(NetworkSummaryPublic):
+    """A stored network with its associations, in catalogue order."""
+
+    associations: list[AssociationPublic]
+
+
+class NetworkWritten(NetworkPublic):
+    """A network as a write left it."""
+
+    live_runs: list[int] = Field(
+        description="ids of the running runs started from this network that got the change "
+        "(live=true only)"
+    )
+
+
+class NetworkAssociationsPublic(BaseModel):
+    """A network's associations, in catalogue order."""
+
+    data: list[AssociationPublic]
+    count: int
+    version: int
+
+
+class AssociationWritten(AssociationPublic):
+    """An association as a write left it, with its network's version."""
+
+    network: str
+    version: int = Field(description="the network's version after the write")
+    live_runs: list[int] = Field(
+        description="ids of the running runs started from this network that got the change "
+        "(live=true only)"
+    )
+
+
+class NetworkVersionPublic(BaseModel):
+    """One entry of a network's edit history."""
+
+    version: int
+    created_at: datetime
+    note: str
+    association_count: int
+
+
+class NetworkVersionsPublic(BaseModel):
+    """A network's edit history, oldest first."""
+
+    data: list[NetworkVersionPublic]
+    count: int
+
+
+class NetworkSnapshotPublic(BaseModel):
+    """A network as it was at one version."""
+
+    name: str
+    version: int
+    created_at: datetime
+    note: str
+    description: str
+    associations: list[AssociationPublic]
+    association_count: int
+
+
+class AssociationChangePublic(BaseModel):
+    """An association that changed between two versions."""
+
+    stimulus: str
+    behaviour: str
+    before: AssociationPublic
+    after: AssociationPublic
+
+
+class NetworkDiffPublic(BaseModel):
+    """What changed from one version of a network to another."""
+
+    name: str
+    from_version: int
+    to_version: int
+    added: list[AssociationPublic]
+    removed: list[AssociationPublic]
+    changed: list[AssociationChangePublic]
+
+
+class NetworkRevert(Strict):
+    """The version to make current again."""
+
+    version: int = Field(ge=1, le=2**31 - 1)
+
+
+class NetworkDocument(Strict):
+    """A network as a file: what GET .../export gives and POST /api/networks/import takes."""
+
+    format: Literal["srlab-network/1"] = Field(description="the document's format and version")
+    name: str = Field(min_length=1, max_length=100)
+    description: str = Field("", max_length=2000)
+    associations: list[AssociationCreate] = Field(max_length=2000)

@@ -2,8 +2,9 @@
 
 from fastapi import APIRouter
 
+from server.api.errors import ERRORS
 from server.api.routes import catalog, events, health, networks, rewards, runs
 
 api_router = APIRouter(prefix="/api")
 for module in (health, catalog, networks, runs, rewards, events):
-    api_router.include_router(module.router)
+    api_router.include_router(module.router, responses=ERRORS)

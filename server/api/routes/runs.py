@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, status
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import Engine, EngineStats
-from core.ports import Mode, RunSpec, StoredRun
+from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.trace import unpack
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.schemas import (
@@ -30,44 +31,74 @@ router = APIRouter(prefix="/runs", tags=["runs"])
 RunId = Annotated[int, Path(ge=1, le=2**62, description="a run's id")]
 
 
-def _public(run: StoredRun, engine: Engine | None) -> RunPublic:
-    live = None
-    status_value = run.status.value
-    episodes, successes, ticks = run.totals.episodes, run.totals.successes, run.totals.ticks
-    if engine is not None:
-        status_value = engine.status.value
-        totals = engine.totals
-        episodes, successes, ticks = totals.episodes, totals.successes, totals.ticks
-        p99 = EngineStats.percentile(engine.stats.lateness_s, 99)
-        live = LiveState(
-            tick=engine.sim.tick_count,
-            episode=max(engine.sim.episode, 0),
-            hz=engine.hz,
-            ticks_run=engine.stats.ticks,
-            lateness_p99_ms=None if p99 != p99 else p99 * 1000,
-        )
-    params = {k: v for k, v in run.spec.params.items() if isinstance(v, float | int | bool)}
+def _ms(x: float) -> float | None:
+    return None if math.isnan(x) else x * 1000
+
+
+def _live_state(engine: Engine) -> LiveState:
+    stats = engine.stats
+    pct = EngineStats.percentile
+    return LiveState(
+        tick=engine.sim.tick_count,
+        episode=max(engine.sim.episode, 0),
+        hz=engine.hz,
+        ticks_run=stats.ticks,
+        lateness_p99_ms=_ms(pct(stats.lateness_s, 99)),
+        lateness_max_ms=_ms(max(stats.lateness_s, default=math.nan)),
+        overruns=stats.overruns,
+        reward_ack_p99_ms=_ms(pct(stats.reward_ack_s, 99)),
+    )
+
+
+def _public(
+    run_id: int,
+    spec: RunSpec,
+    status_value: str,
+    error: str | None,
+    totals: RunTotals,
+    live: LiveState | None,
+) -> RunPublic:
+    params = {k: v for k, v in spec.params.items() if isinstance(v, float | int | bool)}
     return RunPublic(
-        id=run.id,
-        condition=run.spec.condition,
-        seed=run.spec.seed,
-        episodes=run.spec.episodes,
-        mode=run.spec.mode.value,
-        hz=run.spec.hz,
-        network=run.spec.network,
+        id=run_id,
+        condition=spec.condition,
+        seed=spec.seed,
+        episodes=spec.episodes,
+        mode=spec.mode.value,
+        hz=spec.hz,
+        network=spec.network,
         params=params,
         status=status_value,
-        error=engine.error if engine is not None and engine.error else run.error,
-        episodes_done=episodes,
-        successes=successes,
-        ticks=ticks,
+        error=error,
+        episodes_done=totals.episodes,
+        successes=totals.successes,
+        ticks=totals.ticks,
         live=live,
     )
 
 
+def _of_engine(engine: Engine) -> RunPublic:
+    """A run's state from its engine, without touching the database."""
+    return _public(
+        engine.run_id,
+        engine.spec,
+        engine.status.value,
+        engine.error,
+        engine.totals,
+        _live_state(engine),
+    )
+
+
+def _of_stored(run: StoredRun) -> RunPublic:
+    return _public(run.id, run.spec, run.status.value, run.error, run.totals, None)
+
+
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
+    engine = engines.get(run_id)
+    if engine is not None:
+        return _of_engine(engine)
     # Database work runs in a thread: the event loop also paces realtime ticks.
-    return _public(await io(store.load_run, run_id), engines.get(run_id))
+    return _of_stored(await io(store.load_run, run_id))
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteGuard])
@@ -93,7 +124,10 @@ async def create_run(
 @router.get("")
 async def list_runs(store: StoreDep, engines: EnginesDep) -> RunsPublic:
     """Every stored run, oldest first."""
-    data = [_public(r, engines.get(r.id)) for r in await io(store.list_runs)]
+    data = []
+    for r in await io(store.list_runs):
+        engine = engines.get(r.id)
+        data.append(_of_engine(engine) if engine is not None else _of_stored(r))
     return RunsPublic(data=data, count=len(data))
 
 
