@@ -20,12 +20,9 @@ $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
 
 install: $(BIN)/srlab
 
-# Until the service exists: migrate and seed ./var/srlab.db, a headless demo, a stored run.
+# Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install
-	$(BIN)/srlab db upgrade
-	$(BIN)/srlab simulate --condition expert --episodes 20 --seed 1
-	$(BIN)/srlab run --condition kp --seed 1 --episodes 10
-	$(BIN)/srlab runs
+	$(BIN)/srlab serve
 
 lint: install
 	$(BIN)/ruff check .

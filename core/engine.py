@@ -296,6 +296,11 @@ class Engine:
         )
         pairs = tuple(_pair(sim, a) for a in sim.brain.network)
         run_id = store.create_run(spec, pairs)
+        # A checkpoint before the first tick: a run can be rebuilt whatever network it
+        # started from (an edited one may change later) and however early it stopped.
+        state = export_state(sim)
+        state["last_external_reward_id"] = 0
+        store.end_episodes(run_id, (), Checkpoint(0, 0, encode(state)), RunTotals(0, 0, 0))
         return cls(run_id, spec, store, sim, trace=trace)
 
     @classmethod

@@ -5,9 +5,9 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, JsonValue
 
-from core.brain.catalog import Source
+from core.brain.catalog import Source, load_catalog
 from core.conditions import CONDITIONS
 
 EngineCondition = Literal["innate", "delayed", "dp", "rp", "kp", "expert"]
@@ -198,20 +198,22 @@ class EpisodeDetail(EpisodePublic):
 
 NETWORK_NAME = r"^[A-Za-z0-9_-]{1,64}$"
 NETWORK_FORMAT = "srlab-network/1"
-
-
-class ErrorPublic(BaseModel):
-    """An error, for a person to read."""
-
-    detail: str
+_SHIPPED = load_catalog()
+STIMULUS_NAMES: list[JsonValue] = [s.name for s in _SHIPPED.stimuli]
+"""The stimuli the service knows (its catalogue), listed in /openapi.json."""
+BEHAVIOUR_NAMES: list[JsonValue] = [b.name for b in _SHIPPED.behaviours]
+"""The behaviours the service knows (its catalogue), listed in /openapi.json."""
 
 
 class AssociationCreate(Strict):
     """An S-R association to add: stimulus -> behaviour with a strength, source and lock."""
 
-    stimulus: str = Field(min_length=1, max_length=100, description="a name of GET /api/stimuli")
+    # The names are listed for clients; the route checks them, naming the field in its 422.
+    stimulus: str = Field(
+        description="a name of GET /api/stimuli", json_schema_extra={"enum": STIMULUS_NAMES}
+    )
     behaviour: str = Field(
-        min_length=1, max_length=100, description="a name of GET /api/behaviours"
+        description="a name of GET /api/behaviours", json_schema_extra={"enum": BEHAVIOUR_NAMES}
     )
     strength: float = Field(1.0, ge=0.0, le=1.0, allow_inf_nan=False)
     source: Source = "dp"
@@ -239,7 +241,7 @@ class NetworkCreate(Strict):
     associations: list[AssociationCreate] = Field(
         default_factory=list,
         max_length=2000,
-        description="added to the base's, replacing its association of the same pair",
+        description="added to the base's in order, each replacing any earlier one of its pair",
     )
 
 
@@ -354,6 +356,8 @@ class NetworkDocument(Strict):
     """A network as a file: what GET .../export gives and POST /api/networks/import takes."""
 
     format: Literal["srlab-network/1"] = Field(description="the document's format and version")
-    name: str = Field(min_length=1, max_length=100)
+    name: str = Field(pattern=NETWORK_NAME, description="1-64 letters, digits, '-' and '_'")
     description: str = Field("", max_length=2000)
-    associations: list[AssociationCreate] = Field(max_length=2000)
+    associations: list[AssociationCreate] = Field(
+        max_length=2000, description="in order, each replacing any earlier one of its pair"
+    )

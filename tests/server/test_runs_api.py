@@ -229,3 +229,23 @@ async def test_beyond_loopback_every_write_needs_the_token(tmp_path: Path) -> No
         for path in ("/api/runs", "/api/runs/1/start", "/api/runs/1/rewards", "/api/runs/1/stop"):
             r = await client.post(path, json={"condition": "kp", "value": 1})
             assert r.status_code == 401, path
+
+
+async def test_a_run_from_an_edited_network_starts_again_after_a_stop(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        assert (
+            await client.post("/api/networks", json={"name": "mine", "base": "kp"})
+        ).status_code == 201
+        run = await create(client, condition="kp", mode="realtime", hz=100, network="mine")
+        await client.post(f"/api/runs/{run['id']}/start")
+        await until(client, run["id"], "running")
+        await client.post(f"/api/runs/{run['id']}/stop")
+        await until(client, run["id"], "stopped")
+        # The network changes meanwhile; the run goes on with the one it started from.
+        await client.put("/api/networks/mine/associations/Red/stop", json={"strength": 1.0})
+        again = await client.post(f"/api/runs/{run['id']}/start")
+        assert again.status_code == 200, again.text
+        await until(client, run["id"], "running")
+        network = (await client.get(f"/api/runs/{run['id']}/network")).json()["data"]
+        assert not any(a["stimulus"] == "Red" for a in network)
+        await client.post(f"/api/runs/{run['id']}/stop")

@@ -1,7 +1,559 @@
-"""Stored networks and their associations: the DP S-R editor's operations."""
+"""Stored networks and their associations: the DP S-R editor's operations.
+
+Built-in networks (innate, dp, kp, expert: the knowledge sets srlab ships) are read-only;
+copy one with `POST /api/networks {"name": ..., "base": ...}` and edit the copy. Every
+change makes a new version of the network (see `/versions`); a change that changes
+nothing makes none. A locked association changes only with `force=true`. With
+`live=true` a write also reaches every running run started from the network, at its next
+tick boundary; without it running robots are untouched.
+"""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+import asyncio
+import logging
+import re
+from collections.abc import Callable, Iterable, Sequence
+from typing import Annotated, Any, TypeVar, cast
 
+from fastapi import APIRouter, Path, Query, Response, status
+from fastapi.exceptions import RequestValidationError
+from starlette.concurrency import run_in_threadpool
+
+from core.brain.catalog import Catalog, Source
+from core.commands import EditAssociation
+from core.engine import Engine
+from core.errors import RunStateError, StorageError
+from core.ports import NetworkPair, RunStatus
+from server.api.deps import EnginesDep, NetworksDep, StateDep, WriteGuard
+from server.api.errors import ErrorPublic
+from server.engines import EngineManager
+from server.persistence.networks import (
+    AssociationChange,
+    NetworkEdit,
+    StoredNetwork,
+)
+from server.schemas import (
+    NETWORK_FORMAT,
+    NETWORK_NAME,
+    AssociationChangePublic,
+    AssociationCreate,
+    AssociationPublic,
+    AssociationUpdate,
+    AssociationWritten,
+    NetworkAssociationsPublic,
+    NetworkCreate,
+    NetworkDiffPublic,
+    NetworkDocument,
+    NetworkPublic,
+    NetworkRevert,
+    NetworkSnapshotPublic,
+    NetworksPublic,
+    NetworkSummaryPublic,
+    NetworkVersionPublic,
+    NetworkVersionsPublic,
+    NetworkWritten,
+)
+
+log = logging.getLogger("srlab.networks")
 router = APIRouter(prefix="/networks", tags=["networks"])
+_T = TypeVar("_T")
+
+NetworkName = Annotated[str, Path(max_length=100, description="a stored network's name")]
+StimulusName = Annotated[str, Path(max_length=100, description="a stimulus name")]
+BehaviourName = Annotated[str, Path(max_length=100, description="a behaviour name")]
+Live = Annotated[
+    bool,
+    Query(
+        description="also apply the change to every running run started from this network, "
+        "at its next tick boundary"
+    ),
+]
+Force = Annotated[bool, Query(description="change or remove locked associations too")]
+Note = Annotated[str, Query(max_length=500, description="a note for the network's history")]
+
+_E = dict[int | str, dict[str, Any]]
+_NOT_FOUND: _E = {404: {"model": ErrorPublic, "description": "no such network"}}
+_CONFLICT: _E = {
+    409: {
+        "model": ErrorPublic,
+        "description": "a built-in network (read-only), or a locked association without force",
+    }
+}
+LIVE_RUNS_HEADER = "Srlab-Live-Runs"
+VERSION_HEADER = "Srlab-Network-Version"
+
+
+async def _call(fn: Callable[..., _T], *args: Any, **kwargs: Any) -> _T:
+    """A repository call off the event loop, so ticking runs never wait on the database."""
+    return await run_in_threadpool(fn, *args, **kwargs)
+
+
+def _association(p: NetworkPair) -> AssociationPublic:
+    return AssociationPublic(
+        stimulus=p.stimulus,
+        behaviour=p.behaviour,
+        strength=p.strength,
+        source=p.source,
+        locked=p.locked,
+    )
+
+
+def _pair(a: AssociationCreate) -> NetworkPair:
+    return NetworkPair(a.stimulus, a.behaviour, a.strength, a.source, a.locked)
+
+
+def _public(n: StoredNetwork) -> NetworkPublic:
+    return NetworkPublic(
+        name=n.name,
+        description=n.description,
+        builtin=n.builtin,
+        version=n.version,
+        association_count=len(n.associations),
+        created_at=n.created_at,
+        updated_at=n.updated_at,
+        associations=[_association(p) for p in n.associations],
+    )
+
+
+def _written(n: StoredNetwork, live_runs: list[int]) -> NetworkWritten:
+    return NetworkWritten(**_public(n).model_dump(), live_runs=live_runs)
+
+
+def _check_names(
+    catalog: Catalog, items: Sequence[AssociationCreate], loc: tuple[str | int, ...], many: bool
+) -> None:
+    """422 naming the field for stimulus and behaviour names the catalogue lacks."""
+    stimuli = {s.name for s in catalog.stimuli}
+    behaviours = {b.name for b in catalog.behaviours}
+    errors: list[dict[str, Any]] = []
+    for i, a in enumerate(items):
+        at = (*loc, i) if many else loc
+        for field, value, known in (
+            ("stimulus", a.stimulus, stimuli),
+            ("behaviour", a.behaviour, behaviours),
+        ):
+            if value not in known:
+                errors.append(
+                    {
+                        "type": "value_error",
+                        "loc": (*at, field),
+                        "msg": f"unknown {field} {value!r}",
+                        "input": value,
+                    }
+                )
+    if errors:
+        raise RequestValidationError(errors)
+
+
+def _edit(change: AssociationChange) -> EditAssociation:
+    after = change.after
+    if after is None:
+        return EditAssociation(change.stimulus, change.behaviour, None)
+    return EditAssociation(
+        change.stimulus, change.behaviour, after.strength, after.source, after.locked
+    )
+
+
+async def _push(engine: Engine, edits: Sequence[EditAssociation]) -> bool:
+    # Queued together, the edits land at the same tick boundary, in order.
+    results = await asyncio.gather(*(engine.edit(e) for e in edits), return_exceptions=True)
+    failed = [r for r in results if isinstance(r, BaseException)]
+    for r in failed:
+        if not isinstance(r, RunStateError | StorageError):
+            raise r
+        log.warning("live edit of run %s not applied: %s", engine.run_id, r)
+    return not failed
+
+
+async def _live(
+    engines: EngineManager, name: str, changes: Iterable[AssociationChange], live: bool
+) -> list[int]:
+    """Give every running run started from network `name` the same changes."""
+    edits = [_edit(c) for c in changes]
+    if not live or not edits:
+        return []
+    targets = [
+        e
+        for e in engines.engines()
+        if e.spec.network == name and e.status in (RunStatus.RUNNING, RunStatus.PAUSED)
+    ]
+    reached = await asyncio.gather(*(_push(e, edits) for e in targets))
+    return sorted(e.run_id for e, ok in zip(targets, reached, strict=True) if ok)
+
+
+@router.get("")
+def list_networks(networks: NetworksDep) -> NetworksPublic:
+    """Every stored network, built-in ones first, with its version and size."""
+    data = [
+        NetworkSummaryPublic(
+            name=s.name,
+            description=s.description,
+            builtin=s.builtin,
+            version=s.version,
+            association_count=s.association_count,
+            created_at=s.created_at,
+            updated_at=s.updated_at,
+        )
+        for s in networks.summaries()
+    ]
+    return NetworksPublic(data=data, count=len(data))
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteGuard],
+    responses={
+        404: {"model": ErrorPublic, "description": "no such base network"},
+        409: {"model": ErrorPublic, "description": "the name is taken"},
+    },
+)
+async def create_network(
+    body: NetworkCreate, networks: NetworksDep, state: StateDep, note: Note = ""
+) -> NetworkPublic:
+    """Create an editable network: a copy of `base` (innate by default, null for none).
+
+    This is how a built-in network is edited: copy it and change the copy.
+    """
+    _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
+    created = await _call(
+        networks.create,
+        body.name,
+        description=body.description,
+        base=body.base,
+        associations=[_pair(a) for a in body.associations],
+        note=note,
+    )
+    return _public(created)
+
+
+@router.post(
+    "/import",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteGuard],
+    responses={
+        200: {"model": NetworkWritten, "description": "replaced: a new version of the network"},
+        409: {
+            "model": ErrorPublic,
+            "description": "the name is taken (import under another ?name= or ?replace=true), "
+            "a built-in network, or a locked association without force",
+        },
+    },
+)
+async def import_network(
+    body: NetworkDocument,
+    response: Response,
+    networks: NetworksDep,
+    engines: EnginesDep,
+    state: StateDep,
+    name: Annotated[
+        str | None,
+        Query(pattern=NETWORK_NAME, description="store it under this name, not the document's"),
+    ] = None,
+    replace: Annotated[
+        bool, Query(description="replace an existing network's associations (a new version)")
+    ] = False,
+    force: Force = False,
+    live: Live = False,
+    note: Note = "",
+) -> NetworkWritten:
+    """Import a document GET .../export gave: 201 as a new network, 200 when replacing one."""
+    target = name or body.name
+    _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
+    edit: NetworkEdit = await _call(
+        networks.import_network,
+        target,
+        [_pair(a) for a in body.associations],
+        description=body.description,
+        replace=replace,
+        force=force,
+        note=note,
+    )
+    if not edit.created:
+        response.status_code = status.HTTP_200_OK
+    live_runs = await _live(engines, target, () if edit.created else edit.changes, live)
+    return _written(edit.network, live_runs)
+
+
+@router.get("/{name}", responses=_NOT_FOUND)
+def get_network(name: NetworkName, networks: NetworksDep) -> NetworkPublic:
+    """A network with its associations and version."""
+    return _public(networks.get(name))
+
+
+@router.delete(
+    "/{name}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    response_class=Response,
+    dependencies=[WriteGuard],
+    responses={**_NOT_FOUND, 409: {"model": ErrorPublic, "description": "a built-in network"}},
+)
+async def delete_network(name: NetworkName, networks: NetworksDep) -> Response:
+    """Delete a network and its history; built-in networks cannot be deleted.
+
+    Runs started from it keep the copy they started with.
+    """
+    await _call(networks.delete, name)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.get("/{name}/associations", responses=_NOT_FOUND)
+def list_associations(name: NetworkName, networks: NetworksDep) -> NetworkAssociationsPublic:
+    """A network's associations, in catalogue order."""
+    n = networks.get(name)
+    data = [_association(p) for p in n.associations]
+    return NetworkAssociationsPublic(data=data, count=len(data), version=n.version)
+
+
+def _association_written(
+    edit: NetworkEdit, stimulus: str, behaviour: str, live_runs: list[int]
+) -> AssociationWritten:
+    n = edit.network
+    pair = next(p for p in n.associations if (p.stimulus, p.behaviour) == (stimulus, behaviour))
+    return AssociationWritten(
+        **_association(pair).model_dump(), network=n.name, version=n.version, live_runs=live_runs
+    )
+
+
+@router.post(
+    "/{name}/associations",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteGuard],
+    responses={
+        **_NOT_FOUND,
+        409: {
+            "model": ErrorPublic,
+            "description": "the network has this pair already (PUT changes it), "
+            "or it is built in (read-only)",
+        },
+    },
+)
+async def add_association(
+    name: NetworkName,
+    body: AssociationCreate,
+    networks: NetworksDep,
+    engines: EnginesDep,
+    state: StateDep,
+    live: Live = False,
+    note: Note = "",
+) -> AssociationWritten:
+    """Add an association the network does not have yet (PUT changes one it has)."""
+    _check_names(state.catalog, [body], ("body",), many=False)
+    edit = await _call(networks.add_association, name, _pair(body), note=note)
+    live_runs = await _live(engines, name, edit.changes, live)
+    return _association_written(edit, body.stimulus, body.behaviour, live_runs)
+
+
+@router.put(
+    "/{name}/associations/{stimulus}/{behaviour}",
+    dependencies=[WriteGuard],
+    responses={
+        404: {"model": ErrorPublic, "description": "no such network, stimulus or behaviour"},
+        **_CONFLICT,
+    },
+)
+async def put_association(
+    name: NetworkName,
+    stimulus: StimulusName,
+    behaviour: BehaviourName,
+    body: AssociationUpdate,
+    networks: NetworksDep,
+    engines: EnginesDep,
+    force: Force = False,
+    live: Live = False,
+    note: Note = "",
+) -> AssociationWritten:
+    """Set an association, adding it if the network lacks it; omitted fields keep their value.
+
+    A locked association changes only with `force=true`; unlocking is `{"locked": false}`
+    with `force=true`. With `live=true` running runs get the association as it now is, even
+    when the stored network did not change (a way to push a stored edit to them later).
+    """
+    edit = await _call(
+        networks.put_association,
+        name,
+        stimulus,
+        behaviour,
+        strength=body.strength,
+        source=body.source,
+        locked=body.locked,
+        force=force,
+        note=note,
+    )
+    pair = next(
+        p for p in edit.network.associations if (p.stimulus, p.behaviour) == (stimulus, behaviour)
+    )
+    current = AssociationChange(stimulus, behaviour, None, pair)
+    live_runs = await _live(engines, name, [current], live)
+    return _association_written(edit, stimulus, behaviour, live_runs)
+
+
+@router.delete(
+    "/{name}/associations/{stimulus}/{behaviour}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    response_class=Response,
+    dependencies=[WriteGuard],
+    responses={
+        204: {
+            "description": "removed",
+            "headers": {
+                VERSION_HEADER: {
+                    "description": "the network's version after the removal",
+                    "schema": {"type": "integer"},
+                },
+                LIVE_RUNS_HEADER: {
+                    "description": "comma-separated ids of the running runs that got the "
+                    "removal (live=true only)",
+                    "schema": {"type": "string"},
+                },
+            },
+        },
+        404: {"model": ErrorPublic, "description": "no such network or association"},
+        **_CONFLICT,
+    },
+)
+async def remove_association(
+    name: NetworkName,
+    stimulus: StimulusName,
+    behaviour: BehaviourName,
+    networks: NetworksDep,
+    engines: EnginesDep,
+    force: Force = False,
+    live: Live = False,
+    note: Note = "",
+) -> Response:
+    """Remove an association; a locked one only with `force=true`."""
+    edit = await _call(
+        networks.remove_association, name, stimulus, behaviour, force=force, note=note
+    )
+    live_runs = await _live(engines, name, edit.changes, live)
+    headers = {
+        VERSION_HEADER: str(edit.network.version),
+        LIVE_RUNS_HEADER: ",".join(map(str, live_runs)),
+    }
+    return Response(status_code=status.HTTP_204_NO_CONTENT, headers=headers)
+
+
+@router.get("/{name}/versions", responses=_NOT_FOUND)
+def list_versions(name: NetworkName, networks: NetworksDep) -> NetworkVersionsPublic:
+    """The network's edit history, oldest first (version 1 is how it was made or seeded)."""
+    data = [
+        NetworkVersionPublic(
+            version=v.version,
+            created_at=v.created_at,
+            note=v.note,
+            association_count=v.association_count,
+        )
+        for v in networks.versions(name)
+    ]
+    return NetworkVersionsPublic(data=data, count=len(data))
+
+
+Version = Annotated[int, Path(ge=1, le=2**31 - 1, description="a version of the network")]
+
+
+@router.get(
+    "/{name}/versions/{version}",
+    responses={404: {"model": ErrorPublic, "description": "no such network or version"}},
+)
+def get_version(
+    name: NetworkName, version: Version, networks: NetworksDep
+) -> NetworkSnapshotPublic:
+    """The network as it was at one version."""
+    snap = networks.snapshot(name, version)
+    return NetworkSnapshotPublic(
+        name=snap.name,
+        version=snap.version,
+        created_at=snap.created_at,
+        note=snap.note,
+        description=snap.description,
+        associations=[_association(p) for p in snap.associations],
+        association_count=len(snap.associations),
+    )
+
+
+@router.get(
+    "/{name}/diff",
+    responses={404: {"model": ErrorPublic, "description": "no such network or version"}},
+)
+def diff_versions(
+    name: NetworkName,
+    networks: NetworksDep,
+    from_version: Annotated[
+        int | None,
+        Query(alias="from", ge=1, le=2**31 - 1, description="default: the version before `to`"),
+    ] = None,
+    to_version: Annotated[
+        int | None, Query(alias="to", ge=1, le=2**31 - 1, description="default: the current")
+    ] = None,
+) -> NetworkDiffPublic:
+    """The associations added, removed and changed from version `from` to version `to`."""
+    to = to_version if to_version is not None else networks.get(name).version
+    start = from_version if from_version is not None else max(1, to - 1)
+    changes = networks.diff(name, start, to)
+    return NetworkDiffPublic(
+        name=name,
+        from_version=start,
+        to_version=to,
+        added=[_association(c.after) for c in changes if c.before is None and c.after],
+        removed=[_association(c.before) for c in changes if c.after is None and c.before],
+        changed=[
+            AssociationChangePublic(
+                stimulus=c.stimulus,
+                behaviour=c.behaviour,
+                before=_association(c.before),
+                after=_association(c.after),
+            )
+            for c in changes
+            if c.before is not None and c.after is not None
+        ],
+    )
+
+
+@router.post(
+    "/{name}/revert",
+    dependencies=[WriteGuard],
+    responses={
+        404: {"model": ErrorPublic, "description": "no such network or version"},
+        **_CONFLICT,
+    },
+)
+async def revert_network(
+    name: NetworkName,
+    body: NetworkRevert,
+    networks: NetworksDep,
+    engines: EnginesDep,
+    force: Force = False,
+    live: Live = False,
+    note: Note = "",
+) -> NetworkWritten:
+    """Make the network what it was at `version`, as a new version (history is kept).
+
+    Changing or removing locked associations needs `force=true`.
+    """
+    edit = await _call(networks.revert, name, body.version, force=force, note=note)
+    return _written(edit.network, await _live(engines, name, edit.changes, live))
+
+
+@router.get("/{name}/export", responses=_NOT_FOUND)
+def export_network(name: NetworkName, networks: NetworksDep, response: Response) -> NetworkDocument:
+    """The network as a document POST /api/networks/import takes, as a file to save."""
+    n = networks.get(name)
+    filename = re.sub(r"[^A-Za-z0-9_-]", "_", n.name) or "network"
+    response.headers["Content-Disposition"] = f'attachment; filename="{filename}.json"'
+    return NetworkDocument(
+        format=NETWORK_FORMAT,
+        name=n.name,
+        description=n.description,
+        associations=[
+            AssociationCreate(
+                stimulus=p.stimulus,
+                behaviour=p.behaviour,
+                strength=p.strength,
+                source=cast(Source, p.source),
+                locked=p.locked,
+            )
+            for p in n.associations
+        ],
+    )
