@@ -88,6 +88,16 @@ class EngineManager:
         self._tasks[run_id] = asyncio.create_task(self._run(engine), name=f"run {run_id}")
         return engine
 
+    async def started(self, run_id: int, timeout_s: float = 5.0) -> None:
+        """Wait until a started run ticks (or has already ended)."""
+        engine = self._engines[run_id]
+        task = self._tasks[run_id]
+        async with asyncio.timeout(timeout_s):
+            while engine.status in (RunStatus.CREATED, RunStatus.INTERRUPTED, RunStatus.STOPPED):
+                if task.done():
+                    return
+                await asyncio.sleep(0.001)
+
     async def _run(self, engine: Engine) -> RunStatus:
         try:
             return await engine.run()

@@ -51,3 +51,27 @@ def test_serving_beyond_loopback_needs_a_token(tmp_path: Path) -> None:
 
     with pytest.raises(ValueError, match="SRLAB_TOKEN"):
         create_app(settings_for(tmp_path, host="0.0.0.0"))
+
+
+async def test_the_lifespan_interrupts_running_runs_and_startup_marks_dead_ones(
+    tmp_path: Path,
+) -> None:
+    from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
+
+    settings = settings_for(tmp_path)
+    async with client_for(settings) as (client, _):
+        run = (await client.post("/api/runs", json={"condition": "delayed", "mode": "realtime",
+                                                    "hz": 100})).json()  # fmt: skip
+        await client.post(f"/api/runs/{run['id']}/start")
+        await client.get(f"/api/runs/{run['id']}")
+    store = SqlAlchemyRunStore(make_sessionmaker(make_engine(settings.database_url)))
+    assert store.load_run(run["id"]).status.value == "interrupted"
+    # A process that died left a run "running": the next start marks it interrupted.
+    from core.ports import RunStatus
+
+    store.set_status(run["id"], RunStatus.RUNNING)
+    async with client_for(settings) as (client, _):
+        r = await client.get(f"/api/runs/{run['id']}")
+        assert r.json()["status"] == "interrupted"
+        again = await client.post(f"/api/runs/{run['id']}/start")
+        assert again.status_code == 200 and again.json()["status"] == "running"

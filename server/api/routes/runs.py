@@ -145,6 +145,7 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     if engine is None or engine.status.value != "created":
         await io(engines.prepare, run_id)  # from its checkpoint and log
     engines.start(run_id)
+    await engines.started(run_id)
     return await _run(store, engines, run_id)
 
 
