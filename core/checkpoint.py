@@ -12,6 +12,7 @@ import json
 import zlib
 from typing import Any
 
+from core.brain.brain import BrainConfig
 from core.brain.catalog import Behaviour, Catalog
 from core.brain.network import Association, BehaviourNetwork
 from core.conditions import Condition
@@ -83,6 +84,7 @@ def restore_simulation(
     *,
     world_config: WorldConfig | None = None,
     defer_rewards: bool = False,
+    brain_config: BrainConfig | None = None,
 ) -> Simulation:
     """A simulation in the state `export_state` gave.
 
@@ -108,6 +110,7 @@ def restore_simulation(
             catalog=catalog,
             network=network,
             defer_rewards=defer_rewards,
+            brain_config=brain_config,
         )
         brain = sim.brain
         for st, be, v in state["ltm"]:

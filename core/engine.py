@@ -167,6 +167,8 @@ class _RewardJob:
     ack: asyncio.Future[RewardAck] | None = None
     arrived: float = 0.0
     logged_id: int | None = None
+    logged: asyncio.Event = field(default_factory=asyncio.Event)
+    """Set once the reward is in the log (external rewards are logged by the ack task)."""
     committed_before: bool = False
     """Its learning is already in storage (a replayed reward applied before a crash)."""
 
@@ -243,6 +245,14 @@ class Engine:
         self._last_external_id = 0
         self._replay_skip_upto = 0
         self._closing = False
+        self._settling = 0
+        """The boundary being settled (0: none)."""
+        self._replayed = asyncio.Event()
+        """Set once a resumed run has replayed its log (at once for a new run)."""
+        self._held: list[_RewardJob] = []
+        if replay is None:
+            self._replayed.set()
+        self._ack_queue: asyncio.Queue[object] = asyncio.Queue()
 
     # --- construction ---------------------------------------------------------------
 
@@ -336,6 +346,7 @@ class Engine:
                 catalog,
                 world_config=world_config,
                 defer_rewards=True,
+                brain_config=config,
             )
             totals = stored.totals
         else:
@@ -382,23 +393,40 @@ class Engine:
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
         """
+        if not self._replayed.is_set():
+            # A resumed run replays its log first; a new reward stamped inside the replay
+            # would be applied in an order a later replay could not repeat.
+            await self._replayed.wait()
         if self.status is not RunStatus.RUNNING or self._closing:
             raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+        stamp = self.sim.tick_count + 1
+        if self._settling >= stamp:
+            # That boundary is being settled: a reward arriving now takes the next one, so
+            # a stream of rewards can never hold a boundary open.
+            stamp = self._settling + 1
         job = _RewardJob(
-            self.sim.tick_count + 1,
+            stamp,
             self.sim.episode,
             InjectReward(value, note, source),
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
         )
-        self._due.append(job)
-        self._queue.put_nowait(job)
+        if stamp > self.sim.tick_count + 1:
+            # Held until the tick being settled has run: the rewards it produces for the
+            # next boundary come first there, as they do when the log is replayed.
+            self._held.append(job)
+        else:
+            self._due.append(job)
+            self._queue.put_nowait(job)
+        self._ack_queue.put_nowait(job)
         assert job.ack is not None
         return await job.ack
 
     async def edit(self, command: EditAssociation) -> int:
         """Change the running robot's network at the next tick boundary; returns the log id."""
+        if not self._replayed.is_set():
+            await self._replayed.wait()
         if self.status not in (RunStatus.RUNNING, RunStatus.PAUSED) or self._closing:
             raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
         cat = self.sim.brain.catalog
@@ -475,6 +503,7 @@ class Engine:
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._reward_task(), name=f"run {self.run_id} rewards")
                 tg.create_task(self._episode_task(), name=f"run {self.run_id} episodes")
+                tg.create_task(self._ack_task(), name=f"run {self.run_id} acknowledgements")
                 tg.create_task(self._tick_task(), name=f"run {self.run_id} ticks")
         except* StorageError as group:
             failure = group.exceptions[0]
@@ -532,18 +561,25 @@ class Engine:
     async def _tick_task(self) -> None:
         try:
             if self._replay is not None:
-                await self._replay_log(self._replay)
-                self._replay = None
+                try:
+                    await self._replay_log(self._replay)
+                finally:
+                    self._replay = None
+                    self._replayed.set()
             if self.spec.mode is Mode.REALTIME:
                 await self._realtime()
             else:
                 await self._fast()
-            # Rewards that arrived after the last tick apply at the boundary after it.
+            # No more rewards now; those that arrived after the last tick apply at the
+            # boundary after it.
+            self._closing = True
+            self._release_held()
             await self._settle(self.sim.tick_count + 1, until=math.inf)
         finally:
             self._closing = True
             self._queue.put_nowait(_CLOSE)
             self._episode_queue.put_nowait(_CLOSE)
+            self._ack_queue.put_nowait(_CLOSE)
 
     def _episodes_left(self) -> bool:
         limit = self.spec.episodes
@@ -576,23 +612,24 @@ class Engine:
                 self._end_episode(ended)
 
     async def _realtime(self) -> None:
-        loop = asyncio.get_running_loop()
-        deadline = loop.time()
+        # time.monotonic, not loop.time(): uvloop's clock ticks in whole milliseconds.
+        clock = time.monotonic
+        deadline = clock()
         while self._more():
-            now = loop.time()
+            now = clock()
             if now < deadline:
                 await asyncio.sleep(deadline - now)
             if self._paused:
                 await self._resumed.wait()
-                deadline = loop.time()
+                deadline = clock()
                 continue
             if self._stop:
                 break
-            self.stats.lateness_s.append(max(0.0, loop.time() - deadline))
+            self.stats.lateness_s.append(max(0.0, clock() - deadline))
             await self._step()
             period = 1.0 / self._hz
             deadline += period
-            behind = loop.time() - deadline
+            behind = clock() - deadline
             if behind > 0:
                 # An overrun: skip the missed periods instead of bursting to catch up.
                 missed = math.floor(behind / period) + 1
@@ -632,7 +669,15 @@ class Engine:
                     ended = e
                 else:
                     self._publish(e)
+        if self._held:
+            self._release_held()
         return ended
+
+    def _release_held(self) -> None:
+        for job in self._held:
+            self._due.append(job)
+            self._queue.put_nowait(job)
+        self._held.clear()
 
     def _start_episode(self) -> None:
         self.sim.reset()
@@ -666,13 +711,17 @@ class Engine:
         """
         limit = boundary if until is None else until
         due = self._due
-        while due and due[0].stamp <= limit:
-            job = due[0]
-            if internal_only and job.external:
-                break
-            job.release.set()
-            await job.applied.wait()
-            due.popleft()
+        self._settling = boundary
+        try:
+            while due and due[0].stamp <= limit:
+                job = due[0]
+                if internal_only and job.external:
+                    break
+                job.release.set()
+                await job.applied.wait()
+                due.popleft()
+        finally:
+            self._settling = 0
         if self._commands and not internal_only:
             self._apply_commands(boundary)
 
@@ -854,17 +903,34 @@ class Engine:
                 last.totals,
             )
 
-    async def _process_reward(self, job: _RewardJob) -> None:
-        record = RewardRecord(
-            job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
-        )
-        if job.external and job.logged_id is None:
+    async def _ack_task(self) -> None:
+        """Logs trainers' rewards in arrival order; the log entry is the acknowledgement.
+
+        It never waits for a tick boundary, so acknowledging does not wait for the
+        previous reward to be applied.
+        """
+        while True:
+            job = await self._ack_queue.get()
+            if job is _CLOSE:
+                break
+            assert isinstance(job, _RewardJob)
+            record = RewardRecord(
+                job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
+            )
             job.logged_id = await self._io(self.store.log_reward, self.run_id, record)
+            job.logged.set()
             if job.ack is not None and not job.ack.done():
                 self.stats.reward_ack_s.append(time.perf_counter() - job.arrived)
                 job.ack.set_result(
                     RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
                 )
+
+    async def _process_reward(self, job: _RewardJob) -> None:
+        record = RewardRecord(
+            job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
+        )
+        if job.external and job.logged_id is None:
+            await job.logged.wait()
         await job.release.wait()
         outcome = self._apply_in_memory(job)
         if job.committed_before:

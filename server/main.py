@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -120,6 +121,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = SqlAlchemyRunStore(sessions)
         catalog = load_catalog()
         manager = EngineManager(store, catalog, settings.max_runs)
+        # Load the sensing kernel's machine code now, not in the first run's first tick.
+        from starlette.concurrency import run_in_threadpool
+
+        from core.sim.world import PymunkWorld
+
+        await run_in_threadpool(lambda: PymunkWorld().reset(0, 0))
+        # Everything loaded so far lives as long as the process: keep it out of the cyclic
+        # collector's way, so a full collection does not stall realtime ticks.
+        gc.collect()
+        gc.freeze()
         for run in store.list_runs():
             if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
                 # Its process died: it can be resumed from its checkpoint and log.

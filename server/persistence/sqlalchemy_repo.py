@@ -542,6 +542,24 @@ class SqlAlchemyRunStore:
             )
             return [_reward(r) for r in rows]
 
+    def rewards_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[StoredReward], int]:
+        """A page of the run's reward log in log order, and the log's length."""
+        with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            total = s.scalar(
+                select(func.count()).select_from(RewardRow).where(RewardRow.run_id == run_id)
+            )
+            rows = s.scalars(
+                select(RewardRow)
+                .where(RewardRow.run_id == run_id)
+                .order_by(RewardRow.id)
+                .offset(offset)
+                .limit(limit)
+            )
+            return [_reward(r) for r in rows], int(total or 0)
+
     def commands(self, run_id: int) -> list[StoredCommand]:
         """The run's whole command log, in log order."""
         with self._transaction(f"reading the commands of run {run_id}", write=False) as s:

@@ -345,3 +345,48 @@ def test_episode_end_events_reach_subscribers() -> None:
     asyncio.run(engine.run())
     ended = [ev for ev in drain(sub) if isinstance(ev, EpisodeEnded)]
     assert [e.episode for e in ended] == [0, 1, 2]
+
+
+def test_acknowledgements_do_not_wait_for_tick_boundaries() -> None:
+    """Trainer rewards are acknowledged once logged, not after the previous one applies."""
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("delayed", 3, hz=2.0), store, catalog=CATALOG)
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 1)
+        before = e.sim.tick_count
+        acks = [await e.reward(0.5, note=str(i)) for i in range(3)]
+        # Three acknowledgements within one 500 ms tick period: none waited for a boundary.
+        assert e.sim.tick_count - before <= 1
+        assert [a.tick for a in acks] == [acks[0].tick] * 3
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    assert [r.record.note for r in store.rewards(engine.run_id)] == ["0", "1", "2"]
+    assert all(r.applied for r in store.rewards(engine.run_id))
+
+
+def test_a_stream_of_rewards_never_holds_a_boundary_open() -> None:
+    store = InMemoryRunStore(CATALOG)
+    engine = Engine.create(realtime("delayed", 3, hz=200.0), store, catalog=CATALOG)
+
+    async def trainer(e: Engine) -> None:
+        while e.status is RunStatus.RUNNING:
+            try:
+                await e.reward(0.1)
+            except RunStateError:
+                return
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 1)
+        async with asyncio.TaskGroup() as tg:
+            for _ in range(8):
+                tg.create_task(trainer(e))
+            start = e.sim.tick_count
+            await wait_ticks(e, 30)  # ticks go on while rewards keep arriving
+            assert e.sim.tick_count >= start + 30
+            e.stop()
+
+    asyncio.run(drive(engine, script))
+    stamps = [r.record.tick for r in store.rewards(engine.run_id)]
+    assert stamps == sorted(stamps)

@@ -104,6 +104,10 @@ def test_kill_9_loses_nothing_acknowledged_and_applies_every_reward_once(
 
     store = SqlAlchemyRunStore(make_sessionmaker(make_engine(url)))
     rewards = store.rewards(1)
+    if os.environ.get("SRLAB_CRASH_KEEP"):
+        import shutil
+
+        shutil.copy(path, os.environ["SRLAB_CRASH_KEEP"])
     acknowledged: dict[int, str] = {}
     for line in acks.read_text().splitlines():
         logged_id, note = line.split()

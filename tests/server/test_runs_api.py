@@ -249,3 +249,21 @@ async def test_a_run_from_an_edited_network_starts_again_after_a_stop(tmp_path: 
         network = (await client.get(f"/api/runs/{run['id']}/network")).json()["data"]
         assert not any(a["stimulus"] == "Red" for a in network)
         await client.post(f"/api/runs/{run['id']}/stop")
+
+
+async def test_the_reward_log_is_paged(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, reward_rate_per_s=1000.0, reward_burst=1000)
+    async with client_for(settings) as (client, _):
+        run = await create(client, condition="delayed", mode="realtime", hz=200)
+        await client.post(f"/api/runs/{run['id']}/start")
+        for i in range(7):
+            r = await client.post(
+                f"/api/runs/{run['id']}/rewards", json={"value": 0.1, "note": str(i)}
+            )
+            assert r.status_code == 202
+        page = (await client.get(f"/api/runs/{run['id']}/rewards?offset=2&limit=3")).json()
+        assert page["count"] == 7
+        assert [x["note"] for x in page["data"]] == ["2", "3", "4"]
+        bad = await client.get(f"/api/runs/{run['id']}/rewards?limit=0")
+        assert bad.status_code == 422
+        await client.post(f"/api/runs/{run['id']}/stop")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException, Request, Response, status
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard
@@ -45,13 +47,23 @@ async def inject_reward(
 
 
 @router.get("")
-def list_rewards(run_id: RunId, store: StoreDep) -> RewardsPublic:
-    """The run's reward log, oldest first: trainers', the task's and programs' rewards."""
+def list_rewards(
+    run_id: RunId,
+    store: StoreDep,
+    offset: Annotated[int, Query(ge=0, le=2**62)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+) -> RewardsPublic:
+    """The run's reward log in log order, a page at a time (`count` is the whole log's).
+
+    Trainers', the task's and reinforcement programs' rewards, each with whether its
+    learning was applied and how many STM records it credited.
+    """
+    page, total = store.rewards_page(run_id, offset, limit)
     data = [
         RewardPublic(
             id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
             source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
         )
-        for r in store.rewards(run_id)
+        for r in page
     ]  # fmt: skip
-    return RewardsPublic(data=data, count=len(data))
+    return RewardsPublic(data=data, count=total)
