@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
 from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import exc as sa_exc
 from sqlalchemy.engine import URL, Connection, make_url
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
+
+from core.errors import StorageError
 
 DEFAULT_DATABASE_URL = "sqlite:///var/srlab.db"
 IMMEDIATE = "srlab_begin_immediate"
@@ -83,3 +88,31 @@ def make_engine(
 def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
     """Sessions on `engine` whose objects stay readable after commit."""
     return sessionmaker(engine, expire_on_commit=False)
+
+
+_DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
+
+
+@contextmanager
+def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> Iterator[Session]:
+    """A session whose work is committed at the end or rolled back on any error.
+
+    Writers take SQLite's write lock at BEGIN (see `make_engine`). Database failures come
+    out as `StorageError` naming `what`, after the rollback, so nothing half-written stays.
+    """
+    session = sessions()
+    try:
+        if write:
+            session.connection(execution_options={IMMEDIATE: True})
+        yield session
+        session.commit()
+    except _DB_ERRORS as e:
+        with suppress(*_DB_ERRORS):
+            session.rollback()
+        detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
+        raise StorageError(f"storage failed while {what}: {detail}") from e
+    except BaseException:
+        session.rollback()
+        raise
+    finally:
+        session.close()

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Iterable, Iterator, Mapping
-from contextlib import contextmanager, suppress
+from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager, suppress
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -25,11 +25,10 @@ from core.errors import (
     CatalogError,
     LockedAssociationError,
     RunStateError,
-    StorageError,
     UnknownNameError,
 )
 from core.ports import NetworkPair
-from server.persistence.db import IMMEDIATE
+from server.persistence.db import transaction
 from server.persistence.orm import (
     AssociationRow,
     BehaviourRow,
@@ -43,7 +42,6 @@ NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 """A network's name: a slug of letters, digits, - and _, 1 to 64 characters."""
 _NAME = re.compile(NAME_PATTERN)
 FIRST_RECORDED_NOTE = "recorded as found before its first change"
-_DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
 _Key = tuple[str, str]
 
 
@@ -279,24 +277,8 @@ class SqlAlchemyNetworkRepository:
     def __init__(self, sessions: Callable[[], Session]) -> None:
         self._sessions = sessions
 
-    @contextmanager
-    def _transaction(self, what: str, *, write: bool) -> Iterator[Session]:
-        session = self._sessions()
-        try:
-            if write:
-                session.connection(execution_options={IMMEDIATE: True})
-            yield session
-            session.commit()
-        except _DB_ERRORS as e:
-            with suppress(*_DB_ERRORS):
-                session.rollback()
-            detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
-            raise StorageError(f"storage failed while {what}: {detail}") from e
-        except BaseException:
-            session.rollback()
-            raise
-        finally:
-            session.close()
+    def _transaction(self, what: str, *, write: bool) -> AbstractContextManager[Session]:
+        return transaction(self._sessions, what, write=write)
 
     def pairs(self, name: str) -> tuple[NetworkPair, ...]:
         """A network's associations; `UnknownNameError` when there is no such network."""

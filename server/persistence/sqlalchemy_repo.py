@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager, suppress
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import AbstractContextManager
 from typing import Any, TypeVar
 
 from sqlalchemy import bindparam, delete, func, insert, select
-from sqlalchemy import exc as sa_exc
 from sqlalchemy import update as sql_update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
@@ -30,7 +29,7 @@ from core.ports import (
     StoredReward,
     StoredRun,
 )
-from server.persistence.db import IMMEDIATE
+from server.persistence.db import transaction
 from server.persistence.orm import (
     BehaviourRow,
     EpisodeRow,
@@ -43,7 +42,6 @@ from server.persistence.orm import (
     StimulusRow,
 )
 
-_DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
 _FINAL = frozenset({RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.INTERRUPTED, RunStatus.FAILED})
 _Pair = tuple[str, str]
 _Row = TypeVar("_Row", LtmRow, RltmRow)
@@ -161,25 +159,8 @@ class SqlAlchemyRunStore:
             self._behaviours = dict(rows)
         return self._behaviours
 
-    @contextmanager
-    def _transaction(self, what: str, *, write: bool) -> Iterator[Session]:
-        """A session whose work is committed at the end or rolled back on any error."""
-        session = self._sessions()
-        try:
-            if write:
-                session.connection(execution_options={IMMEDIATE: True})
-            yield session
-            session.commit()
-        except _DB_ERRORS as e:
-            with suppress(*_DB_ERRORS):
-                session.rollback()
-            detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
-            raise StorageError(f"storage failed while {what}: {detail}") from e
-        except BaseException:
-            session.rollback()
-            raise
-        finally:
-            session.close()
+    def _transaction(self, what: str, *, write: bool) -> AbstractContextManager[Session]:
+        return transaction(self._sessions, what, write=write)
 
     @staticmethod
     def _run_row(session: Session, run_id: int) -> RunRow:
