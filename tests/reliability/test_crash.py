@@ -4,7 +4,8 @@ A child process runs an engine on a SQLite file while rewards arrive; the parent
 with SIGKILL at random points, restarts it (it resumes the run), and in the end checks
 the database's integrity, that every acknowledged reward is stored exactly once, and that
 the stored LTM equals a replay of the stored rewards. ``SRLAB_CRASH_KILLS`` sets the
-number of kills (50 by default; ``make reliability`` runs more).
+number of kills (50 by default; ``make reliability`` runs more); ``SRLAB_CRASH_KEEP=FILE``
+keeps a copy of the database for a post-mortem.
 """
 
 from __future__ import annotations
