@@ -27,7 +27,7 @@ from typing import Any, TypeVar
 
 from core.brain.brain import BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog, load_catalog
-from core.brain.network import Association
+from core.brain.network import Association, BehaviourNetwork
 from core.checkpoint import decode, encode, export_state, restore_simulation
 from core.commands import EditAssociation, InjectReward
 from core.conditions import Condition, get_condition
@@ -275,6 +275,34 @@ class Engine:
         return condition, config
 
     @classmethod
+    def _new_simulation(
+        cls,
+        spec: RunSpec,
+        catalog: Catalog,
+        world_config: WorldConfig | None,
+        network: tuple[Association, ...] | None,
+    ) -> Simulation:
+        """A fresh simulation for a run.
+
+        Its network is `network`, else the spec's knowledge set, else the condition's own.
+        """
+        condition, config = cls._condition(spec)
+        net = None if network is None else BehaviourNetwork(len(catalog.stimuli), network)
+        if net is None and spec.network is not None:
+            net = BehaviourNetwork.from_specs(
+                catalog, catalog.knowledge_set(spec.network).associations
+            )
+        return Simulation(
+            condition,
+            spec.seed,
+            catalog=catalog,
+            world_config=world_config,
+            network=net,
+            brain_config=config,
+            defer_rewards=True,
+        )
+
+    @classmethod
     def create(
         cls,
         spec: RunSpec,
@@ -287,23 +315,7 @@ class Engine:
     ) -> Engine:
         """A new run, stored with status created."""
         catalog = catalog or load_catalog()
-        condition, config = cls._condition(spec)
-        from core.brain.network import BehaviourNetwork
-
-        net = None if network is None else BehaviourNetwork(len(catalog.stimuli), network)
-        if net is None and spec.network is not None:
-            net = BehaviourNetwork.from_specs(
-                catalog, catalog.knowledge_set(spec.network).associations
-            )
-        sim = Simulation(
-            condition,
-            spec.seed,
-            catalog=catalog,
-            world_config=world_config,
-            network=net,
-            brain_config=config,
-            defer_rewards=True,
-        )
+        sim = cls._new_simulation(spec, catalog, world_config, network)
         pairs = tuple(_pair(sim, a) for a in sim.brain.network)
         run_id = store.create_run(spec, pairs)
         # A checkpoint before the first tick: a run can be rebuilt whatever network it
@@ -349,23 +361,8 @@ class Engine:
                 brain_config=config,
             )
             totals = stored.totals
-        else:
-            net = None
-            if spec.network is not None:
-                from core.brain.network import BehaviourNetwork
-
-                net = BehaviourNetwork.from_specs(
-                    catalog, catalog.knowledge_set(spec.network).associations
-                )
-            sim = Simulation(
-                condition,
-                spec.seed,
-                catalog=catalog,
-                world_config=world_config,
-                network=net,
-                brain_config=config,
-                defer_rewards=True,
-            )
+        else:  # stored before runs got a checkpoint at creation
+            sim = cls._new_simulation(spec, catalog, world_config, None)
             totals = RunTotals(0, 0, 0)
         engine = cls(run_id, spec, store, sim, replay=stored, totals=totals, trace=trace)
         engine._replay_skip_upto = skip
