@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shlex
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -26,44 +27,28 @@ from core.runner import EpisodeSummary, RunSummary, run
 from core.simulation import Snapshot
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
+def _number(
+    cast: Callable[[str], float], low: float, high: float, closed_low: bool, what: str
+) -> Callable[[str], Any]:
+    """An argparse type: a number of `cast`'s kind within bounds, with a clear message."""
+    kind = "whole number" if cast is int else "number"
+
+    def parse(text: str) -> Any:
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind}") from None
+        if value > high or value < low or (value == low and not closed_low):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {value}")
+        return value
+
+    return parse
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
-
-
-def _unit(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"must be in [0, 1], got {value}")
-    return value
-
-
-def _rate(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not 0.0 < value <= 1000.0:
-        raise argparse.ArgumentTypeError(f"must be in (0, 1000], got {value}")
-    return value
+_positive_int = _number(int, 1, math.inf, True, "at least 1")
+_seed = _number(int, 0, math.inf, True, "0 or more")
+_unit = _number(float, 0.0, 1.0, True, "in [0, 1]")
+_rate = _number(float, 0.0, 1000.0, False, "in (0, 1000]")
 
 
 def build_parser() -> argparse.ArgumentParser:

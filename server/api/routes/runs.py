@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, status
@@ -156,37 +157,38 @@ def _live(engines: EnginesDep, run_id: int) -> Engine:
     return engine
 
 
+async def _control(
+    run_id: int,
+    store: StoreDep,
+    engines: EnginesDep,
+    allowed: tuple[str, ...],
+    action: Callable[[Engine], None],
+) -> RunPublic:
+    """Apply `action` to a live run whose status is one of `allowed` (409 otherwise)."""
+    await io(store.load_run, run_id)
+    engine = _live(engines, run_id)
+    if engine.status.value not in allowed:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
+    action(engine)
+    return await _run(store, engines, run_id)
+
+
 @router.post("/{run_id}/pause", dependencies=[WriteGuard])
 async def pause_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Stop ticking until resumed."""
-    await io(store.load_run, run_id)
-    engine = _live(engines, run_id)
-    if engine.status.value != "running":
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
-    engine.pause()
-    return await _run(store, engines, run_id)
+    return await _control(run_id, store, engines, ("running",), Engine.pause)
 
 
 @router.post("/{run_id}/resume", dependencies=[WriteGuard])
 async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Tick again after a pause."""
-    await io(store.load_run, run_id)
-    engine = _live(engines, run_id)
-    if engine.status.value != "paused":
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
-    engine.resume()
-    return await _run(store, engines, run_id)
+    return await _control(run_id, store, engines, ("paused",), Engine.resume)
 
 
 @router.post("/{run_id}/stop", dependencies=[WriteGuard])
 async def stop_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """End the run at the next tick boundary (it can be started again to go on)."""
-    await io(store.load_run, run_id)
-    engine = _live(engines, run_id)
-    if engine.status.value not in ("running", "paused"):
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
-    engine.stop()
-    return await _run(store, engines, run_id)
+    return await _control(run_id, store, engines, ("running", "paused"), Engine.stop)
 
 
 def _memory(values: dict[tuple[str, str], float]) -> MemoryPublic:
