@@ -31,9 +31,12 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
+# Chromium (browser tests) and docker-compose (config check) come from Debian: the first
+# script installs them as root, or says what to install.
 # The storage tests run on SQLite and on a throwaway PostgreSQL server on 127.0.0.1, which
 # the script installs (as root) when missing, starts for pytest and stops afterwards.
 test: lint typecheck
+	bash scripts/system-deps.sh
 	bash scripts/pg-test-server.sh run -- $(BIN)/pytest
 
 test-fast: install

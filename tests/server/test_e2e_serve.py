@@ -3,71 +3,19 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
-import socket
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
+from liveserver import live_server, wait_status
 
 
 @pytest.fixture(scope="module")
 def api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[httpx.Client]:
-    folder = tmp_path_factory.mktemp("e2e")
-    port = free_port()
-    env = {**os.environ, "SRLAB_DATABASE_URL": f"sqlite:///{folder / 'e2e.db'}"}
-    server = subprocess.Popen(
-        [sys.executable, "-m", "server.cli", "serve", "--port", str(port)],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
-    client = httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=10)
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            try:
-                if client.get("/api/health").status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.2)
-        else:
-            raise AssertionError("srlab serve did not come up")
-        yield client
-    finally:
-        client.close()
-        server.terminate()
-        _, err = server.communicate(timeout=30)
-        # uvicorn shuts down cleanly, then re-raises the signal it caught.
-        assert server.returncode in (0, -signal.SIGTERM), err.decode()[-3000:]
-        assert b"Application shutdown complete" in err, err.decode()[-3000:]
-        assert b"Traceback" not in err, err.decode()[-3000:]
-
-
-def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        run: dict[str, Any] = api.get(f"/api/runs/{run_id}").json()
-        if run["status"] == status:
-            return run
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} never became {status}: {run}")
+    with live_server(tmp_path_factory.mktemp("e2e") / "e2e.db") as server:
+        yield server.client
 
 
 def test_edit_a_network_run_it_fast_to_completion_and_read_the_results(
