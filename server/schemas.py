@@ -27,6 +27,9 @@ class Health(BaseModel):
     version: str
     database: str
     runs_active: int
+    viser_port: int | None = Field(
+        None, description="Port of the 3D view on this host; null when it is not running."
+    )
 
 
 class StimulusPublic(BaseModel):
