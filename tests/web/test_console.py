@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -167,3 +168,22 @@ def test_the_page_recovers_when_the_server_restarts(
             stop_server(second)
     finally:
         context.close()
+
+
+def test_new_associations_appear_in_the_feed_as_they_pass_the_threshold(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = create_run(server, condition="kp", episodes=60, seed=3)
+    open_view(page, server, f"console/{run_id}")
+    expect(page.locator("#run-status")).to_have_text("created")
+    page.click("#run-start")
+    expect(page.locator("#run-status")).to_have_text("finished", timeout=60_000)
+    feed = page.locator("#assoc-feed li.promoted")
+    expect(feed.first).to_be_visible()
+    network = server.client.get(f"/api/runs/{run_id}/network").json()["data"]
+    learned = {(a["stimulus"], a["behaviour"]) for a in network if a["source"] != "innate"}
+    shown = " | ".join(feed.all_inner_texts())
+    assert any(f"{s} → {b}" in shown for s, b in learned), (shown, learned)
+    # In the heatmap the promoted pair is outlined as part of the run's network.
+    s, b = next(iter(sorted(learned)))
+    expect(page.locator(cell(page, s, b, "#heatmap"))).to_have_class(re.compile(r"\bin-net\b"))
