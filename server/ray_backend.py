@@ -130,7 +130,14 @@ class RayBackend:
             else:
                 ray.init(address=self.address, logging_level=logging.WARNING, **kwargs)
         except (ConnectionError, TimeoutError, OSError) as e:
-            raise BackendError(f"cannot connect to Ray at {self.address!r}: {e}") from None
+            hint = (
+                ""
+                if os.environ.get("RAY_AUTH_MODE")
+                else " (if the cluster uses token authentication, as `ray start` does by "
+                "default, set RAY_AUTH_MODE=token and RAY_AUTH_TOKEN to what "
+                "`ray get-auth-token` prints on its head)"
+            )
+            raise BackendError(f"cannot connect to Ray at {self.address!r}: {e}{hint}") from None
         except RuntimeError as e:  # e.g. the cluster runs another Ray or Python version
             raise BackendError(f"Ray: {e}") from None
         self._owned = True

@@ -133,7 +133,7 @@ def add_sweep_parser(sub: Any, positive_int: Any, seed: Any) -> None:
         help="local processes, or CPUs of a private Ray instance",
     )
     add_backend_arguments(sweep)
-    sweep.add_argument("--out", type=Path, default=Path("sweep"), help="output folder")
+    sweep.add_argument("--out", type=Path, default=Path("results/sweep"), help="output folder")
     sweep.add_argument("--quiet", action="store_true", help="no progress display")
 
 

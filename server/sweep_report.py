@@ -184,7 +184,7 @@ def sweep_markdown(
             "",
             f"### {name}",
             "",
-            f"{entry['description']}.",
+            f"{entry['description'][:1].upper()}{entry['description'][1:]}.",
             "",
             f"| {name} | condition | success, all episodes | success, last 10 | "
             "collisions / episode | violations / episode |",
