@@ -97,9 +97,11 @@ class RayBackend:
     @property
     def where(self) -> str:
         """Where the tasks run, for people."""
+        connected = self._ray is not None and self._ray.is_initialized()
+        if connected and not self._owned:
+            return f"the Ray this process was connected to ({self.cpus()} CPUs)"
         if self.address is None:
             return f"a local Ray instance with {self.jobs} CPUs"
-        connected = self._ray is not None and self._ray.is_initialized()
         return f"Ray at {self.address}" + (f" ({self.cpus()} CPUs)" if connected else "")
 
     def __enter__(self) -> RayBackend:

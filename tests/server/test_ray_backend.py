@@ -98,7 +98,7 @@ def test_a_sweep_on_ray_gives_the_local_results(
     assert without_timing(b) == without_timing(a)
     assert (b["params"]["backend"], a["params"]["backend"]) == ("ray", "local")
     assert b["params"]["ticks"] == a["params"]["ticks"] > 0
-    assert "on a local Ray instance with 2 CPUs" in capsys.readouterr().out
+    assert "on the Ray this process was connected to (2 CPUs)" in capsys.readouterr().out
     assert ray.is_initialized(), "a connected driver is left as it was"
 
 
