@@ -13,7 +13,14 @@ from pathlib import Path
 from typing import IO, Any
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+)
 from rich.table import Table
 
 from core.conditions import CONDITIONS
@@ -67,7 +74,7 @@ def open_backend(args: argparse.Namespace, err: Console) -> Iterator[tuple[Backe
         yield backend, backend.where
 
 
-def progress_display(err: Console, title: str, total: int, quiet: bool) -> tuple[Progress, Any]:
+def progress_display(err: Console, title: str, total: int, quiet: bool) -> tuple[Progress, TaskID]:
     """The progress bar of a batch of tasks and its task id."""
     progress = Progress(
         TextColumn(f"[bold]{title}[/]"),
@@ -82,7 +89,7 @@ def progress_display(err: Console, title: str, total: int, quiet: bool) -> tuple
     return progress, progress.add_task("tasks", total=total, last="")
 
 
-def on_result_updater(progress: Progress, bar: Any) -> Callable[[TaskResult], None]:
+def on_result_updater(progress: Progress, bar: TaskID) -> Callable[[TaskResult], None]:
     """A callback that advances the bar and names the task just done."""
 
     def on_result(r: TaskResult) -> None:
@@ -97,8 +104,12 @@ def on_result_updater(progress: Progress, bar: Any) -> Callable[[TaskResult], No
     return on_result
 
 
-def add_sweep_parser(sub: Any, positive_int: Any, seed: Any) -> None:
-    """The `sweep` command's arguments."""
+def add_sweep_parser(
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+    positive_int: Callable[[str], Any],
+    seed: Callable[[str], Any],
+) -> None:
+    """The `sweep` command and its arguments; the number types are the CLI's own."""
     names = "; ".join(f"{p.name} {p.bounds} ({p.scope})" for p in PARAMETERS.values())
     sweep = sub.add_parser(
         "sweep",
