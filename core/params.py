@@ -11,12 +11,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from core.brain.brain import BrainConfig
 from core.conditions import Condition
 from core.errors import CoreError, UnknownNameError
-from core.qlambda import QLambdaConfig
+
+if TYPE_CHECKING:
+    from core.qlambda import QLambdaConfig
 
 ParamValue = float | int | bool
 Params = tuple[tuple[str, ParamValue], ...]
@@ -231,6 +233,9 @@ def qlambda_config(
     condition: Condition, params: Mapping[str, ParamValue] | Params = ()
 ) -> QLambdaConfig:
     """Q(lambda)'s hyper-parameters with `params` set (its defaults otherwise)."""
+    # Imported here: the engine uses this module and needs neither Q(lambda) nor Gymnasium.
+    from core.qlambda import QLambdaConfig
+
     values = dict(params)
     normalise(values)
     _unused(condition, values)
