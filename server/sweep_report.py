@@ -19,10 +19,6 @@ from core.sweep import Sweep, format_value, point_label
 from server.report import ROLLING, _clean, _fmt
 
 
-def _task_params(params: Params) -> dict[str, ParamValue]:
-    return dict(params)
-
-
 def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
     """Every episode of every task run, with the parameters the task set, one JSON a line."""
     with path.open("w", encoding="utf-8") as f:
@@ -30,7 +26,7 @@ def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
             for e in r.episodes:
                 row = {
                     "condition": r.task.condition,
-                    "params": _task_params(r.task.params),
+                    "params": dict(r.task.params),
                     "seed": r.task.seed,
                     "episode": e.episode,
                     "outcome": e.outcome.value,
@@ -289,7 +285,7 @@ def write_sweep_report(
             {
                 "condition": r.task.condition,
                 "seed": r.task.seed,
-                "params": _task_params(r.task.params),
+                "params": dict(r.task.params),
                 "error": r.error,
             }
             for r in failed
