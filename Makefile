@@ -14,8 +14,9 @@ help:
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
 
+# With the optional ray extra (srlab[ray]): the tests run the Ray backend on a local instance.
 $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
-	$(UV) sync --frozen --quiet
+	$(UV) sync --frozen --extra ray --quiet
 	@touch $@
 
 install: $(BIN)/srlab
@@ -57,6 +58,7 @@ screenshots: install
 bench: install
 	$(BIN)/python -m bench.ticks
 	$(BIN)/python -m bench.experiment
+	$(BIN)/python -m bench.sweep
 	$(BIN)/python -m bench.engine
 
 migrate: install

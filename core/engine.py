@@ -40,6 +40,7 @@ from core.events import (
     RewardApplied,
     RewardDue,
 )
+from core.params import applicable, configure
 from core.ports import (
     BehaviourSpec,
     Checkpoint,
@@ -265,14 +266,8 @@ class Engine:
         unknown = set(params) - {"eta", "epsilon", "synthesize"}
         if unknown:
             raise ValueError(f"unknown learning parameters: {', '.join(sorted(unknown))}")
-        if "epsilon" in params:
-            from dataclasses import replace
-
-            condition = replace(condition, epsilon=float(params["epsilon"]))
-        config = condition.brain_config(
-            eta=float(params.get("eta", 0.1)), synthesize=bool(params.get("synthesize", False))
-        )
-        return condition, config
+        # The API accepts these for every condition and ignores those a condition does not use.
+        return configure(condition, applicable(condition, params))
 
     @classmethod
     def _new_simulation(

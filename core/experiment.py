@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import math
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
-from typing import Any
+from functools import cache
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -15,7 +16,8 @@ from core.brain.catalog import Catalog, load_catalog
 from core.conditions import CONDITIONS, get_condition
 from core.errors import UnknownNameError
 from core.events import Cause, Outcome
-from core.qlambda import QLambdaConfig, run_qlambda
+from core.params import Params, configure, qlambda_config
+from core.qlambda import run_qlambda
 from core.runner import EpisodeSummary, run
 
 CRITERION_WINDOW = 10
@@ -25,11 +27,12 @@ CAMERA_SENSOR = "camera_obstacle"
 
 @dataclass(frozen=True, slots=True)
 class Task:
-    """One (condition, seed) run."""
+    """One (condition, seed) run, with the learning parameters it sets (none: defaults)."""
 
     condition: str
     seed: int
     episodes: int
+    params: Params = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,17 +80,29 @@ def _camera_memory(
     }
 
 
+@cache
+def _shared_catalog() -> Catalog:
+    """The shipped catalogue, loaded once per process (it is never modified)."""
+    return load_catalog()
+
+
 def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
-    """Run one task; any error is returned, not raised, so the others' results survive."""
+    """Run one task; any error is returned, not raised, so the others' results survive.
+
+    A pure function of the task: the same task gives the same result in any process, on
+    any machine running the same code.
+    """
     try:
-        catalog = catalog or load_catalog()
+        catalog = catalog or _shared_catalog()
         condition = get_condition(task.condition)
         if condition.agent == "qlambda":
-            episodes, _, ticks = run_qlambda(task.seed, task.episodes, QLambdaConfig())
+            config = qlambda_config(condition, task.params)
+            episodes, _, ticks = run_qlambda(task.seed, task.episodes, config)
             return TaskResult(task, tuple(episodes), ticks)
         from core.simulation import Simulation
 
-        sim = Simulation(condition, task.seed, catalog=catalog)
+        condition, brain_config = configure(condition, task.params)
+        sim = Simulation(condition, task.seed, catalog=catalog, brain_config=brain_config)
         summary = run(condition, task.seed, task.episodes, simulation=sim)
         names = [b.name for b in sim.brain.catalog.behaviours]
         rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
@@ -108,16 +123,67 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
         return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
 
 
-_WORKER_CATALOG: Catalog | None = None
+TaskFunction = Callable[[Task], TaskResult]
 
 
-def _init_worker() -> None:
-    global _WORKER_CATALOG
-    _WORKER_CATALOG = load_catalog()
+class Backend(Protocol):
+    """Where tasks run: local processes (`LocalBackend`) or a cluster (server's Ray backend).
+
+    Results may come in any order; `run_tasks` puts them back in the tasks' order.
+    """
+
+    def run(self, tasks: Sequence[Task], fn: TaskFunction = run_task) -> Iterator[TaskResult]:
+        """Run `fn` on every task, yielding each result as it is done."""
+        ...
 
 
-def _run_in_worker(task: Task) -> TaskResult:
-    return run_task(task, _WORKER_CATALOG)
+@dataclass(frozen=True, slots=True)
+class LocalBackend:
+    """`jobs` processes on this machine (1: in this process, in order)."""
+
+    jobs: int = 1
+
+    def __post_init__(self) -> None:
+        if self.jobs < 1:
+            raise ValueError("jobs must be >= 1")
+
+    def run(self, tasks: Sequence[Task], fn: TaskFunction = run_task) -> Iterator[TaskResult]:
+        """Run `fn` on every task, yielding each result as it is done."""
+        if self.jobs == 1:
+            for t in tasks:
+                yield fn(t)
+            return
+        with ProcessPoolExecutor(max_workers=self.jobs) as pool:
+            pending: set[Future[TaskResult]] = {pool.submit(fn, t) for t in tasks}
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    yield f.result()
+
+
+def run_tasks(
+    tasks: Sequence[Task],
+    backend: Backend,
+    on_result: Callable[[TaskResult], None] | None = None,
+    fn: TaskFunction = run_task,
+) -> list[TaskResult]:
+    """Run every task on `backend`; the results come back in the tasks' order.
+
+    Each task is a pure function of itself, so the results are the same whatever the
+    backend and its parallelism.
+    """
+    if len(set(tasks)) != len(tasks):
+        raise ValueError("tasks must be distinct")
+    order = {t: i for i, t in enumerate(tasks)}
+    results: list[TaskResult] = []
+    for r in backend.run(tasks, fn):
+        results.append(r)
+        if on_result is not None:
+            on_result(r)
+    results.sort(key=lambda r: order[r.task])
+    if [r.task for r in results] != list(tasks):
+        raise RuntimeError("the backend did not return one result per task")
+    return results
 
 
 def run_experiment(
@@ -126,11 +192,12 @@ def run_experiment(
     episodes: int,
     jobs: int = 1,
     on_result: Callable[[TaskResult], None] | None = None,
+    backend: Backend | None = None,
 ) -> list[TaskResult]:
-    """Run every (condition, seed) task, `jobs` processes at a time.
+    """Run every (condition, seed) task on `backend` (default: `jobs` local processes).
 
     Each task is a pure function of (condition, seed, episodes), so the results are the
-    same whatever `jobs` is; they are returned in (condition, seed) order.
+    same whatever the backend and `jobs`; they are returned in (condition, seed) order.
     """
     if episodes < 1:
         raise ValueError("episodes must be >= 1")
@@ -141,27 +208,7 @@ def run_experiment(
     for c in conditions:
         get_condition(c)
     tasks = [Task(c, s, episodes) for c in conditions for s in seeds]
-    results: list[TaskResult] = []
-    if jobs == 1:
-        catalog = load_catalog()
-        for t in tasks:
-            r = run_task(t, catalog)
-            results.append(r)
-            if on_result is not None:
-                on_result(r)
-    else:
-        with ProcessPoolExecutor(max_workers=jobs, initializer=_init_worker) as pool:
-            pending: set[Future[TaskResult]] = {pool.submit(_run_in_worker, t) for t in tasks}
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    r = f.result()
-                    results.append(r)
-                    if on_result is not None:
-                        on_result(r)
-    order = {(t.condition, t.seed): i for i, t in enumerate(tasks)}
-    results.sort(key=lambda r: order[(r.task.condition, r.task.seed)])
-    return results
+    return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
 
 
 # --- analysis -------------------------------------------------------------------------

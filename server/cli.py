@@ -22,9 +22,17 @@ from core.brain.selection import Strategy
 from core.conditions import CONDITIONS, get_condition
 from core.errors import CoreError
 from core.events import Outcome
-from core.experiment import TaskResult
 from core.runner import EpisodeSummary, RunSummary, run
 from core.simulation import Snapshot
+from server.ray_backend import BackendError
+from server.sweep_cli import (
+    add_backend_arguments,
+    add_sweep_parser,
+    on_result_updater,
+    open_backend,
+    progress_display,
+    sweep_command,
+)
 
 
 def _number(
@@ -106,10 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--episodes", type=_positive_int, default=50, help="episodes per seed (default 50)"
     )
     exp.add_argument(
-        "--jobs", type=_positive_int, default=os.cpu_count() or 1, help="parallel processes"
+        "--jobs",
+        type=_positive_int,
+        default=os.cpu_count() or 1,
+        help="parallel processes, or CPUs of a private Ray instance",
     )
+    add_backend_arguments(exp)
     exp.add_argument("--out", type=Path, default=Path("results"), help="output folder")
     exp.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_sweep_parser(sub, _positive_int, _seed)
 
     sweep = sub.add_parser(
         "qlambda-sweep",
@@ -296,26 +309,20 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     catalog = load_catalog()
     err = Console(file=stderr, stderr=True)
-    progress = Progress(
-        TextColumn("[bold]experiment[/]"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[last]}"),
-        TimeElapsedColumn(),
-        console=err,
-        transient=True,
-        disable=args.quiet,
-    )
-    bar = progress.add_task("tasks", total=len(conditions) * len(seeds), last="")
-
-    def on_result(r: TaskResult) -> None:
-        mark = "ok" if r.ok else "[red]FAILED[/]"
-        progress.update(bar, advance=1, last=f"{r.task.condition} seed {r.task.seed} {mark}")
-
-    started = time.perf_counter()
-    with progress:
-        results = run_experiment(conditions, seeds, args.episodes, args.jobs, on_result)
-    elapsed = time.perf_counter() - started
+    with open_backend(args, err) as (backend, where):
+        total = len(conditions) * len(seeds)
+        progress, bar = progress_display(err, "experiment", total, args.quiet)
+        started = time.perf_counter()
+        with progress:
+            results = run_experiment(
+                conditions,
+                seeds,
+                args.episodes,
+                args.jobs,
+                on_result_updater(progress, bar),
+                backend,
+            )
+        elapsed = time.perf_counter() - started
     summary = summarise(results, conditions)
     params = {
         "command": "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "srlab experiment",
@@ -324,6 +331,9 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         "seed_base": args.seed_base,
         "episodes": args.episodes,
         "jobs": args.jobs,
+        "backend": args.backend,
+        "address": args.address,
+        "where": where,
         "elapsed_s": elapsed,
         "ticks": sum(r.ticks for r in results),
     }
@@ -347,7 +357,7 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         )
     console.print(table)
     ticks = params["ticks"]
-    console.print(f"{ticks:,} ticks in {elapsed:.1f} s ({ticks / elapsed:,.0f} ticks/s)")
+    console.print(f"{ticks:,} ticks in {elapsed:.1f} s on {where} ({ticks / elapsed:,.0f} ticks/s)")
     for p in paths:
         console.print(f"wrote {p}")
     failed = [r for r in results if not r.ok]
@@ -415,6 +425,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _simulate(args, sys.stdout, sys.stderr)
         if args.command == "experiment":
             return _experiment(args, sys.stdout, sys.stderr)
+        if args.command == "sweep":
+            return sweep_command(args, sys.stdout, sys.stderr)
         if args.command == "qlambda-sweep":
             return _qlambda_sweep(args, sys.stdout, sys.stderr)
         if args.command == "db":
@@ -437,7 +449,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from server import run_cli
 
             return run_cli.runs(args, sys.stdout)
-    except (CoreError, ValueError, OSError) as e:
+    except (CoreError, ValueError, OSError, BackendError) as e:
         parser.exit(2, f"srlab: error: {e}\n")
     except KeyboardInterrupt:
         parser.exit(130, "srlab: interrupted\n")

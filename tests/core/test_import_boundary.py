@@ -20,6 +20,7 @@ FORBIDDEN_PACKAGES = {
     "httpx",
     "pydantic",
     "pydantic_settings",
+    "ray",
     "server",
 }
 CLOCK_MODULES = {"time", "datetime"}

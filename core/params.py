@@ -1,0 +1,249 @@
+"""Learning parameters a run, an experiment or a sweep may set, validated in one place.
+
+The brain's conditions take the runs API's learning parameters (eta, epsilon, synthesize)
+and a few more of the memory, selection and KP modules; the Q(lambda) baseline takes its
+own. Each parameter says which conditions it applies to, so a sweep over `eta` runs the
+Q(lambda) condition once instead of once per value.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Literal
+
+from core.brain.brain import BrainConfig
+from core.conditions import Condition
+from core.errors import CoreError, UnknownNameError
+
+if TYPE_CHECKING:
+    from core.qlambda import QLambdaConfig
+
+ParamValue = float | int | bool
+Params = tuple[tuple[str, ParamValue], ...]
+"""Parameter settings as sorted (name, value) pairs: hashable, so tasks can be compared."""
+
+
+class ParameterError(CoreError):
+    """A learning parameter's name or value is not acceptable."""
+
+
+def _learns(c: Condition) -> bool:
+    return c.agent == "brain" and c.learning
+
+
+def _explores(c: Condition) -> bool:
+    return c.learning
+
+
+def _brain(c: Condition) -> bool:
+    return c.agent == "brain"
+
+
+def _kp(c: Condition) -> bool:
+    return c.agent == "brain" and c.kp
+
+
+def _qlambda(c: Condition) -> bool:
+    return c.agent == "qlambda"
+
+
+@dataclass(frozen=True, slots=True)
+class Parameter:
+    """One settable learning parameter.
+
+    Attributes:
+        name: its name on the command line and in reports.
+        description: one line for people.
+        kind: ``float``, ``int`` or ``bool``.
+        low: the smallest value allowed (numbers only).
+        high: the largest value allowed (numbers only).
+        closed_low: whether `low` itself is allowed.
+        applies: whether a condition uses the parameter.
+        scope: the conditions it applies to, in words.
+    """
+
+    name: str
+    description: str
+    kind: Literal["float", "int", "bool"]
+    low: float
+    high: float
+    closed_low: bool
+    applies: Callable[[Condition], bool]
+    scope: str
+
+    def parse(self, text: str) -> ParamValue:
+        """One value from its text, checked against the bounds."""
+        t = text.strip()
+        if self.kind == "bool":
+            lowered = t.lower()
+            if lowered in ("true", "yes", "1"):
+                return True
+            if lowered in ("false", "no", "0"):
+                return False
+            raise ParameterError(f"{self.name}: {text!r} is not true or false")
+        try:
+            value: float = int(t) if self.kind == "int" else float(t)
+        except ValueError:
+            kind = "whole number" if self.kind == "int" else "number"
+            raise ParameterError(f"{self.name}: {text!r} is not a {kind}") from None
+        return self.check(value)
+
+    def check(self, value: ParamValue) -> ParamValue:
+        """`value` if it is of the right kind and within bounds, else a ParameterError."""
+        if self.kind == "bool":
+            if not isinstance(value, bool):
+                raise ParameterError(f"{self.name} must be true or false, got {value!r}")
+            return value
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ParameterError(f"{self.name} must be a number, got {value!r}")
+        if self.kind == "int" and value != int(value):
+            raise ParameterError(f"{self.name} must be a whole number, got {value!r}")
+        if (
+            not math.isfinite(value)
+            or value > self.high
+            or value < self.low
+            or (value == self.low and not self.closed_low)
+        ):
+            raise ParameterError(f"{self.name} must be in {self.bounds}, got {value!r}")
+        return int(value) if self.kind == "int" else float(value)
+
+    @property
+    def bounds(self) -> str:
+        """The allowed values, as text."""
+        if self.kind == "bool":
+            return "true or false"
+        low = f"{self.low:g}" if self.kind == "float" else str(int(self.low))
+        high = f"{self.high:g}" if self.kind == "float" else str(int(self.high))
+        return f"{'[' if self.closed_low else '('}{low}, {high}]"
+
+
+PARAMETERS: dict[str, Parameter] = {
+    p.name: p
+    for p in (
+        Parameter(
+            "eta",
+            "Eq. (1)'s learning rate, of LTM and of KP's RLTM (default 0.1)",
+            "float", 0.0, 1.0, True, _learns, "the brain's learning conditions",
+        ),
+        Parameter(
+            "epsilon",
+            "exploration rate (default 0.1)",
+            "float", 0.0, 1.0, True, _explores, "every learning condition, qlambda too",
+        ),
+        Parameter(
+            "threshold",
+            "a behaviour value must reach this to compete in selection (default 0.25)",
+            "float", 0.0, 1.0, True, _brain, "every condition but qlambda",
+        ),
+        Parameter(
+            "insert_threshold",
+            "a pair this reliable joins the behaviour network, in LTM and RLTM (default 0.5)",
+            "float", 0.0, 1.0, False, _learns, "the brain's learning conditions",
+        ),
+        Parameter(
+            "kp_window",
+            "ticks after a camera stimulus in which sonar responses are propagated (default 20)",
+            "int", 1.0, 1000.0, True, _kp, "kp",
+        ),
+        Parameter(
+            "synthesize",
+            "KP keeps a new behaviour instead of snapping to a primitive (default false)",
+            "bool", 0.0, 1.0, True, _kp, "kp",
+        ),
+        Parameter(
+            "alpha",
+            "Q(lambda)'s step size (default 0.3)",
+            "float", 0.0, 1.0, True, _qlambda, "qlambda",
+        ),
+        Parameter(
+            "gamma",
+            "Q(lambda)'s discount per decision (default 0.99)",
+            "float", 0.0, 1.0, True, _qlambda, "qlambda",
+        ),
+        Parameter(
+            "lambda",
+            "Q(lambda)'s trace decay (default 0.5)",
+            "float", 0.0, 1.0, True, _qlambda, "qlambda",
+        ),
+    )
+}  # fmt: skip
+
+
+def get_parameter(name: str) -> Parameter:
+    """The parameter called `name`."""
+    try:
+        return PARAMETERS[name]
+    except KeyError:
+        known = ", ".join(PARAMETERS)
+        raise UnknownNameError(f"unknown parameter {name!r} (known: {known})") from None
+
+
+def normalise(params: Mapping[str, ParamValue]) -> Params:
+    """`params` checked and sorted into the hashable form tasks carry."""
+    return tuple(sorted((n, get_parameter(n).check(v)) for n, v in params.items()))
+
+
+def applicable(condition: Condition, params: Mapping[str, ParamValue]) -> Params:
+    """The settings of `params` that `condition` uses, in the hashable form."""
+    return normalise({n: v for n, v in params.items() if get_parameter(n).applies(condition)})
+
+
+def _unused(condition: Condition, params: Mapping[str, ParamValue]) -> None:
+    unused = [n for n in params if not get_parameter(n).applies(condition)]
+    if unused:
+        raise ParameterError(
+            f"condition {condition.name!r} does not use {', '.join(sorted(unused))}"
+        )
+
+
+def configure(
+    condition: Condition, params: Mapping[str, ParamValue] | Params = ()
+) -> tuple[Condition, BrainConfig]:
+    """The condition and brain configuration of the paper's architecture with `params` set.
+
+    With no parameters this is exactly ``(condition, condition.brain_config())``.
+    """
+    values = dict(params)
+    normalise(values)
+    _unused(condition, values)
+    if "epsilon" in values:
+        condition = replace(condition, epsilon=float(values["epsilon"]))
+    config = condition.brain_config(
+        eta=float(values.get("eta", 0.1)), synthesize=bool(values.get("synthesize", False))
+    )
+    if "threshold" in values:
+        config = replace(
+            config, selection=replace(config.selection, threshold=float(values["threshold"]))
+        )
+    if "insert_threshold" in values:
+        level = float(values["insert_threshold"])
+        config = replace(
+            config,
+            learning=replace(config.learning, insert_threshold=level),
+            kp=replace(config.kp, insert_threshold=level),
+        )
+    if "kp_window" in values:
+        config = replace(config, kp=replace(config.kp, window_ticks=int(values["kp_window"])))
+    return condition, config
+
+
+def qlambda_config(
+    condition: Condition, params: Mapping[str, ParamValue] | Params = ()
+) -> QLambdaConfig:
+    """Q(lambda)'s hyper-parameters with `params` set (its defaults otherwise)."""
+    # Imported here: the engine uses this module and needs neither Q(lambda) nor Gymnasium.
+    from core.qlambda import QLambdaConfig
+
+    values = dict(params)
+    normalise(values)
+    _unused(condition, values)
+    base = QLambdaConfig()
+    return QLambdaConfig(
+        alpha=float(values.get("alpha", base.alpha)),
+        gamma=float(values.get("gamma", base.gamma)),
+        lam=float(values.get("lambda", base.lam)),
+        epsilon=float(values.get("epsilon", base.epsilon)),
+        prior=base.prior,
+    )

@@ -1,0 +1,304 @@
+"""Sweep outputs: summary.json, summary.md, runs.jsonl, learning curves and a plot per parameter."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from core.experiment import TaskResult
+from core.params import Params, ParamValue
+from core.sweep import Sweep, format_value, point_label
+from server.report import ROLLING, _clean, _fmt
+
+
+def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
+    """Every episode of every task run, with the parameters the task set, one JSON a line."""
+    with path.open("w", encoding="utf-8") as f:
+        for r in results:
+            for e in r.episodes:
+                row = {
+                    "condition": r.task.condition,
+                    "params": dict(r.task.params),
+                    "seed": r.task.seed,
+                    "episode": e.episode,
+                    "outcome": e.outcome.value,
+                    "cause": e.cause.value if e.cause else None,
+                    "ticks": e.ticks,
+                    "rewards": e.rewards,
+                }
+                f.write(json.dumps(row) + "\n")
+
+
+def distinct_settings(sweep: Sweep, condition: str) -> list[tuple[int, dict[str, ParamValue]]]:
+    """The grid points that give `condition` distinct tasks: (point index, its settings)."""
+    seen: set[Params] = set()
+    out = []
+    for i, point in enumerate(sweep.points()):
+        key = sweep.task(point, condition, sweep.seeds[0]).params
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append((i, {n: v for n, v in point.items() if sweep.applies(n, condition)}))
+    return out
+
+
+def plot_parameter(path: Path, name: str, entry: dict[str, Any]) -> None:
+    """Success (all episodes, and the last 10) against one parameter's values, per condition."""
+    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+    labels: list[str] = []
+    for cond, rows in entry["conditions"].items():
+        values = [r["value"] for r in rows]
+        labels = [format_value(v) for v in values]
+        numeric = all(not isinstance(v, bool) for v in values)
+        x = np.asarray(values, dtype=float) if numeric else np.arange(len(values), dtype=float)
+        color = None
+        for figure, style, what in (
+            ("success_rate", "-", "all episodes"),
+            ("success_last10", "--", "last 10"),
+        ):
+            y = np.array([r[figure]["mean"] for r in rows], dtype=float)
+            ci = np.array([r[figure]["ci95"] for r in rows], dtype=float)
+            ci = np.where(np.isnan(ci), 0.0, ci)
+            bars = ax.errorbar(
+                x,
+                y,
+                yerr=ci,
+                linestyle=style,
+                marker="o" if style == "-" else "s",
+                capsize=3,
+                color=color,
+                alpha=1.0 if style == "-" else 0.6,
+                label=f"{cond}, {what}",
+            )
+            color = bars.lines[0].get_color()
+        if not numeric:
+            ax.set_xticks(x, labels)
+    ax.set_xlabel(name)
+    ax.set_ylabel("success rate (mean over seeds)")
+    ax.set_ylim(-0.02, 1.02)
+    ax.grid(alpha=0.3)
+    ax.set_title(f"{name}: {entry['description']}", fontsize=9)
+    ax.legend(fontsize=8, loc="best")
+    fig.text(
+        0.01,
+        0.01,
+        "bars: 95% CI over seeds; other swept parameters averaged",
+        fontsize=7,
+        color="grey",
+    )
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_sweep_curves(path: Path, sweep: Sweep, summary: dict[str, Any]) -> None:
+    """Learning curves, one panel per condition, one line per distinct setting."""
+    cols = len(sweep.conditions)
+    fig, axes = plt.subplots(1, cols, figsize=(6 * cols, 4.8), dpi=110, squeeze=False, sharey=True)
+    for ax, cond in zip(axes[0], sweep.conditions, strict=True):
+        for i, setting in distinct_settings(sweep, cond):
+            s = summary["points"][i]["conditions"][cond]
+            if not s.get("seeds"):
+                continue
+            runs = np.asarray(s["success_by_seed"], dtype=float)
+            kernel = np.ones(ROLLING)
+            counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
+            rolled = np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
+            label = point_label(setting) or "defaults"
+            ax.plot(np.arange(1, rolled.shape[1] + 1), rolled.mean(axis=0), label=label)
+        ax.set_title(cond)
+        ax.set_xlabel("episode")
+        ax.axhline(0.8, color="grey", linestyle=":", linewidth=1)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axes[0][0].set_ylabel(f"success rate (rolling {ROLLING}, mean over seeds)")
+    axes[0][0].set_ylim(-0.02, 1.02)
+    fig.suptitle("Learning curves per setting")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _row_cells(s: dict[str, Any]) -> list[str]:
+    crit = s["episodes_to_criterion"]
+    median = "-" if crit["median"] is None else f"{crit['median']:.0f}"
+    return [
+        _fmt(s["success_rate"], pct=True),
+        _fmt(s["success_last10"], pct=True),
+        f"{median} ({crit['reached']}/{crit['never']})",
+        _fmt(s["collisions_per_episode"]),
+        _fmt(s["violations_per_episode"]),
+    ]
+
+
+def sweep_markdown(
+    sweep: Sweep,
+    summary: dict[str, Any],
+    params: dict[str, Any],
+    failed: Sequence[TaskResult],
+) -> str:
+    """The sweep's summary as readable tables."""
+    grid = " x ".join(f"{len(v)} {n}" for n, v in sweep.axes)
+    lines = [
+        "# srlab sweep",
+        "",
+        f"`{params['command']}`",
+        "",
+        f"{grid} = {len(sweep.points())} grid points, x {len(sweep.conditions)} conditions x "
+        f"{len(sweep.seeds)} seeds x {sweep.episodes} episodes: {params['tasks']} distinct "
+        f"tasks (a condition runs once for the points that differ only in parameters it does "
+        f"not use); {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
+        f"{params['where']}.",
+        "",
+        "| parameter | values | used by | ignored by |",
+        "|---|---|---|---|",
+    ]
+    for name, values in sweep.axes:
+        entry = summary["by_parameter"][name]
+        lines.append(
+            f"| {name} | {', '.join(format_value(v) for v in values)} | "
+            f"{', '.join(entry['conditions']) or '-'} | {', '.join(entry['ignored_by']) or '-'} |"
+        )
+    lines += [
+        "",
+        "## Each parameter's effect",
+        "",
+        "Per value: the mean over seeds (± 95% CI) of each seed's figures averaged over the "
+        "grid points with that value, so the other swept parameters are averaged out.",
+    ]
+    for name in sweep.names:
+        entry = summary["by_parameter"][name]
+        lines += [
+            "",
+            f"### {name}",
+            "",
+            f"{entry['description'][:1].upper()}{entry['description'][1:]}.",
+            "",
+            f"| {name} | condition | success, all episodes | success, last 10 | "
+            "collisions / episode | violations / episode |",
+            "|---|---|---|---|---|---|",
+        ]
+        for cond, rows in entry["conditions"].items():
+            for r in rows:
+                lines.append(
+                    f"| {format_value(r['value'])} | {cond} | "
+                    f"{_fmt(r['success_rate'], pct=True)} | "
+                    f"{_fmt(r['success_last10'], pct=True)} | "
+                    f"{_fmt(r['collisions_per_episode'])} | {_fmt(r['violations_per_episode'])} |"
+                )
+        lines += ["", f"![{name}](param_{name}.png)"]
+    names = [n for n, _ in sweep.axes]
+    lines += [
+        "",
+        "## Every setting",
+        "",
+        "One row per condition and distinct setting; `-` marks a parameter the condition does "
+        "not use. Episodes to criterion: the first episode after which the success over the "
+        "last 10 episodes is at least 80% (median; seeds reached/never).",
+        "",
+        "| condition | "
+        + " | ".join(names)
+        + " | success, all episodes | success, last 10 | episodes to criterion | "
+        "collisions / episode | violations / episode |",
+        "|---|" + "---|" * len(names) + "---|---|---|---|---|",
+    ]
+    best: dict[str, tuple[float, str, dict[str, Any]]] = {}
+    for cond in sweep.conditions:
+        for i, setting in distinct_settings(sweep, cond):
+            s = summary["points"][i]["conditions"][cond]
+            cells = [format_value(setting[n]) if n in setting else "-" for n in names]
+            if not s.get("seeds"):
+                lines.append(f"| {cond} | " + " | ".join(cells) + " | failed | | | | |")
+                continue
+            lines.append(f"| {cond} | " + " | ".join([*cells, *_row_cells(s)]) + " |")
+            rate = s["success_rate"]["mean"]
+            if cond not in best or rate > best[cond][0]:
+                best[cond] = (rate, point_label(setting) or "defaults", s)
+    lines += [
+        "",
+        "## Best setting per condition (by success over all episodes)",
+        "",
+        "| condition | setting | success, all episodes | success, last 10 |",
+        "|---|---|---|---|",
+    ]
+    for cond, (_, label, s) in best.items():
+        lines.append(
+            f"| {cond} | {label} | {_fmt(s['success_rate'], pct=True)} | "
+            f"{_fmt(s['success_last10'], pct=True)} |"
+        )
+    lines += [
+        "",
+        "Picking the best of many settings on the same seeds flatters it: confirm it with "
+        "`srlab experiment` on other seeds (`--seed-base`).",
+        "",
+        "![learning curves](learning_curves.png)",
+    ]
+    if failed:
+        lines += ["", "## Failed tasks", ""]
+        for r in failed:
+            first = (r.error or "").splitlines()[0]
+            where = point_label(dict(r.task.params))
+            lines.append(
+                f"- {r.task.condition} seed {r.task.seed}{' ' + where if where else ''}: {first}"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def write_sweep_report(
+    out: Path,
+    sweep: Sweep,
+    results: Sequence[TaskResult],
+    summary: dict[str, Any],
+    params: dict[str, Any],
+) -> list[Path]:
+    """Write every output file into `out`; returns their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    failed = [r for r in results if not r.ok]
+    paths = [out / n for n in ("summary.json", "summary.md", "runs.jsonl")]
+    doc = {
+        "params": params,
+        "grid": {n: list(v) for n, v in sweep.axes},
+        "points": [
+            {
+                "params": p["params"],
+                "conditions": {
+                    c: {
+                        k: v
+                        for k, v in s.items()
+                        if k not in ("success_curve_ci95", "success_by_seed")
+                    }
+                    for c, s in p["conditions"].items()
+                },
+            }
+            for p in summary["points"]
+        ],
+        "by_parameter": summary["by_parameter"],
+        "failed": [
+            {
+                "condition": r.task.condition,
+                "seed": r.task.seed,
+                "params": dict(r.task.params),
+                "error": r.error,
+            }
+            for r in failed
+        ],
+    }
+    paths[0].write_text(json.dumps(_clean(doc), indent=2, allow_nan=False) + "\n")
+    paths[1].write_text(sweep_markdown(sweep, summary, params, failed))
+    write_sweep_runs(paths[2], results)
+    curves = out / "learning_curves.png"
+    plot_sweep_curves(curves, sweep, summary)
+    plots = [curves]
+    for name, _ in sweep.axes:
+        p = out / f"param_{name}.png"
+        plot_parameter(p, name, summary["by_parameter"][name])
+        plots.append(p)
+    return [*paths, *plots]
