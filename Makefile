@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install run test test-fast lint typecheck format bench reliability migrate revision pg pg-stop clean
+.PHONY: help install run test test-fast lint typecheck format bench reliability migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | migrate | revision m=... | pg | pg-stop | clean"
+	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -65,6 +65,14 @@ pg:
 
 pg-stop:
 	bash scripts/pg-test-server.sh stop
+
+# The service and PostgreSQL in containers: needs Docker and a .env (see .env.example).
+COMPOSE ?= docker compose
+up:
+	$(COMPOSE) up -d --build
+
+down:
+	$(COMPOSE) down
 
 clean: pg-stop
 	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache .pg
