@@ -107,10 +107,17 @@ class EngineManager:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
 
-    async def shutdown(self, grace_s: float = 5.0) -> None:
-        """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
+    def interrupt_all(self) -> None:
+        """Ask every run to end at its next tick boundary, as interrupted (resumable).
+
+        Its event streams end with it, with a last status event.
+        """
         for engine in self._engines.values():
             engine.interrupt()
+
+    async def shutdown(self, grace_s: float = 5.0) -> None:
+        """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
+        self.interrupt_all()
         tasks = [t for t in self._tasks.values() if not t.done()]
         if tasks:
             with contextlib.suppress(TimeoutError):
