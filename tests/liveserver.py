@@ -120,7 +120,7 @@ def server_log(server: LiveServer) -> str:
 
 
 @contextmanager
-def live_server(database: Path, env: dict[str, str] | None = None) -> Iterator[LiveServer]:
+def live_server(database: Path | str, env: dict[str, str] | None = None) -> Iterator[LiveServer]:
     """`start_server`, then a clean `stop_server` on the way out."""
     server = start_server(database, env=env)
     try:
