@@ -5,9 +5,11 @@
 default; ``make reliability`` runs 60), while a realtime run ticks at 20 Hz. The mix is
 reads of the live run, its reward log and LTM, the run list, health, the catalogue, and
 rewards (the per-client rate limit sheds most of them with 429). No request may hang,
-meaning go unanswered for 10 s. None may get a 5xx other than a 503 shed. The run's tick
-lateness must stay bounded: its p99 within one tick period and its max within
-`MAX_LATENESS_MS`.
+meaning go unanswered for 10 s. None may get a 5xx other than a 503 shed. Over a full
+minute the run's tick lateness must stay bounded: its p99 within one tick period and its
+max within `MAX_LATENESS_MS`. CI's 5 s is only 100 ticks, whose p99 is their worst one or
+two, at the mercy of whatever else the machine runs: there the lateness is measured and
+reported, and not asserted.
 
 A 50 MB body, once with its length declared and once chunked, gets 413 and does not grow
 the server's resident memory (VmRSS, and the peak VmHWM, from /proc).
@@ -38,6 +40,8 @@ TIMEOUT_S = 10.0
 """A request unanswered this long is a hang."""
 MAX_LATENESS_MS = 250.0
 """The worst tick lateness allowed under overload (5 periods at 20 Hz)."""
+BOUNDED_FROM_S = 30.0
+"""Loads at least this long assert the lateness bounds."""
 BODY_MB = 50
 MAX_GROWTH_KIB = 8 * 1024
 """How much a rejected 50 MB body may grow the server's memory (peak included)."""
@@ -128,15 +132,17 @@ def test_64_connections_of_overload_never_hang_and_ticks_stay_bounded(tmp_path: 
         f" ms, max {max(latencies, default=0) * 1000:.0f} ms), {count(shed)} shed with 429/503, "
         f"{statuses['hang']} hung, {sum(errors.values()) - statuses['hang']} errors; "
         f"tick lateness p99 {p99:.1f} ms, max {worst:.1f} ms, {live['overruns']} overruns "
-        f"in {count(live['ticks_run'])} ticks",
+        f"in {count(live['ticks_run'])} ticks"
+        + ("" if SECONDS >= BOUNDED_FROM_S else " (bounds not asserted under 30 s)"),
     )
     assert statuses["hang"] == 0, statuses
     assert not errors, statuses
     assert health == 200
     assert run["status"] == "running"
     assert statuses["202"] > 0 and statuses["429"] > 0, "rewards were taken, the excess shed"
-    assert p99 <= 1000 / HZ, live
-    assert worst <= MAX_LATENESS_MS, live
+    if SECONDS >= BOUNDED_FROM_S:
+        assert p99 <= 1000 / HZ, live
+        assert worst <= MAX_LATENESS_MS, live
 
 
 def _post_huge(port: int, chunked: bool) -> tuple[int | None, int]:

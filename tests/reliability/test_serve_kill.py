@@ -9,7 +9,7 @@ cleanly, and the stored log must hold every acknowledged reward exactly once, wi
 logged reward applied once (the stored LTM equals a headless replay of the log).
 
 ``SRLAB_SERVE_KILLS`` (SQLite, 4 by default) and ``SRLAB_SERVE_KILLS_PG`` (PostgreSQL,
-2) set the numbers; ``make reliability`` runs 200 and 50.
+2) set the numbers; ``make reliability`` runs 200 and 25.
 """
 
 from __future__ import annotations
