@@ -1,7 +1,7 @@
 # srlab's service image: `srlab serve` (one uvicorn worker) as a non-root user.
 #
 #   docker compose up -d              # with PostgreSQL, see docker-compose.yml and README
-#   docker build -t srlab .           # the image alone (then SRLAB_TOKEN and a database URL)
+#   docker build -t srlab .           # the image alone: SQLite in /data, see README
 #
 # Two stages: the first installs the locked dependencies with uv, the second holds only
 # Python, the virtual environment and the source, without uv, compilers or the dev tools.
@@ -31,13 +31,17 @@ COPY web web
 RUN uv sync --frozen --no-dev
 
 FROM ${PYTHON_IMAGE}
-RUN useradd --system --uid 10001 --user-group --create-home --home-dir /home/srlab srlab
+# /data holds the SQLite database when no SRLAB_DATABASE_URL is given (the image alone:
+# `docker run -v srlab-data:/data ...`); compose points the service at PostgreSQL instead.
+RUN useradd --system --uid 10001 --user-group --create-home --home-dir /home/srlab srlab \
+    && install -d -o srlab -g srlab /data
 COPY --from=build /app /app
 WORKDIR /app
 ENV PATH=/app/.venv/bin:$PATH \
     PYTHONUNBUFFERED=1 \
     NUMBA_CACHE_DIR=/home/srlab/.cache/numba \
     MPLCONFIGDIR=/home/srlab/.cache/matplotlib \
+    SRLAB_DATABASE_URL=sqlite:////data/srlab.db \
     SRLAB_HOST=0.0.0.0 \
     SRLAB_PORT=8000 \
     SRLAB_VISER_PORT=8080

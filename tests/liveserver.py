@@ -74,10 +74,11 @@ def start_server(
     port = port or free_port()
     environment = {
         **os.environ,
-        "SRLAB_DATABASE_URL": database if isinstance(database, str) else f"sqlite:///{database}",
         "SRLAB_VISER_PORT": str(free_port()),
-        "SRLAB_PORT": str(port),
         **(env or {}),
+        # `database` and `port` win over `env`: the client must find the server there.
+        "SRLAB_DATABASE_URL": database if isinstance(database, str) else f"sqlite:///{database}",
+        "SRLAB_PORT": str(port),
     }
     argv = command or [sys.executable, "-m", "server.cli", "serve", "--port", str(port)]
     with ExitStack() as files:

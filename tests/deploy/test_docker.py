@@ -332,16 +332,19 @@ def test_the_dockerignore_keeps_out_secrets_and_clutter_but_not_what_the_image_c
 
 @dataclass
 class Image:
-    """The Dockerfile's /app and home folder, built in a temporary folder."""
+    """The Dockerfile's /app, /data and home folder, built in a temporary folder."""
 
     app: Path
+    data: Path
     home: Path
     env: dict[str, str]
     """The final stage's ENV, its paths moved into the folder."""
 
 
-def _move(value: str, app: Path, home: Path) -> str:
-    return value.replace("/home/srlab", str(home)).replace("/app", str(app))
+def _move(value: str, places: dict[str, Path]) -> str:
+    """`value` with the image's absolute paths (/app, /data, /home/srlab) moved."""
+    pattern = "|".join(re.escape(p) for p in places)
+    return re.sub(rf"(?<![\w.-])({pattern})(?=/|:|$)", lambda m: str(places[m.group(1)]), value)
 
 
 def _shell(command: str, env: dict[str, str], cwd: Path) -> None:
@@ -361,9 +364,9 @@ def _shell(command: str, env: dict[str, str], cwd: Path) -> None:
 def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
     """The image's contents, made by the Dockerfile's own steps."""
     folder = tmp_path_factory.mktemp("image")
-    app, home = folder / "app", folder / "home"
-    home.mkdir()
-    app.mkdir()
+    app, data, home = folder / "app", folder / "data", folder / "home"
+    for made in (app, data, home):
+        made.mkdir()  # the final stage's useradd and install -d make /home/srlab and /data
     build, final = dockerfile().stages
 
     def ignore(directory: str, names: list[str]) -> set[str]:
@@ -389,13 +392,14 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
     for command in build.runs:
         if command.startswith("uv "):
             _shell(command, env, app)
-    final_env = {k: _move(os.path.expandvars(v), app, home) for k, v in final.env}
+    places = {"/app": app, "/data": data, "/home/srlab": home}
+    final_env = {k: _move(os.path.expandvars(v), places) for k, v in final.env}
     final_env["PATH"] = f"{app / '.venv' / 'bin'}:{os.environ['PATH']}"
     run_env = {**base, **final_env}
     for command in final.runs:
         if command.split()[0] != "useradd":
             _shell(command, run_env, app)
-    return Image(app, home, final_env)
+    return Image(app, data, home, final_env)
 
 
 def test_the_image_has_no_dev_tools_and_compiles_its_kernel_at_build_time(image: Image) -> None:
@@ -443,6 +447,31 @@ def test_the_image_refuses_to_serve_without_a_token(
     )
     assert done.returncode == 2, done.stderr
     assert "set SRLAB_TOKEN" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_the_image_alone_serves_sqlite_from_its_data_folder(image: Image, tmp_path: Path) -> None:
+    port = free_port()
+    env = {**image.env, "SRLAB_TOKEN": TOKEN, "SRLAB_VISER_PORT": str(free_port())}
+    assert env["SRLAB_DATABASE_URL"] == f"sqlite:///{image.data / 'srlab.db'}"
+    program = shutil.which(dockerfile().cmd[0], path=env["PATH"])
+    assert program is not None
+    server = start_server(
+        env["SRLAB_DATABASE_URL"],
+        port=port,
+        env=env,
+        command=[program, *dockerfile().cmd[1:]],
+        cwd=image.app,
+        log=tmp_path / "serve.log",
+        headers={"Authorization": f"Bearer {TOKEN}"},
+    )
+    try:
+        assert _healthcheck(image, port).returncode == 0
+        assert server.client.get("/api/health").json()["database"] == "sqlite"
+        created = server.client.post("/api/runs", json={"condition": "kp", "episodes": 1})
+        assert created.status_code == 201, created.text
+    finally:
+        stop_server(server)
+    assert (image.data / "srlab.db").exists()
 
 
 def test_the_image_serves_compose_s_configuration_on_postgres(
