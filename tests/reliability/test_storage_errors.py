@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import httpx
 from harness import RewardTraffic, check_log, replay_ltm
@@ -55,8 +56,8 @@ class Outcome:
     acked: dict[int, str]
 
 
-def _run_status(api: httpx.Client, run_id: int) -> dict[str, object]:
-    run: dict[str, object] = api.get(f"/api/runs/{run_id}").json()
+def _run_status(api: httpx.Client, run_id: int) -> dict[str, Any]:
+    run: dict[str, Any] = api.get(f"/api/runs/{run_id}").json()
     return run
 
 
@@ -91,7 +92,7 @@ def _under_fault(
         fault,
         run_id,
         str(run["status"]),
-        run["error"],  # type: ignore[arg-type]
+        run["error"],
         traffic.sent,
         dict(traffic.outcomes),
         health,
