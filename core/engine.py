@@ -530,7 +530,9 @@ class Engine:
             sub.closed = True
 
     def _fail_pending(self, error: BaseException) -> None:
-        for job in self._due:
+        # Held rewards (stamped while a boundary was being settled) are not due yet, but
+        # their senders wait for an answer all the same.
+        for job in (*self._due, *self._held):
             if job.ack is not None and not job.ack.done():
                 job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
         for c in self._commands:

@@ -10,7 +10,7 @@ from collections.abc import Iterable
 from core.brain.catalog import Catalog
 from core.brain.network import Association
 from core.engine import Engine
-from core.errors import RunStateError
+from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
 
 log = logging.getLogger("srlab.engines")
@@ -69,9 +69,21 @@ class EngineManager:
         if task is not None and not task.done():
             engine = self._engines[run_id]
             raise RunStateError(f"run {run_id} is {engine.status.value}")
+        if task is not None:
+            self._settle_status(self._engines[run_id])
         engine = Engine.restore(run_id, self.store, catalog=self.catalog)
         self._engines[run_id] = engine
         return engine
+
+    def _settle_status(self, engine: Engine) -> None:
+        """Store how a run this process ran ended, if storage still says it is going.
+
+        A run that failed because storage failed often could not store that either. This
+        process is the run's only writer, so its own view is the truth.
+        """
+        if self.store.load_run(engine.run_id).status in ACTIVE:
+            final = engine.status if engine.status not in ACTIVE else RunStatus.INTERRUPTED
+            self.store.set_status(engine.run_id, final, engine.error)
 
     def start(self, run_id: int) -> Engine:
         """Start a created or prepared run (on the event loop)."""
@@ -103,14 +115,25 @@ class EngineManager:
             return await engine.run()
         except asyncio.CancelledError:
             raise
+        except StorageError as e:
+            # An outage, not a bug: its message says what failed, a traceback adds nothing.
+            log.error("run %s failed: %s", engine.run_id, e)
+            return RunStatus.FAILED
         except Exception:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
 
-    async def shutdown(self, grace_s: float = 5.0) -> None:
-        """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
+    def interrupt_all(self) -> None:
+        """Ask every run to end at its next tick boundary, as interrupted (resumable).
+
+        Its event streams end with it, with a last status event.
+        """
         for engine in self._engines.values():
             engine.interrupt()
+
+    async def shutdown(self, grace_s: float = 5.0) -> None:
+        """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
+        self.interrupt_all()
         tasks = [t for t in self._tasks.values() if not t.done()]
         if tasks:
             with contextlib.suppress(TimeoutError):

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import gc
 import logging
+import os
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from importlib.metadata import version
 from pathlib import Path
 
+import anyio.to_thread
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
@@ -36,6 +38,8 @@ from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.ratelimit import RateLimiter
 
 log = logging.getLogger("srlab.server")
+REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
+"""Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
 WEB = Path(__file__).resolve().parents[1] / "web"
 
 _STATUS: list[tuple[type[Exception], int]] = [
@@ -68,18 +72,27 @@ class BodyLimit:
             return
         seen = 0
         started = False
+        over = False
 
         async def counted() -> Message:
-            nonlocal seen
+            nonlocal seen, over
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > self.limit:
+                    over = True
                     raise _TooLarge
             return message
 
         async def tracking_send(message: Message) -> None:
             nonlocal started
+            if over:
+                # The app made an answer of its own out of the cut-off read (FastAPI's is
+                # 400 "error parsing the body"): the client gets the 413 instead.
+                if message["type"] == "http.response.start" and not started:
+                    started = True
+                    await self._reject(send)
+                return
             started = started or message["type"] == "http.response.start"
             await send(message)
 
@@ -131,6 +144,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # collector's way, so a full collection does not stall realtime ticks.
         gc.collect()
         gc.freeze()
+        # Routes run their database work in threads, which take the GIL from the event loop
+        # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
+        # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
+        # them short (tests/reliability/test_load.py).
+        limiter = anyio.to_thread.current_default_thread_limiter()
+        limiter.total_tokens = REQUEST_THREADS
         for run in store.list_runs():
             if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
                 # Its process died: it can be resumed from its checkpoint and log.

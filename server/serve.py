@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import logging
+import socket
 
 import uvicorn
+from fastapi import FastAPI
+from uvicorn.config import STARTUP_FAILURE
 
 from server.config import Settings
 from server.main import create_app
@@ -12,6 +15,26 @@ from server.persistence import upgrade
 from server.tuning import configure_process
 
 log = logging.getLogger("srlab.serve")
+
+
+class _Server(uvicorn.Server):
+    """uvicorn's server, which interrupts the runs as soon as it starts shutting down.
+
+    uvicorn lets open connections finish before the lifespan's shutdown, and a run's event
+    stream ends only when the run does. Without this, one open stream would hold SIGTERM for
+    the whole graceful timeout and then be cancelled. Interrupting the runs first ends each
+    stream with a last status event, so the service exits within about a tick.
+    """
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+        super().__init__(config)
+        self._app = app
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        state = getattr(self._app.state, "srlab", None)  # None: the lifespan never started
+        if state is not None:
+            state.engines.interrupt_all()
+        await super().shutdown(sockets)
 
 
 def serve(host: str | None = None, port: int | None = None) -> int:
@@ -28,7 +51,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = create_app(settings)
     # One worker: the runs' state lives in this process.
-    uvicorn.run(
+    config = uvicorn.Config(
         app,
         host=settings.host,
         port=settings.port,
@@ -37,4 +60,6 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         proxy_headers=False,
         timeout_graceful_shutdown=5,
     )
-    return 0
+    server = _Server(config, app)
+    server.run()
+    return 0 if server.started else STARTUP_FAILURE

@@ -8,11 +8,11 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import httpx
 
@@ -33,9 +33,11 @@ class LiveServer:
 
     url: str
     port: int
-    database: Path
+    database: Path | str
     process: subprocess.Popen[bytes]
     client: httpx.Client
+    log: Path | None = None
+    """Where its stderr goes, when not to a pipe (long or busy servers: a pipe fills up)."""
 
 
 def _wait_healthy(client: httpx.Client, process: subprocess.Popen[bytes]) -> None:
@@ -53,32 +55,49 @@ def _wait_healthy(client: httpx.Client, process: subprocess.Popen[bytes]) -> Non
 
 
 def start_server(
-    database: Path, port: int | None = None, env: dict[str, str] | None = None
+    database: Path | str,
+    port: int | None = None,
+    env: dict[str, str] | None = None,
+    *,
+    command: Sequence[str] | None = None,
+    cwd: Path | None = None,
+    log: Path | None = None,
+    headers: dict[str, str] | None = None,
 ) -> LiveServer:
-    """Start `srlab serve` on `database` (a SQLite file) and wait until it answers."""
+    """Start `srlab serve` and wait until it answers.
+
+    `database` is a SQLite file or any SQLAlchemy URL. `command` replaces
+    `python -m server.cli serve --port PORT` (the port is in SRLAB_PORT too), `cwd` the
+    repository as working directory, `log` the stderr pipe with a file; `headers` go with
+    every request of the server's client (e.g. the bearer token).
+    """
     port = port or free_port()
     environment = {
         **os.environ,
-        "SRLAB_DATABASE_URL": f"sqlite:///{database}",
         "SRLAB_VISER_PORT": str(free_port()),
         **(env or {}),
+        # `database` and `port` win over `env`: the client must find the server there.
+        "SRLAB_DATABASE_URL": database if isinstance(database, str) else f"sqlite:///{database}",
+        "SRLAB_PORT": str(port),
     }
-    process = subprocess.Popen(
-        [sys.executable, "-m", "server.cli", "serve", "--port", str(port)],
-        cwd=ROOT,
-        env=environment,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
+    argv = command or [sys.executable, "-m", "server.cli", "serve", "--port", str(port)]
+    with ExitStack() as files:
+        stderr: IO[bytes] | int = (
+            files.enter_context(log.open("ab")) if log is not None else subprocess.PIPE
+        )
+        process = subprocess.Popen(
+            list(argv), cwd=cwd or ROOT, env=environment, stdout=subprocess.DEVNULL, stderr=stderr
+        )
     url = f"http://127.0.0.1:{port}"
-    client = httpx.Client(base_url=url, timeout=10)
+    client = httpx.Client(base_url=url, timeout=10, headers=headers)
     try:
         _wait_healthy(client, process)
     except BaseException:
         process.kill()
+        process.wait()
         client.close()
         raise
-    return LiveServer(url, port, database, process, client)
+    return LiveServer(url, port, database, process, client, log)
 
 
 def stop_server(server: LiveServer, check: bool = True) -> str:
@@ -86,7 +105,7 @@ def stop_server(server: LiveServer, check: bool = True) -> str:
     server.client.close()
     server.process.terminate()
     _, err = server.process.communicate(timeout=30)
-    text = err.decode(errors="replace")
+    text = server_log(server) if server.log is not None else err.decode(errors="replace")
     if check:
         # uvicorn shuts down cleanly, then re-raises the signal it caught.
         assert server.process.returncode in (0, -signal.SIGTERM), text[-3000:]
@@ -95,8 +114,14 @@ def stop_server(server: LiveServer, check: bool = True) -> str:
     return text
 
 
+def server_log(server: LiveServer) -> str:
+    """What a server started with `log` has written to stderr so far."""
+    assert server.log is not None
+    return server.log.read_text(errors="replace")
+
+
 @contextmanager
-def live_server(database: Path, env: dict[str, str] | None = None) -> Iterator[LiveServer]:
+def live_server(database: Path | str, env: dict[str, str] | None = None) -> Iterator[LiveServer]:
     """`start_server`, then a clean `stop_server` on the way out."""
     server = start_server(database, env=env)
     try:

@@ -49,8 +49,14 @@ def make_engine(
     with the `IMMEDIATE` execution option takes the write lock at once, so a writer never
     fails half-way when another connection committed since its first read. Migrations
     pass ``foreign_keys=False`` because batch table rebuilds would otherwise cascade.
+
+    On PostgreSQL the same timeout is the sessions' ``lock_timeout``: a write that waits
+    longer for a lock fails (the run ends with a storage error) instead of hanging with
+    every request that waits for it.
     """
     url = make_url(url)
+    if url.get_backend_name() == "postgresql":
+        kwargs.setdefault("connect_args", {"options": f"-c lock_timeout={int(busy_timeout_ms)}"})
     if url.get_backend_name() != "sqlite":
         return create_engine(url, pool_pre_ping=True, **kwargs)
     path = _sqlite_file(url)

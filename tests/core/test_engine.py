@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import threading
 from collections.abc import Callable, Coroutine
 from dataclasses import replace
 from typing import Any
@@ -390,3 +391,49 @@ def test_a_stream_of_rewards_never_holds_a_boundary_open() -> None:
     asyncio.run(drive(engine, script))
     stamps = [r.record.tick for r in store.rewards(engine.run_id)]
     assert stamps == sorted(stamps)
+
+
+class StuckLog(InMemoryRunStore):
+    """A store whose second reward log write hangs until released, then fails."""
+
+    def __init__(self) -> None:
+        super().__init__(CATALOG)
+        self.calls = 0
+        self.stuck = threading.Event()
+        self.release = threading.Event()
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        self.calls += 1
+        if self.calls == 2:
+            self.stuck.set()
+            self.release.wait(30)
+            raise StorageError("database is locked")
+        return super().log_reward(run_id, reward)
+
+
+def test_a_storage_error_answers_every_waiting_reward_even_those_held_for_the_next_tick() -> None:
+    store = StuckLog()
+    engine = Engine.create(realtime("rp", 1), store, catalog=CATALOG)
+
+    async def scenario() -> list[object]:
+        run = asyncio.create_task(engine.run())
+        await wait_ticks(engine, 5)
+        await engine.reward(1.0, note="first")
+        stuck = asyncio.create_task(engine.reward(1.0, note="stuck"))
+        while not store.stuck.is_set():
+            await asyncio.sleep(0.001)
+        # The tick task waits at the stuck reward's boundary; rewards arriving now are held
+        # for the boundary after it.
+        while not engine._settling:
+            await asyncio.sleep(0.001)
+        held = [asyncio.create_task(engine.reward(0.5, note=f"held {i}")) for i in range(3)]
+        await asyncio.sleep(0.01)
+        store.release.set()
+        with pytest.raises(StorageError):
+            await run
+        async with asyncio.timeout(10):  # a guard against hanging, not a speed goal
+            return await asyncio.gather(stuck, *held, return_exceptions=True)
+
+    answers = asyncio.run(scenario())
+    assert engine.status is RunStatus.FAILED
+    assert all(isinstance(a, StorageError) for a in answers), answers

@@ -19,6 +19,7 @@ import httpx
 import pytest
 import schemathesis
 from hypothesis import HealthCheck, given, settings
+from reliability_report import count, record
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = int(os.environ.get("SRLAB_FUZZ_EXAMPLES", "100"))
@@ -73,6 +74,7 @@ def test_api_never_errs_and_conforms(base_url: str) -> None:
     schema = schemathesis.openapi.from_url(f"{base_url}/openapi.json")
     failures: dict[str, str] = {}
     tested = []
+    cases: dict[str, int] = {}
     for result in schema.get_all_operations():
         ok = getattr(result, "ok", None)
         if ok is None:  # the schema of this operation is invalid
@@ -92,6 +94,8 @@ def test_api_never_errs_and_conforms(base_url: str) -> None:
             derandomize=True,
         )
         def check(case: schemathesis.Case[Any]) -> None:
+            label = case.operation.label
+            cases[label] = cases.get(label, 0) + 1
             case.call_and_validate()
 
         try:
@@ -99,5 +103,25 @@ def test_api_never_errs_and_conforms(base_url: str) -> None:
         except Exception as e:  # collect every operation's failure, then fail once
             failures[operation.label] = f"{type(e).__name__}: {e}"[:1500]
     print(f"{len(tested)} operations, {EXAMPLES} examples each")  # noqa: T201
+    counts = sorted(cases.get(label, 0) for label in tested)
+    few = sorted(label for label in tested if cases.get(label, 0) < EXAMPLES)
+    paths = httpx.get(f"{base_url}/openapi.json", timeout=10).json()["paths"]
+
+    def takes_input(label: str) -> bool:
+        method, path = label.split(" ", 1)
+        spec = paths[path][method.lower()]
+        return bool(spec.get("parameters") or spec.get("requestBody"))
+
+    record(
+        "schemathesis over the live API",
+        f"every operation of /openapi.json but the event stream ({len(tested)}), up to "
+        f"{count(EXAMPLES)} generated cases each, against a live srlab serve: no 5xx, "
+        "responses match the schema",
+        f"{count(sum(counts))} cases; {len(tested) - len(few)} operations got at least "
+        f"{count(EXAMPLES)} each, the {len(few)} without parameters or body "
+        f"{'/'.join(sorted({str(cases.get(label, 0)) for label in few})) or '-'} each (one "
+        f"distinct input); {len(failures)} operations failed",
+    )
+    assert not any(takes_input(label) for label in few), "an operation with inputs ran short"
     assert len(tested) >= 15, tested
     assert not failures, "\n\n".join(f"{k}:\n{v}" for k, v in failures.items())

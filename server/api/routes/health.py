@@ -8,6 +8,7 @@ from fastapi import APIRouter
 from sqlalchemy import text
 
 from server.api.deps import StateDep
+from server.persistence.db import transaction
 from server.schemas import Health
 
 router = APIRouter(tags=["health"])
@@ -15,8 +16,8 @@ router = APIRouter(tags=["health"])
 
 @router.get("/health")
 def health(state: StateDep) -> Health:
-    """Whether the service answers and its database does."""
-    with state.sessions() as s:
+    """Whether the service answers and its database does (503 when it does not)."""
+    with transaction(state.sessions, "checking the database", write=False) as s:
         s.execute(text("select 1"))
     return Health(
         status="ok",

@@ -1,0 +1,178 @@
+"""The reliability suite at full size: every check, then a table of what held.
+
+    python -m tests.reliability.suite            # what `make reliability` runs (~25 min)
+    python -m tests.reliability.suite --quick    # the sizes CI runs (~3 min)
+
+It runs tests/reliability and the schemathesis test with pytest at the sizes below (an
+environment variable already set wins), with PostgreSQL from ``SRLAB_TEST_POSTGRES_URL``
+(`make reliability` starts one; without it those checks are skipped). It prints a table
+with one row per check: what was tried, what was measured, whether it held (the test
+passed). The table also goes to docs/reliability.md. After a full run it replaces the
+table in README.md's Reliability section as well. The exit status is pytest's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests"))  # as pytest does: the tests' helpers are top-level
+from reliability_report import ROWS_VARIABLE  # noqa: E402
+
+FULL = {
+    "SRLAB_SERVE_KILLS": "200",
+    "SRLAB_SERVE_KILLS_PG": "25",
+    "SRLAB_CRASH_KILLS": "100",
+    "SRLAB_SIGTERMS": "20",
+    "SRLAB_LOAD_SECONDS": "60",
+    "SRLAB_FUZZ_EXAMPLES": "1000",
+}
+"""The full sizes; the tests' own defaults are CI's."""
+TESTS = ["tests/reliability", "tests/server/test_schemathesis.py"]
+README_START = "<!-- reliability-table:start -->"
+README_END = "<!-- reliability-table:end -->"
+
+
+@dataclass
+class Outcomes:
+    """A pytest plugin that keeps each test's outcome and duration, in run order."""
+
+    results: dict[str, tuple[str, float, str]] = field(default_factory=dict)
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        """Keep the worst phase's outcome; add up the phases' durations."""
+        outcome, seconds, why = self.results.get(report.nodeid, ("passed", 0.0, ""))
+        if report.outcome != "passed" and outcome == "passed":
+            outcome = report.outcome
+            text = str(report.longrepr) if report.longrepr else ""
+            if report.skipped and isinstance(report.longrepr, tuple):
+                text = str(report.longrepr[2])
+            why = text.strip().splitlines()[-1] if text.strip() else ""
+        self.results[report.nodeid] = (outcome, seconds + report.duration, why)
+
+
+class LoadSampler:
+    """The machine's 1-minute load average every few seconds while the suite runs."""
+
+    def __init__(self, every_s: float = 10.0) -> None:
+        self.samples = [os.getloadavg()[0]]
+        self._stop = threading.Event()
+        self._every_s = every_s
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._every_s):
+            self.samples.append(os.getloadavg()[0])
+
+    def stop(self) -> str:
+        """The load seen: at the start, the mean, the highest and at the end."""
+        self._stop.set()
+        self._thread.join()
+        s = [*self.samples, os.getloadavg()[0]]
+        return f"start {s[0]:.2f}, mean {sum(s) / len(s):.2f}, max {max(s):.2f}, end {s[-1]:.2f}"
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "/").replace("\n", " ")
+
+
+def table(rows: list[dict[str, str]], outcomes: Outcomes) -> str:
+    """The markdown table: a row per check, tests that recorded nothing included."""
+    by_test: dict[str, list[dict[str, str]]] = {}
+    for row in rows:
+        by_test.setdefault(row["test"], []).append(row)
+    lines = [
+        "| check | tried | measured | held | time |",
+        "|---|---|---|---|---|",
+    ]
+    for test, (outcome, seconds, why) in outcomes.results.items():
+        held = {"passed": "yes", "failed": "**NO**", "skipped": "skipped"}.get(outcome, outcome)
+        recorded = by_test.get(test) or [
+            {"check": test.split("::")[-1], "tried": "", "measured": why or outcome}
+        ]
+        for row in recorded:
+            measured = row["measured"]
+            if outcome != "passed" and why and why not in measured:
+                measured += f" ({outcome}: {why})"
+            lines.append(
+                f"| {_cell(row['check'])} | {_cell(row['tried'])} | {_cell(measured)} | "
+                f"{held} | {seconds:.0f} s |"
+            )
+    return "\n".join(lines)
+
+
+def _git(*args: str) -> str:
+    done = subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True, check=False)
+    return done.stdout.strip()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the suite, print and write the table; pytest's exit status."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="CI's sizes, not the full ones")
+    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "reliability.md")
+    parser.add_argument("--no-readme", action="store_true", help="leave README.md alone")
+    parser.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
+    args = parser.parse_args(argv)
+    sizes = {} if args.quick else FULL
+    for name, value in sizes.items():
+        os.environ.setdefault(name, value)
+    if not os.environ.get("SRLAB_TEST_POSTGRES_URL"):
+        sys.stderr.write(
+            "reliability: SRLAB_TEST_POSTGRES_URL is not set, the PostgreSQL checks will be "
+            "skipped (`make reliability` starts a server)\n"
+        )
+    commit = _git("rev-parse", "--short", "HEAD") + (" (modified)" if _git("status", "-s") else "")
+    started = time.monotonic()
+    when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    load = LoadSampler()
+    outcomes = Outcomes()
+    with tempfile.TemporaryDirectory(prefix="srlab-reliability-") as tmp:
+        rows_file = Path(tmp) / "rows.jsonl"
+        os.environ[ROWS_VARIABLE] = str(rows_file)
+        os.chdir(ROOT)
+        status = pytest.main(
+            [*TESTS, "-q", "-p", "no:cacheprovider", *args.pytest_args], plugins=[outcomes]
+        )
+        rows = (
+            [json.loads(line) for line in rows_file.read_text().splitlines()]
+            if rows_file.exists()
+            else []
+        )
+    minutes = (time.monotonic() - started) / 60
+    sizes_used = ", ".join(f"{k}={os.environ[k]}" for k in FULL if k in os.environ)
+    header = (
+        f"`{'python -m tests.reliability.suite' + (' --quick' if args.quick else '')}` "
+        f"(`make reliability`), {when}, commit {commit}, {minutes:.0f} min on "
+        f"{os.cpu_count()} cores; load average {load.stop()}; sizes: {sizes_used or 'CI'}."
+    )
+    body = table(rows, outcomes)
+    text = f"# Reliability\n\n{header}\n\n{body}\n"
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
+    sys.stdout.write(f"\n{header}\n\n{body}\n\nwritten to {args.out}\n")
+    readme = ROOT / "README.md"
+    if not args.quick and not args.no_readme and README_START in readme.read_text():
+        before, rest = readme.read_text().split(README_START, 1)
+        _, after = rest.split(README_END, 1)
+        block = f"{README_START}\n{header}\n\n{body}\n{README_END}"
+        readme.write_text(before + block + after)
+        sys.stdout.write("and to README.md's Reliability section\n")
+    return int(status)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
