@@ -181,3 +181,25 @@ def test_api_errors_show_a_message_and_keep_what_was_typed(page: Page, server: L
     page.click(cell(page, "Red", "stop"))
     page.keyboard.press("Space")
     expect(page.locator(".toast.error").last).to_contain_text("read-only")
+
+
+def test_keystrokes_faster_than_the_server_are_all_applied_in_order(
+    page: Page, server: LiveServer
+) -> None:
+    fresh_network(server, "fast-keys", base="innate")
+    open_view(page, server, "editor/fast-keys")
+    page.click(cell(page, "Yellow", "stop"))
+    for key in ("Space", "3", "l", "ArrowDown", "Space", "ArrowUp", "l", "7"):
+        page.keyboard.press(key)  # no waiting between them
+    expected = {"strength": 0.7, "source": "dp", "locked": False}
+    eventually(
+        lambda: (
+            (association(server, "fast-keys", "Yellow", "stop") or {}).items() >= expected.items()
+        ),
+        what="Yellow -> stop at 0.7, unlocked",
+    )
+    assert association(server, "fast-keys", "Green", "stop")["strength"] == 1.0
+    notes = [
+        v["note"] for v in server.client.get("/api/networks/fast-keys/versions").json()["data"]
+    ]
+    assert len(notes) == 1 + 6  # created, then one version per change, none lost

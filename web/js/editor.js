@@ -19,6 +19,7 @@ const state = {
   undo: [],
   redo: [],
   pending: false,
+  queue: Promise.resolve(),
   active: false,
 };
 
@@ -224,21 +225,23 @@ function onMatrixKey(event) {
     return;
   }
   if (!state.selected) select(td.dataset.s, td.dataset.b, { focus: false });
-  const current = state.cells.get(key(state.selected.s, state.selected.b)) || null;
   if (k === " " || k === "Spacebar") {
     event.preventDefault();
     toggle();
   } else if (k === "Delete" || k === "Backspace") {
     event.preventDefault();
-    if (current) change(null);
+    change((cur) => (cur ? null : undefined));
   } else if (/^[0-9]$/.test(k)) {
     event.preventDefault();
     const strength = k === "0" ? 1 : Number(k) / 10;
-    change({ strength, source: current ? current.source : "dp", locked: current ? current.locked : false });
+    change((cur) => ({ strength, source: cur ? cur.source : "dp", locked: cur ? cur.locked : false }));
   } else if (k === "l" || k === "L") {
     event.preventDefault();
-    if (current) change({ ...pick(current), locked: !current.locked });
-    else toast("There is no association here to lock: add one first (Space).");
+    change((cur) => {
+      if (cur) return { ...cur, locked: !cur.locked };
+      toast("There is no association here to lock: add one first (Space).");
+      return undefined;
+    });
   } else if (k === "Enter") {
     event.preventDefault();
     $("#cell-form").strength.focus();
@@ -247,9 +250,7 @@ function onMatrixKey(event) {
 }
 
 function toggle() {
-  if (!state.selected) return;
-  const current = state.cells.get(key(state.selected.s, state.selected.b));
-  change(current ? null : { strength: 1, source: "dp", locked: false });
+  change((cur) => (cur ? null : { strength: 1, source: "dp", locked: false }));
 }
 
 const pick = (a) => ({ strength: a.strength, source: a.source, locked: a.locked });
@@ -266,19 +267,34 @@ function onSaveCell(event) {
   change({ strength, source: form.source.value, locked: form.locked.checked }, { note: form.note.value });
 }
 
+/** Run `job` after every change queued before it: keystrokes are never dropped or reordered. */
+function enqueue(job) {
+  state.queue = state.queue.then(job, job);
+  return state.queue;
+}
+
 /**
- * Change the selected cell to `after` (null removes it), as one saved version.
+ * Change the selected cell to `next` (null removes it), as one saved version; `next` may be
+ * a function of the cell as it is when the change's turn comes (undefined: no change).
  * A locked association only changes its lock: unlock it first, so a design is not lost to
  * a slip of the keyboard.
  */
-async function change(after, { note = "" } = {}) {
+function change(next, { note = "" } = {}) {
   const sel = state.selected;
-  if (!sel || !state.net) return;
+  if (!sel || !state.net) return Promise.resolve();
+  return enqueue(() => changeNow(sel, next, note));
+}
+
+async function changeNow(sel, next, note) {
+  if (!state.net) return;
+  const current = state.cells.has(key(sel.s, sel.b)) ? pick(state.cells.get(key(sel.s, sel.b))) : null;
+  const after = typeof next === "function" ? next(current) : next;
+  if (after === undefined) return;
   if (state.net.builtin) {
     toast(`${state.net.name} is built in and read-only: copy it to edit it.`, "error");
     return;
   }
-  const before = state.cells.has(key(sel.s, sel.b)) ? pick(state.cells.get(key(sel.s, sel.b))) : null;
+  const before = current;
   if (same(before, after)) return;
   const unlockOnly = before && after && before.locked && !after.locked &&
     before.strength === after.strength && before.source === after.source;
@@ -297,10 +313,6 @@ async function change(after, { note = "" } = {}) {
 
 /** Write one cell; true when the server stored it. The page state follows the server. */
 async function send(s, b, after, { force = false, note = "" } = {}) {
-  if (state.pending) {
-    toast("Still saving the last change…");
-    return false;
-  }
   state.pending = true;
   const name = state.net.name;
   const live = $("#live-edits").checked;
@@ -322,7 +334,7 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
       return { stimulus, behaviour, ...a };
     }) };
     setNetwork(state.net);
-    select(s, b);
+    if (state.selected) select(state.selected.s, state.selected.b);
     refreshVersions();
     return true;
   } catch (error) {
@@ -336,22 +348,26 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
   }
 }
 
-async function undo() {
-  const op = state.undo.pop();
-  if (!op) return;
-  state.selected = { s: op.s, b: op.b };
-  if (await send(op.s, op.b, op.before, { force: true, note: "undo" })) state.redo.push(op);
-  else state.undo.push(op);
-  updateUndo();
+function undo() {
+  return enqueue(async () => {
+    const op = state.undo.pop();
+    if (!op) return;
+    state.selected = { s: op.s, b: op.b };
+    if (await send(op.s, op.b, op.before, { force: true, note: "undo" })) state.redo.push(op);
+    else state.undo.push(op);
+    updateUndo();
+  });
 }
 
-async function redo() {
-  const op = state.redo.pop();
-  if (!op) return;
-  state.selected = { s: op.s, b: op.b };
-  if (await send(op.s, op.b, op.after, { force: true, note: "redo" })) state.undo.push(op);
-  else state.redo.push(op);
-  updateUndo();
+function redo() {
+  return enqueue(async () => {
+    const op = state.redo.pop();
+    if (!op) return;
+    state.selected = { s: op.s, b: op.b };
+    if (await send(op.s, op.b, op.after, { force: true, note: "redo" })) state.undo.push(op);
+    else state.redo.push(op);
+    updateUndo();
+  });
 }
 
 function updateUndo() {
