@@ -135,6 +135,20 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
                 # Its process died: it can be resumed from its checkpoint and log.
                 store.set_status(run.id, RunStatus.INTERRUPTED, run.error)
+        limiter = RateLimiter(settings.reward_rate_per_s, settings.reward_burst)
+        viewer = None
+        if settings.viser:
+            from server.viewer import Viewer
+
+            viewer = await Viewer.start(
+                host=settings.host,
+                port=settings.viser_port,
+                manager=manager,
+                store=store,
+                catalog=catalog,
+                limiter=limiter,
+                writable=not settings.writes_need_token,
+            )
         app.state.srlab = AppState(
             settings=settings,
             catalog=catalog,
@@ -142,11 +156,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             store=store,
             networks=SqlAlchemyNetworkRepository(sessions),
             engines=manager,
-            rewards_limiter=RateLimiter(settings.reward_rate_per_s, settings.reward_burst),
+            rewards_limiter=limiter,
+            viewer=viewer,
         )
         try:
             yield
         finally:
+            if viewer is not None:
+                await viewer.stop()
             await manager.shutdown()
             engine.dispose()
 
