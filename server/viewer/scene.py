@@ -133,13 +133,13 @@ def _wall(a: tuple[float, float], b: tuple[float, float], *, outer: bool) -> Box
     (x0, y0), (x1, y1) = a, b
     length = math.hypot(x1 - x0, y1 - y0)
     yaw = math.atan2(y1 - y0, x1 - x0)
-    # The outer rectangle runs counter-clockwise, so its outside is to the right; the
-    # inner one's outside (the corridor's side) is to the left: push the inner walls in.
+    # Both rectangles run counter-clockwise: beyond an outer wall is to its right, beyond
+    # an inner wall (inside the island) to its left. The box stands there, off the corridor.
     side = -1.0 if outer else 1.0
     nx, ny = -math.sin(yaw) * side, math.cos(yaw) * side
     shift = WALL_THICKNESS_M / 2
-    cx = (x0 + x1) / 2 - nx * shift
-    cy = (y0 + y1) / 2 - ny * shift
+    cx = (x0 + x1) / 2 + nx * shift
+    cy = (y0 + y1) / 2 + ny * shift
     return Box((cx, cy, WALL_HEIGHT_M / 2), (length + WALL_THICKNESS_M, WALL_THICKNESS_M,
                WALL_HEIGHT_M), yaw)  # fmt: skip
 
