@@ -362,9 +362,15 @@ class Controller:
 
     async def _follow_run(self, run_id: int) -> None:
         """Push the run's tick snapshots to the renderer; wait out its pauses and restarts."""
+        shown: Engine | None = None
         while True:
             engine = self.manager.get(run_id)
             if engine is None or engine.status not in ACTIVE:
+                if engine is not None and engine is not shown:
+                    # A run that ended here: show where it stopped.
+                    shown = engine
+                    with contextlib.suppress(SimulationStateError):
+                        self.inbox.push(tick_view(engine, engine.sim.snapshot))
                 await asyncio.sleep(0.5)
                 continue
             sub = engine.subscribe(maxsize=64, tick_hz=MAX_HZ)

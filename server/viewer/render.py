@@ -551,9 +551,12 @@ class Renderer:
         if state.run_id is None or live is None:
             return "**srlab**: no run selected. Create one in the editor or with `srlab run`."
         mode = f"realtime {live.hz:g} Hz" if live.realtime else "fast"
-        return (
+        text = (
             f"**Run {live.run_id}**: {live.condition}, seed {live.seed}, {mode}, **{live.status}**"
         )
+        if not live.ticking and state.mode == "live":
+            text += ". Not running now: **Replay** shows its stored episodes."
+        return text
 
 
 __all__ = [

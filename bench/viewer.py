@@ -1,0 +1,308 @@
+"""Realtime tick lateness of `srlab serve` with a 3D view watching, against none.
+
+Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 5 minutes, ``--seconds
+10 --rounds 1`` for a quick check). It starts ``srlab serve`` itself on 127.0.0.1 (free
+ports, a temporary SQLite database) and Debian's Chromium (Playwright, the flags of
+tests/browser.py), then measures in one run, alternating ``--rounds`` times:
+
+* **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (60) with no browser
+  on the 3D view's port;
+* **viewer**: the same with a real Chromium page on the 3D view, following that run live
+  (the page is loaded and idle before the run starts, so the figure is the steady state of
+  watching, not the page's start-up).
+
+For each: the run's tick lateness p99 and max and overruns, from the engine's own live
+figures (GET /api/runs/{id}), the ticks the page showed, and the CPU shares of the server,
+Chromium and the rest of the machine. The goal: the viewer's lateness p99 within 1 ms of
+none's. Chromium renders WebGL in software here (SwiftShader), so it competes with the
+server for the machine's two cores far more than a browser on another machine would.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import re
+import signal
+import statistics
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bench.service import (
+    HOST,
+    RawClient,
+    Server,
+    call,
+    cpu_seconds,
+    free_port,
+    live_ms,
+    machine_busy_s,
+    ms,
+    stop_run,
+    wait_healthy,
+)
+
+CHROMIUM = Path(os.environ.get("SRLAB_CHROMIUM", "/usr/bin/chromium"))
+FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+TICK = re.compile(r"Episode (\d+), tick (\d+)")
+
+
+def descendants(root: int) -> set[int]:
+    """Every process below `root` (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        children.setdefault(ppid, []).append(int(entry.name))
+    found: set[int] = set()
+    todo = [root]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            if child not in found:
+                found.add(child)
+                todo.append(child)
+    return found
+
+
+def chromium_cpu_s(server_pid: int) -> float:
+    """CPU seconds of this bench's Chromium processes so far."""
+    total = 0.0
+    for pid in descendants(os.getpid()) - descendants(server_pid) - {server_pid}:
+        try:
+            comm = Path(f"/proc/{pid}/comm").read_text().strip()
+        except OSError:
+            continue
+        if comm.startswith("chrom") or comm.startswith("headless"):
+            total += cpu_seconds(pid) or 0.0
+    return total
+
+
+@dataclass
+class Phase:
+    """One measured run."""
+
+    name: str
+    run_id: int
+    ticks: int
+    p99_s: float | None
+    max_s: float | None
+    overruns: int
+    shown: tuple[int, int] | None
+    """The first and last tick the page showed (viewer phases)."""
+    cpu: str
+    load: float
+
+
+class Meter:
+    """CPU shares of the server, Chromium and the rest, from now on."""
+
+    def __init__(self, server_pid: int) -> None:
+        self.pid = server_pid
+        self.t0 = time.perf_counter()
+        self.server0 = cpu_seconds(server_pid) or 0.0
+        self.chrome0 = chromium_cpu_s(server_pid)
+        self.machine0 = machine_busy_s() or 0.0
+        self.me0 = time.process_time()
+
+    def report(self) -> str:
+        """Each one's share of one core since the start."""
+        wall = time.perf_counter() - self.t0
+        server = (cpu_seconds(self.pid) or 0.0) - self.server0
+        chrome = chromium_cpu_s(self.pid) - self.chrome0
+        me = time.process_time() - self.me0
+        rest = max(0.0, (machine_busy_s() or 0.0) - self.machine0 - server - chrome - me)
+        return (
+            f"server {server / wall:4.0%}, chromium {chrome / wall:4.0%}, "
+            f"rest {rest / wall:4.0%} of one core"
+        )
+
+
+async def page_tick(page: Any) -> tuple[int, int] | None:
+    """(episode, tick) the page's panel shows now."""
+    text = await page.inner_text("body")
+    m = TICK.search(text)
+    return (int(m[1]), int(m[2])) if m else None
+
+
+async def measure(
+    client: RawClient, server: Server, page: Any | None, args: argparse.Namespace, name: str
+) -> Phase:
+    meter = Meter(server.pid)
+    run = await call(
+        client,
+        "POST",
+        "/api/runs",
+        {"condition": "kp", "mode": "realtime", "hz": args.hz, "seed": args.seed},
+    )
+    run_id = int(run["id"])
+    await call(client, "POST", f"/api/runs/{run_id}/start")
+    first = None
+    if page is not None:
+        await page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
+        first = await page_tick(page)
+    await asyncio.sleep(args.seconds)
+    state = await call(client, "GET", f"/api/runs/{run_id}")
+    last = await page_tick(page) if page is not None else None
+    cpu = meter.report()
+    await stop_run(client, run_id)
+    live = state.get("live") or {}
+    shown = (first[1], last[1]) if first and last else None
+    return Phase(
+        name,
+        run_id,
+        int(live.get("ticks_run", 0)),
+        live_ms(live, "lateness_p99_ms"),
+        live_ms(live, "lateness_max_ms"),
+        int(live.get("overruns", 0)),
+        shown,
+        cpu,
+        os.getloadavg()[0],
+    )
+
+
+def chromium_command(folder: Path, nice: int) -> Path:
+    """Chromium itself, or a wrapper that starts it `nice`d (its children inherit it)."""
+    if nice == 0:
+        return CHROMIUM
+    wrapper = folder / "chromium-nice"
+    wrapper.write_text(f'#!/bin/sh\nexec nice -n {nice} "{CHROMIUM}" "$@"\n')
+    wrapper.chmod(0o755)
+    return wrapper
+
+
+async def bench(args: argparse.Namespace, server: Server) -> None:
+    from playwright.async_api import async_playwright
+
+    client = RawClient(server.port, 4, 30.0)
+    try:
+        health = await wait_healthy(client, server, 60.0)
+        port = health["viser_port"]
+        if port is None:
+            raise RuntimeError("the service runs without its 3D view (SRLAB_VISER=false?)")
+        print(f"srlab serve on {HOST}:{server.port}, 3D view on port {port}, pid {server.pid}")
+        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        warm = await call(client, "POST", "/api/runs", {"condition": "kp", "mode": "realtime"})
+        await call(client, "POST", f"/api/runs/{warm['id']}/start")
+        await asyncio.sleep(2.0)
+        await stop_run(client, int(warm["id"]))
+        phases: list[Phase] = []
+        async with async_playwright() as pw:
+            exe = chromium_command(server.folder, args.nice)
+            browser = await pw.chromium.launch(executable_path=str(exe), args=FLAGS, headless=True)
+            try:
+                for r in range(args.rounds):
+                    for name in ("none", "viewer"):
+                        page = None
+                        if name == "viewer":
+                            page = await browser.new_page(
+                                viewport={"width": args.width, "height": args.height}
+                            )
+                            await page.goto(f"http://{HOST}:{port}/")
+                            await page.get_by_text("srlab 3D view").wait_for(timeout=60_000)
+                            await asyncio.sleep(3.0)  # the page settles before the run
+                        phase = await measure(client, server, page, args, name)
+                        if page is not None:
+                            await page.close()
+                        phases.append(phase)
+                        print(
+                            f"round {r + 1} {name:6} run {phase.run_id:3}: ticks {phase.ticks:5}"
+                            f", lateness p99 {ms(phase.p99_s, 6)}, max {ms(phase.max_s, 6)}, "
+                            f"overruns {phase.overruns}"
+                            + (
+                                f", page showed ticks {phase.shown[0]}..{phase.shown[1]}"
+                                if phase.shown
+                                else ""
+                            )
+                        )
+                        print(f"    CPU: {phase.cpu}; load {phase.load:.2f}")
+                        await asyncio.sleep(1.0)
+            finally:
+                await browser.close()
+        report(phases, args)
+    finally:
+        await client.aclose()
+
+
+def report(phases: list[Phase], args: argparse.Namespace) -> None:
+    def p99s(name: str) -> list[float]:
+        return [p.p99_s for p in phases if p.name == name and p.p99_s is not None]
+
+    none, viewer = p99s("none"), p99s("viewer")
+    print()
+    print(
+        f"realtime kp run at {args.hz:g} Hz, {args.seconds:g} s per phase, {args.rounds} "
+        f"rounds, Chromium {args.width}x{args.height} at niceness {args.nice}"
+    )
+    if not none or not viewer:
+        print("no figures")
+        return
+    a, b = statistics.median(none), statistics.median(viewer)
+    print(f"  lateness p99, no viewer (median of rounds)   {ms(a)}")
+    print(f"  lateness p99, Chromium on the 3D view        {ms(b)}")
+    diff = b - a
+    verdict = "within" if diff <= 0.001 else "NOT within"
+    print(f"  difference                                  {ms(diff)}   ({verdict} 1 ms)")
+    pairs = [v - n for n, v in zip(none, viewer, strict=False)]
+    print(f"  per round (viewer - none): {', '.join(ms(d, 5).strip() for d in pairs)}")
+    unseen = [p for p in phases if p.name == "viewer" and not p.shown]
+    if unseen:
+        print("  WARNING: a viewer phase's page showed no ticks")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0, help="each phase (60)")
+    parser.add_argument("--rounds", type=int, default=2, help="none/viewer pairs (2)")
+    parser.add_argument("--hz", type=float, default=20.0, help="realtime tick rate (20)")
+    parser.add_argument("--seed", type=int, default=3)
+    parser.add_argument("--width", type=int, default=1280, help="page width (1280)")
+    parser.add_argument("--height", type=int, default=800, help="page height (800)")
+    parser.add_argument(
+        "--nice",
+        type=int,
+        default=0,
+        help="run Chromium with this niceness (0: as the server; 19: as a browser on "
+        "another machine would be, out of the server's way)",
+    )
+    args = parser.parse_args()
+    if args.seconds <= 0 or args.rounds < 1 or not 0 < args.hz <= 1000:
+        parser.error("--seconds must be positive, --rounds at least 1, --hz in (0, 1000]")
+    if not CHROMIUM.exists():
+        sys.exit(f"bench.viewer: {CHROMIUM} is missing: apt-get install chromium")
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
+    with tempfile.TemporaryDirectory(prefix="srlab-bench-viewer-") as tmp:
+        server = Server(Path(tmp), env={"SRLAB_VISER_PORT": str(free_port())})
+        started = time.perf_counter()
+        try:
+            server.start()
+            asyncio.run(bench(args, server))
+        finally:
+            code = server.stop()
+            print(
+                f"srlab serve stopped, exit code {code}; took {time.perf_counter() - started:.0f} s"
+            )
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except KeyboardInterrupt:
+        sys.exit("bench.viewer: interrupted")
