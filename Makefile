@@ -53,6 +53,7 @@ bench: install
 	$(BIN)/python -m bench.ticks
 	$(BIN)/python -m bench.experiment
 	$(BIN)/python -m bench.engine
+	$(BIN)/python -m bench.viewer
 
 migrate: install
 	$(BIN)/python -c "from server.persistence import upgrade; upgrade()"

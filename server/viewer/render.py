@@ -63,7 +63,7 @@ NO_EPISODES = "(no stored episodes)"
 _BODY = (196, 30, 36)
 _TRAIL = (37, 99, 235)
 _WALL = (71, 85, 105)
-_FLOOR = (214, 211, 209)
+_FLOOR = (176, 180, 186)
 _GROUND = (245, 245, 240)
 _BOX = (180, 128, 72)
 _FOV = (250, 204, 21)
@@ -167,8 +167,8 @@ class Renderer:
         sc.world_axes.visible = False
         cx, cy, _ = s.center
         ox0, oy0, ox1, oy1 = s.outer_box
-        self.server.initial_camera.position = (cx, cy - 0.9 * (oy1 - oy0) - 0.6, 0.8 * (ox1 - ox0))
-        self.server.initial_camera.look_at = (cx, cy - 0.2, 0.0)
+        self.server.initial_camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
+        self.server.initial_camera.look_at = (cx, cy - 0.1, 0.0)
         sc.add_box(
             "/ground",
             color=_GROUND,
@@ -212,16 +212,15 @@ class Renderer:
         sc.add_box(
             "/track/lamp/housing",
             color=(25, 25, 25),
-            dimensions=(0.1, 0.1, 0.3),
-            position=(lx, ly, lz + 0.15),
+            dimensions=(0.1, 0.1, 0.36),
+            position=(lx, ly, lz + 0.16),
         )
         self._bulbs = [
             sc.add_icosphere(
                 f"/track/lamp/{c.name.lower()}",
-                radius=0.045,
+                radius=0.06,
                 color=DIM,
-                position=(lx, ly, lz + 0.25 - 0.1 * k),
-                scale=(1.25, 1.25, 1.0),
+                position=(lx, ly, lz + 0.27 - 0.11 * k),
             )
             for k, c in enumerate(BULBS)
         ]
