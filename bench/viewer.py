@@ -1,21 +1,27 @@
 """Realtime tick lateness of `srlab serve` with a 3D view watching, against none.
 
-Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 5 minutes, ``--seconds
+Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 9 minutes, ``--seconds
 10 --rounds 1`` for a quick check). It starts ``srlab serve`` itself on 127.0.0.1 (free
-ports, a temporary SQLite database) and Debian's Chromium (Playwright, the flags of
-tests/browser.py), then measures in one run, alternating ``--rounds`` times:
+ports, a temporary SQLite database) and Debian's Chromium twice (Playwright, the flags of
+tests/browser.py), then measures in one run, ``--rounds`` times in turn:
 
-* **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (60) with no browser
-  on the 3D view's port;
-* **viewer**: the same with a real Chromium page on the 3D view, following that run live
-  (the page is loaded and idle before the run starts, so the figure is the steady state of
-  watching, not the page's start-up).
+* **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (40), no browser on
+  the 3D view's port;
+* **viewer**: the same with a real Chromium page on the 3D view following that run live,
+  Chromium at niceness ``--nice`` (19): what the service pays for a watching browser;
+* **viewer, same priority**: the same with Chromium at the server's own priority.
 
-For each: the run's tick lateness p99 and max and overruns, from the engine's own live
-figures (GET /api/runs/{id}), the ticks the page showed, and the CPU shares of the server,
-Chromium and the rest of the machine. The goal: the viewer's lateness p99 within 1 ms of
-none's. Chromium renders WebGL in software here (SwiftShader), so it competes with the
-server for the machine's two cores far more than a browser on another machine would.
+The page is loaded and idle before its run starts, so a figure is the steady state of
+watching, not the page's start-up. For each run: tick lateness p99 and max and overruns,
+from the engine's own live figures (GET /api/runs/{id}), the ticks the page showed, and
+the CPU shares of the server, Chromium and the rest of the machine. The goal: the viewer's
+lateness p99 within 1 ms of none's.
+
+Chromium has no GPU here: it renders WebGL with SwiftShader, and viser's page redraws
+continuously, so an idle page alone takes about 0.8 of a core at 1280x800. On two cores
+that competes with the server for the CPU as a browser on the user's own machine never
+would; the niced phase keeps it out of the server's way, the last phase shows the cost of
+sharing the cores with it as well.
 """
 
 from __future__ import annotations
@@ -187,6 +193,9 @@ def chromium_command(folder: Path, nice: int) -> Path:
     return wrapper
 
 
+PHASES = ("none", "viewer", "viewer, same priority")
+
+
 async def bench(args: argparse.Namespace, server: Server) -> None:
     from playwright.async_api import async_playwright
 
@@ -204,14 +213,21 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
         await stop_run(client, int(warm["id"]))
         phases: list[Phase] = []
         async with async_playwright() as pw:
-            exe = chromium_command(server.folder, args.nice)
-            browser = await pw.chromium.launch(executable_path=str(exe), args=FLAGS, headless=True)
+            niced = chromium_command(server.folder, args.nice)
+            browsers = {
+                "viewer": await pw.chromium.launch(
+                    executable_path=str(niced), args=FLAGS, headless=True
+                ),
+                "viewer, same priority": await pw.chromium.launch(
+                    executable_path=str(CHROMIUM), args=FLAGS, headless=True
+                ),
+            }
             try:
                 for r in range(args.rounds):
-                    for name in ("none", "viewer"):
+                    for name in PHASES:
                         page = None
-                        if name == "viewer":
-                            page = await browser.new_page(
+                        if name in browsers:
+                            page = await browsers[name].new_page(
                                 viewport={"width": args.width, "height": args.height}
                             )
                             await page.goto(f"http://{HOST}:{port}/")
@@ -221,55 +237,63 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
                         if page is not None:
                             await page.close()
                         phases.append(phase)
-                        print(
-                            f"round {r + 1} {name:6} run {phase.run_id:3}: ticks {phase.ticks:5}"
-                            f", lateness p99 {ms(phase.p99_s, 6)}, max {ms(phase.max_s, 6)}, "
-                            f"overruns {phase.overruns}"
-                            + (
-                                f", page showed ticks {phase.shown[0]}..{phase.shown[1]}"
-                                if phase.shown
-                                else ""
-                            )
+                        shown = (
+                            f", the page showed ticks {phase.shown[0]}..{phase.shown[1]}"
+                            if phase.shown
+                            else ""
                         )
-                        print(f"    CPU: {phase.cpu}; load {phase.load:.2f}")
+                        print(
+                            f"round {r + 1} {name:21} run {phase.run_id:3}: ticks {phase.ticks:5}"
+                            f", lateness p99 {ms(phase.p99_s, 5)}, max {ms(phase.max_s, 5)}, "
+                            f"overruns {phase.overruns}{shown}"
+                        )
+                        print(f"    CPU: {phase.cpu}; load average {phase.load:.2f}")
                         await asyncio.sleep(1.0)
             finally:
-                await browser.close()
+                for b in browsers.values():
+                    await b.close()
         report(phases, args)
     finally:
         await client.aclose()
 
 
 def report(phases: list[Phase], args: argparse.Namespace) -> None:
+    """The medians over rounds of each phase's lateness p99, against none's."""
+
     def p99s(name: str) -> list[float]:
         return [p.p99_s for p in phases if p.name == name and p.p99_s is not None]
 
-    none, viewer = p99s("none"), p99s("viewer")
     print()
     print(
-        f"realtime kp run at {args.hz:g} Hz, {args.seconds:g} s per phase, {args.rounds} "
-        f"rounds, Chromium {args.width}x{args.height} at niceness {args.nice}"
+        f"realtime kp runs at {args.hz:g} Hz, {args.seconds:g} s each, {args.rounds} rounds; "
+        f"Chromium {args.width}x{args.height}; 'viewer' runs it at niceness {args.nice}"
     )
-    if not none or not viewer:
+    base = p99s("none")
+    if not base:
         print("no figures")
         return
-    a, b = statistics.median(none), statistics.median(viewer)
-    print(f"  lateness p99, no viewer (median of rounds)   {ms(a)}")
-    print(f"  lateness p99, Chromium on the 3D view        {ms(b)}")
-    diff = b - a
-    verdict = "within" if diff <= 0.001 else "NOT within"
-    print(f"  difference                                  {ms(diff)}   ({verdict} 1 ms)")
-    pairs = [v - n for n, v in zip(none, viewer, strict=False)]
-    print(f"  per round (viewer - none): {', '.join(ms(d, 5).strip() for d in pairs)}")
-    unseen = [p for p in phases if p.name == "viewer" and not p.shown]
-    if unseen:
+    a = statistics.median(base)
+    print(f"  {'none':23} lateness p99 {ms(a)} (median of rounds)")
+    for name in PHASES[1:]:
+        values = p99s(name)
+        if not values:
+            continue
+        b = statistics.median(values)
+        diff = b - a
+        verdict = "within" if diff <= 0.001 else "NOT within"
+        pairs = ", ".join(ms(v - n, 5).strip() for n, v in zip(base, values, strict=False))
+        print(
+            f"  {name:23} lateness p99 {ms(b)}, difference {ms(diff, 5)} ({verdict} 1 ms); "
+            f"per round {pairs}"
+        )
+    if any(p.name != "none" and not p.shown for p in phases):
         print("  WARNING: a viewer phase's page showed no ticks")
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=60.0, help="each phase (60)")
+    parser.add_argument("--seconds", type=float, default=40.0, help="each phase (40)")
     parser.add_argument("--rounds", type=int, default=2, help="none/viewer pairs (2)")
     parser.add_argument("--hz", type=float, default=20.0, help="realtime tick rate (20)")
     parser.add_argument("--seed", type=int, default=3)
@@ -278,9 +302,9 @@ def main() -> None:
     parser.add_argument(
         "--nice",
         type=int,
-        default=0,
-        help="run Chromium with this niceness (0: as the server; 19: as a browser on "
-        "another machine would be, out of the server's way)",
+        default=19,
+        help="niceness of the 'viewer' phase's Chromium (19: out of the server's way, as a "
+        "browser on another machine would be); 'viewer, same priority' runs it at 0",
     )
     args = parser.parse_args()
     if args.seconds <= 0 or args.rounds < 1 or not 0 < args.hz <= 1000:

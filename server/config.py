@@ -66,7 +66,12 @@ class Settings(BaseSettings):
         return not self.loopback or self.token is not None
 
     def check(self) -> None:
-        """Refuse to serve beyond loopback without a token."""
+        """Refuse to serve beyond loopback without a token, or two servers on one port."""
+        if self.viser and self.viser_port == self.port:
+            raise ValueError(
+                f"SRLAB_VISER_PORT and SRLAB_PORT are both {self.port}: the 3D view needs a "
+                "port of its own"
+            )
         if not self.loopback and not self.token:
             raise ValueError(
                 f"srlab listens on {self.host}, beyond loopback: set SRLAB_TOKEN so that "

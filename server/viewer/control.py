@@ -122,7 +122,10 @@ class Controller:
         self.world = world or WorldConfig()
         self.state = ViewState(writable=writable)
         self._commands: asyncio.Queue[ViewerCommand] = asyncio.Queue()
-        self._loop: asyncio.AbstractEventLoop | None = None
+        try:  # built on the service's loop: commands posted before `run` starts wait
+            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:
+            self._loop = None
         self._follow: asyncio.Task[None] | None = None
         self._signature: tuple[tuple[int, str], ...] | None = None
         self._stored: dict[int, tuple[str, str, int, str, float]] = {}

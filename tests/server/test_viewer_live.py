@@ -20,6 +20,7 @@ from fastapi import FastAPI
 from liveserver import free_port
 
 from core.ports import RunStatus
+from server.main import create_app
 from server.viewer import Viewer
 from server.viewer.render import REWARD_NOTE
 from server.viewer.state import (
@@ -76,6 +77,12 @@ async def test_a_taken_port_is_a_clear_error_not_another_port(tmp_path: Path) ->
         with pytest.raises(OSError, match=f"port {port} .* taken.*SRLAB_VISER_PORT"):
             async with client_for(settings):
                 pass
+
+
+def test_the_view_and_the_api_cannot_share_a_port(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="SRLAB_VISER_PORT and SRLAB_PORT are both 8123"):
+        create_app(settings_for(tmp_path, viser=True, viser_port=8123, port=8123))
+    create_app(settings_for(tmp_path, viser=False, viser_port=8123, port=8123))
 
 
 async def test_a_watched_live_run_is_drawn_and_an_unwatched_one_costs_nothing(
