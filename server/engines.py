@@ -107,6 +107,11 @@ class EngineManager:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
 
+    def close_streams(self) -> None:
+        """End every live stream of every run (the server is shutting down)."""
+        for engine in self._engines.values():
+            engine.close_subscriptions()
+
     async def shutdown(self, grace_s: float = 5.0) -> None:
         """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
         for engine in self._engines.values():

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import socket
 
 import uvicorn
+from fastapi import FastAPI
 
 from server.config import Settings
 from server.main import create_app
@@ -12,6 +15,8 @@ from server.persistence import upgrade
 from server.tuning import configure_process
 
 log = logging.getLogger("srlab.serve")
+STARTUP_FAILURE = 3
+"""uvicorn's exit code when the server could not start."""
 
 
 def serve(host: str | None = None, port: int | None = None) -> int:
@@ -28,7 +33,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = create_app(settings)
     # One worker: the runs' state lives in this process.
-    uvicorn.run(
+    config = uvicorn.Config(
         app,
         host=settings.host,
         port=settings.port,
@@ -37,4 +42,28 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         proxy_headers=False,
         timeout_graceful_shutdown=5,
     )
-    return 0
+    server = _Server(config, app)
+    with contextlib.suppress(KeyboardInterrupt):
+        server.run()
+    # As uvicorn.run: a server that never started (a failed lifespan, a taken port) is an
+    # error.
+    return 0 if server.started else STARTUP_FAILURE
+
+
+class _Server(uvicorn.Server):
+    """uvicorn that ends the runs' live event streams as its shutdown begins.
+
+    uvicorn waits for open connections before the app's lifespan ends the runs, and an
+    event stream stays open until its run ends: without this it would be cancelled after
+    the grace period, with a traceback.
+    """
+
+    def __init__(self, config: uvicorn.Config, app: FastAPI) -> None:
+        super().__init__(config)
+        self._app = app
+
+    async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+        state = getattr(self._app.state, "srlab", None)
+        if state is not None:
+            state.engines.close_streams()
+        await super().shutdown(sockets)
