@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install run test test-fast lint typecheck format bench reliability migrate revision pg pg-stop clean
+.PHONY: help install run test test-fast lint typecheck format bench reliability screenshots migrate revision pg pg-stop clean
 
 help:
-	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | migrate | revision m=... | pg | pg-stop | clean"
+	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -48,6 +48,11 @@ format: install
 
 reliability: install
 	SRLAB_CRASH_KILLS=200 $(BIN)/pytest tests/reliability -q
+
+# The README's pictures of the editor and the console, retaken in Debian's Chromium.
+screenshots: install
+	bash scripts/system-deps.sh
+	$(BIN)/python scripts/screenshots.py
 
 bench: install
 	$(BIN)/python -m bench.ticks

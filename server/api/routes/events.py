@@ -12,6 +12,7 @@ from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from core.brain.catalog import Catalog
+from core.brain.selection import Selector
 from core.engine import StatusChanged, TickPublished
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
 from server.api.deps import EnginesDep, StateDep, StoreDep
@@ -19,18 +20,55 @@ from server.api.routes.runs import RunId
 
 router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
 HEARTBEAT_S = 15.0
+COMPETITORS = 8
 
 
-def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None:
-    """An engine event as an SSE event name and JSON payload (None: not streamed)."""
+def competition(selector: Selector, stimuli: tuple[int, ...], catalog: Catalog) -> dict[str, Any]:
+    """What competes for these stimuli: each released behaviour's value and the threshold.
+
+    Values come from the network as it stands now (a live edit or a promotion since the
+    tick shows), strongest first, at most `COMPETITORS` of them.
+    """
+    values = selector.values(list(stimuli))
+    ranked = sorted(values.items(), key=lambda kv: -kv[1][0])[:COMPETITORS]
+    return {
+        "threshold": selector.config.threshold,
+        "strategy": selector.config.strategy.value,
+        "values": [
+            {
+                "behaviour": _name(catalog, b),
+                "stimulus": catalog.stimuli[st].name,
+                "value": round(v, 4),
+            }
+            for b, (v, st) in ranked
+        ],
+    }
+
+
+def _name(catalog: Catalog, behaviour: int) -> str | None:
+    return catalog.behaviours[behaviour].name if 0 <= behaviour < len(catalog.behaviours) else None
+
+
+def encode(
+    event: object, catalog: Catalog, selector: Selector | None = None
+) -> tuple[str, dict[str, Any]] | None:
+    """An engine event as an SSE event name and JSON payload (None: not streamed).
+
+    With `selector`, tick events carry the competition among released behaviours.
+    """
     s = [x.name for x in catalog.stimuli]
 
     def b(i: int) -> str | None:
-        return catalog.behaviours[i].name if 0 <= i < len(catalog.behaviours) else None
+        return _name(catalog, i)
 
     if isinstance(event, TickPublished):
         snap = event.snapshot
-        return "tick", {
+        extra = (
+            {}
+            if selector is None
+            else {"competition": competition(selector, snap.stimuli, catalog)}
+        )
+        return "tick", {**extra,
             "episode": snap.episode, "tick": snap.tick, "episode_tick": snap.episode_tick,
             "x": snap.x, "y": snap.y, "heading_rad": snap.heading_rad,
             "stimuli": [s[i] for i in snap.stimuli], "behaviour": b(snap.behaviour),
@@ -89,6 +127,7 @@ async def stream_events(
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
     sub = engine.subscribe(maxsize=512, tick_hz=tick_hz)
     catalog = engine.sim.brain.catalog
+    selector = engine.sim.brain.selector
 
     async def events() -> AsyncIterator[bytes]:
         try:
@@ -105,7 +144,7 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
-                encoded = encode(event, catalog)
+                encoded = encode(event, catalog, selector)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()

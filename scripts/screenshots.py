@@ -1,0 +1,70 @@
+"""Refresh the README's screenshots of the editor and the console (`make screenshots`).
+
+Starts `srlab serve` on a throwaway database, edits a network and trains a run the way a
+user would, and saves docs/img/editor.png and docs/img/console.png (1280x800, Debian's
+Chromium).
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from browser import chromium  # noqa: E402
+from liveserver import live_server  # noqa: E402
+
+OUT = ROOT / "docs" / "img"
+
+
+def main() -> None:
+    """Drive the pages and save the screenshots."""
+    OUT.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp, live_server(Path(tmp) / "shots.db") as server:
+        api = server.client
+        api.post("/api/networks", json={"name": "my-design", "base": "dp"}).raise_for_status()
+        # A learned run first, so the heatmap has something to show.
+        run = api.post("/api/runs", json={"condition": "kp", "episodes": 60, "seed": 3}).json()
+        api.post(f"/api/runs/{run['id']}/start").raise_for_status()
+        with chromium() as browser:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(f"{server.url}/#/editor/my-design")
+            page.wait_for_selector("body[data-ready=true]")
+            for stimulus, behaviour, keys in (
+                ("Yellow", "goforward1", ["Space", "6"]),
+                ("Obstacle_M_M", "leftturn30", ["Space", "8", "l"]),
+            ):
+                page.click(f'#matrix td.c[data-s="{stimulus}"][data-b="{behaviour}"]')
+                for key in keys:
+                    page.keyboard.press(key)
+                    page.wait_for_timeout(250)
+            page.check("#versions li:nth-child(1) input")
+            page.check("#versions li:nth-last-child(1) input")
+            page.click("#diff")
+            page.wait_for_timeout(400)
+            page.screenshot(path=str(OUT / "editor.png"))
+            print(f"saved {OUT / 'editor.png'}")  # noqa: T201
+
+            while api.get(f"/api/runs/{run['id']}").json()["status"] != "finished":
+                time.sleep(0.2)
+            live = api.post(
+                "/api/runs",
+                json={"condition": "kp", "mode": "realtime", "hz": 20, "seed": 7},
+            ).json()
+            api.post(f"/api/runs/{live['id']}/start").raise_for_status()
+            page.goto(f"{server.url}/#/console/{live['id']}")
+            page.wait_for_selector("#competition .bar-row", timeout=60_000)
+            page.keyboard.press("+")
+            page.wait_for_selector("#reward-effect table", timeout=10_000)
+            page.wait_for_timeout(800)
+            page.screenshot(path=str(OUT / "console.png"))
+            print(f"saved {OUT / 'console.png'}")  # noqa: T201
+            api.post(f"/api/runs/{live['id']}/stop")
+
+
+if __name__ == "__main__":
+    main()

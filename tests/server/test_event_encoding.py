@@ -1,0 +1,40 @@
+"""The live stream's tick payload: the competition the console draws against the threshold."""
+
+from __future__ import annotations
+
+from core.brain.catalog import Catalog
+from core.conditions import get_condition
+from core.engine import TickPublished
+from core.simulation import Simulation
+from server.api.routes.events import COMPETITORS, competition, encode
+
+
+def test_red_releases_stop_above_the_threshold_in_the_expert_network(catalog: Catalog) -> None:
+    sim = Simulation(get_condition("expert"), seed=1, catalog=catalog)
+    red = catalog.stimulus("Red").id
+    middle = catalog.stimulus("Middle").id
+    result = competition(sim.brain.selector, (middle, red), catalog)
+    assert result["threshold"] == sim.brain.selector.config.threshold
+    values = result["values"]
+    assert values[0]["behaviour"] == "stop" and values[0]["stimulus"] == "Red"
+    assert values[0]["value"] >= result["threshold"]
+    assert [v["value"] for v in values] == sorted((v["value"] for v in values), reverse=True)
+    assert {v["stimulus"] for v in values} <= {"Red", "Middle"}
+
+
+def test_no_stimuli_means_no_competitors(catalog: Catalog) -> None:
+    sim = Simulation(get_condition("innate"), seed=1, catalog=catalog)
+    assert competition(sim.brain.selector, (), catalog)["values"] == []
+
+
+def test_a_tick_event_carries_the_competition_only_with_a_selector(catalog: Catalog) -> None:
+    sim = Simulation(get_condition("expert"), seed=3, catalog=catalog)
+    sim.reset()
+    snapshot = sim.tick().snapshot
+    event = TickPublished(1, snapshot)
+    plain = encode(event, catalog)
+    rich = encode(event, catalog, sim.brain.selector)
+    assert plain is not None and rich is not None
+    assert "competition" not in plain[1]
+    assert rich[0] == "tick" and len(rich[1]["competition"]["values"]) <= COMPETITORS
+    assert rich[1]["stimuli"] == [catalog.stimuli[i].name for i in snapshot.stimuli]

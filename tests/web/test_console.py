@@ -1,0 +1,189 @@
+"""The trainer console in real Chromium against a live `srlab serve`: what a trainer does."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+from browser import artifact
+from liveserver import LiveServer, start_server, stop_server, wait_status
+from playwright.sync_api import Browser, Page, expect
+from webpage import cell, eventually, open_view
+
+
+def create_run(server: LiveServer, **body: Any) -> int:
+    r = server.client.post("/api/runs", json=body)
+    assert r.status_code == 201, r.text
+    run_id: int = r.json()["id"]
+    return run_id
+
+
+def test_a_fast_run_created_in_the_console_fills_the_heatmap_and_the_curve(
+    page: Page, server: LiveServer
+) -> None:
+    open_view(page, server, "console")
+    page.click("#new-run > summary")
+    form = page.locator("#new-run-form")
+    form.locator("select[name=condition]").select_option("kp")
+    form.locator("select[name=mode]").select_option("fast")
+    form.locator("input[name=episodes]").fill("8")
+    form.locator("input[name=seed]").fill("2")
+    form.locator("button[type=submit]").click()
+
+    expect(page.locator("#run-status")).to_have_text("finished", timeout=60_000)
+    run = server.client.get("/api/runs").json()["data"][-1]
+    assert (run["condition"], run["mode"], run["episodes"], run["seed"]) == ("kp", "fast", 8, 2)
+    assert page.url.endswith(f"#/console/{run['id']}")
+
+    ltm = server.client.get(f"/api/runs/{run['id']}/ltm").json()["data"]
+    assert ltm, "a kp run learns something in 8 episodes"
+    for m in ltm[:5]:
+        expect(page.locator(cell(page, m["stimulus"], m["behaviour"], "#heatmap"))).to_contain_text(
+            f"{m['reliability']:.2f}".lstrip("0") if m["reliability"] < 0.995 else "1"
+        )
+    filled = page.locator("#heatmap td.c span.v").count()
+    assert filled == len(ltm)
+    # RLTM: KP's reliabilities for the camera, on the same layout.
+    page.check("input[name=memory][value=rltm]")
+    rltm = server.client.get(f"/api/runs/{run['id']}/rltm").json()["data"]
+    expect(page.locator("#heatmap td.c span.v")).to_have_count(len(rltm))
+    # The learning curve has a dot per episode.
+    expect(page.locator("#curve svg .dots circle")).to_have_count(8)
+    expect(page.locator("#st-success")).to_have_text(str(run["successes"]))
+
+
+def test_reward_keys_on_a_realtime_run_land_in_the_reward_log_with_their_credit(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = create_run(server, condition="kp", mode="realtime", hz=20, seed=5)
+    assert server.client.post(f"/api/runs/{run_id}/start").status_code == 200
+    open_view(page, server, f"console/{run_id}")
+    expect(page.locator("#run-status")).to_have_text("running")
+    eventually(lambda: page.locator("#st-tick").inner_text().isdigit(), what="live ticks")
+    expect(page.locator("#st-threshold")).to_contain_text("threshold 0.25")
+    page.wait_for_timeout(500)  # some STM to credit
+
+    page.keyboard.press("+")
+    effect = page.locator("#reward-effect")
+    expect(effect).to_contain_text("credited")
+
+    def trainer_rewards() -> list[dict[str, Any]]:
+        log = server.client.get(f"/api/runs/{run_id}/rewards").json()["data"]
+        return [r for r in log if r["source"] == "trainer"]
+
+    first = eventually(trainer_rewards, what="the reward in the log")
+    assert [r["value"] for r in first] == [1.0]
+    # The effect shown is the one stored: the same number of credited STM records.
+    applied = eventually(lambda: trainer_rewards()[0]["applied"] and trainer_rewards()[0])
+    expect(effect.locator(".head")).to_contain_text(f"credited {applied['credited']} STM")
+    if applied["credited"]:
+        expect(effect.locator("tbody tr")).to_have_count(min(applied["credited"], 200))
+
+    page.keyboard.press("-")
+    eventually(lambda: [r["value"] for r in trainer_rewards()] == [1.0, -1.0], what="-1 logged")
+    page.screenshot(path=artifact("console.png"))
+
+    # Run control from the page: pause (Shift+P), resume, stop.
+    page.keyboard.press("Shift+P")
+    expect(page.locator("#run-status")).to_have_text("paused")
+    page.click("#run-resume")
+    expect(page.locator("#run-status")).to_have_text("running")
+    page.click("#run-stop")
+    expect(page.locator("#run-status")).to_have_text("stopped")
+    wait_status(server.client, run_id, "stopped")
+    expect(page.locator("#reward-plus")).to_be_disabled()
+
+
+def test_rewarding_a_run_that_is_not_running_shows_why(page: Page, server: LiveServer) -> None:
+    run_id = create_run(server, condition="rp", mode="realtime", hz=20)
+    open_view(page, server, f"console/{run_id}")
+    expect(page.locator("#run-status")).to_have_text("created")
+    page.keyboard.press("+")
+    expect(page.locator(".toast.error").last).to_contain_text("rewards go to a running run")
+    assert server.client.get(f"/api/runs/{run_id}/rewards").json()["count"] == 0
+
+
+def test_the_3d_link_points_at_the_viewer_of_the_same_run(page: Page, server: LiveServer) -> None:
+    run_id = create_run(server, condition="expert", episodes=1)
+    open_view(page, server, f"console/{run_id}")
+    port = server.client.get("/api/health").json()["viser_port"]
+    expect(page.locator("#view3d")).to_have_attribute(
+        "href", f"http://127.0.0.1:{port}/?run={run_id}"
+    )
+
+
+def test_a_bad_run_shows_the_apis_message_and_keeps_the_form(
+    page: Page, server: LiveServer
+) -> None:
+    open_view(page, server, "console")
+    page.click("#new-run > summary")
+    form = page.locator("#new-run-form")
+    form.locator("input[name=hz]").fill("5000")  # over the API's limit
+    form.locator("input[name=seed]").fill("77")
+    form.evaluate("f => f.noValidate = true")  # let the API judge it, as a script would
+    form.locator("button[type=submit]").click()
+    expect(page.locator(".toast.error").last).to_contain_text("hz")
+    expect(form).to_be_visible()
+    expect(form.locator("input[name=seed]")).to_have_value("77")
+
+
+@pytest.mark.parametrize("view", ["editor", "console"])
+def test_the_page_recovers_when_the_server_restarts(
+    browser: Browser, tmp_path: Path, view: str
+) -> None:
+    first = start_server(tmp_path / "restart.db")
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(20_000)
+        assert first.client.post("/api/networks", json={"name": "kept"}).status_code == 201
+        run_id = create_run(first, condition="expert", episodes=1)
+        open_view(page, first, "editor/kept" if view == "editor" else f"console/{run_id}")
+        expect(page.locator("#conn")).to_have_class("conn online")
+
+        stop_server(first)
+        expect(page.locator("#offline")).to_be_visible()
+        if view == "editor":
+            page.fill("#new-network-form input[name=name]", "typed-while-down")
+        second = start_server(tmp_path / "restart.db", port=first.port)
+        try:
+            expect(page.locator("#offline")).to_be_hidden()
+            expect(page.locator("#conn")).to_have_class("conn online")
+            if view == "editor":
+                expect(page.locator("#new-network-form input[name=name]")).to_have_value(
+                    "typed-while-down"
+                )
+                page.click(cell(page, "Red", "stop"))
+                page.keyboard.press("Space")
+                eventually(
+                    lambda: second.client.get("/api/networks/kept").json()["version"] == 2,
+                    what="an edit after the restart",
+                )
+            else:
+                page.click("#run-start")
+                expect(page.locator("#run-status")).to_have_text("finished", timeout=60_000)
+        finally:
+            stop_server(second)
+    finally:
+        context.close()
+
+
+def test_new_associations_appear_in_the_feed_as_they_pass_the_threshold(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = create_run(server, condition="kp", episodes=60, seed=3)
+    open_view(page, server, f"console/{run_id}")
+    expect(page.locator("#run-status")).to_have_text("created")
+    page.click("#run-start")
+    expect(page.locator("#run-status")).to_have_text("finished", timeout=60_000)
+    feed = page.locator("#assoc-feed li.promoted")
+    expect(feed.first).to_be_visible()
+    network = server.client.get(f"/api/runs/{run_id}/network").json()["data"]
+    learned = {(a["stimulus"], a["behaviour"]) for a in network if a["source"] != "innate"}
+    shown = " | ".join(feed.all_inner_texts())
+    assert any(f"{s} → {b}" in shown for s, b in learned), (shown, learned)
+    # In the heatmap the promoted pair is outlined as part of the run's network.
+    s, b = next(iter(sorted(learned)))
+    expect(page.locator(cell(page, s, b, "#heatmap"))).to_have_class(re.compile(r"\bin-net\b"))

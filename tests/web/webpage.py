@@ -1,0 +1,35 @@
+"""Helpers for driving the editor and console pages."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+from liveserver import LiveServer
+from playwright.sync_api import Page
+
+T = TypeVar("T")
+
+
+def open_view(page: Page, server: LiveServer, route: str) -> None:
+    """Open the page at `route` (e.g. "editor/mine") and wait until it has loaded."""
+    page.goto(f"{server.url}/#/{route}")
+    page.wait_for_selector("body[data-ready=true]")
+
+
+def cell(page: Page, stimulus: str, behaviour: str, where: str = "#matrix") -> str:
+    """The selector of one matrix cell."""
+    return f'{where} td.c[data-s="{stimulus}"][data-b="{behaviour}"]'
+
+
+def eventually(check: Callable[[], T | None], timeout: float = 15.0, what: str = "") -> T:
+    """Poll `check` until it returns something truthy."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = check()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what or check}")
+        time.sleep(0.1)

@@ -1,0 +1,91 @@
+// The HTTP API, with errors turned into sentences a person can act on.
+
+const TOKEN_KEY = "srlab.token";
+
+/** An API call that failed: `status` 0 means the service did not answer. */
+export class ApiError extends Error {
+  constructor(status, message) {
+    super(message);
+    this.status = status;
+  }
+}
+
+export function token() {
+  return localStorage.getItem(TOKEN_KEY) || "";
+}
+
+export function setToken(value) {
+  if (value) localStorage.setItem(TOKEN_KEY, value);
+  else localStorage.removeItem(TOKEN_KEY);
+}
+
+const listeners = new Set();
+
+/** Call `fn(online)` whenever a request finds the service up or down. */
+export function onReachability(fn) {
+  listeners.add(fn);
+}
+
+function reachable(online) {
+  for (const fn of listeners) fn(online);
+}
+
+/** FastAPI's error body as one line: 422s name the field. */
+export function describe(status, body) {
+  const detail = body && body.detail;
+  if (Array.isArray(detail)) {
+    return detail
+      .map((e) => {
+        const where = (e.loc || []).filter((p) => p !== "body" && p !== "query" && p !== "path");
+        return where.length ? `${where.join(".")}: ${e.msg}` : e.msg;
+      })
+      .join("; ");
+  }
+  if (typeof detail === "string" && detail) return detail;
+  if (status === 401) return "This service needs its access token for changes: set it with ⚙ token.";
+  return `The service answered ${status}.`;
+}
+
+/**
+ * `method` `path` (under /api) with an optional JSON `body` and `query` parameters.
+ * Resolves to the parsed JSON (null for 204); rejects with an ApiError.
+ */
+export async function api(method, path, { body, query, raw = false } = {}) {
+  const url = new URL(`/api${path}`, location.origin);
+  for (const [k, v] of Object.entries(query || {})) {
+    if (v !== undefined && v !== null && v !== "") url.searchParams.set(k, String(v));
+  }
+  const headers = {};
+  if (body !== undefined) headers["Content-Type"] = "application/json";
+  if (method !== "GET" && token()) headers.Authorization = `Bearer ${token()}`;
+  let response;
+  try {
+    response = await fetch(url, {
+      method,
+      headers,
+      body: body === undefined ? undefined : JSON.stringify(body),
+    });
+  } catch {
+    reachable(false);
+    throw new ApiError(0, "The service is not answering; check that `srlab serve` is running.");
+  }
+  reachable(true);
+  if (raw && response.ok) return response;
+  if (response.status === 204) return null;
+  let parsed = null;
+  try {
+    parsed = await response.json();
+  } catch {
+    parsed = null;
+  }
+  if (!response.ok) throw new ApiError(response.status, describe(response.status, parsed));
+  return parsed;
+}
+
+export const get = (path, query) => api("GET", path, { query });
+export const post = (path, body, query) => api("POST", path, { body, query });
+export const put = (path, body, query) => api("PUT", path, { body, query });
+export const del = (path, query) => api("DELETE", path, { query });
+
+/** A path segment, escaped. */
+export const seg = (s) => encodeURIComponent(s);
