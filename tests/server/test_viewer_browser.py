@@ -16,7 +16,7 @@ from typing import Any
 import httpx
 import numpy as np
 import pytest
-from browser import artifact, chromium
+from browser import artifact
 from liveserver import LiveServer, start_server, stop_server, wait_status
 from PIL import Image
 from playwright.sync_api import Browser, Page
@@ -30,18 +30,13 @@ PANEL_LEFT = 900
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A live server of this module's own (`browser` is the session's, tests/conftest.py)."""
     live = start_server(tmp_path_factory.mktemp("viewer") / "viewer.db")
     try:
         yield live
     finally:
         # The browser may still be connected: shutdown must be clean all the same.
         stop_server(live)
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Browser]:
-    with chromium() as b:
-        yield b
 
 
 def robot_pixels(png: bytes) -> np.ndarray:
