@@ -1,15 +1,16 @@
 """Realtime tick lateness of `srlab serve` with a 3D view watching, against none.
 
-Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 9 minutes, ``--seconds
+Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 5 minutes, ``--seconds
 10 --rounds 1`` for a quick check). It starts ``srlab serve`` itself on 127.0.0.1 (free
 ports, a temporary SQLite database) and Debian's Chromium twice (Playwright, the flags of
 tests/browser.py), then measures in one run, ``--rounds`` times in turn:
 
 * **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (40), no browser on
   the 3D view's port;
-* **viewer**: the same with a real Chromium page on the 3D view following that run live,
-  Chromium at niceness ``--nice`` (19): what the service pays for a watching browser;
-* **viewer, same priority**: the same with Chromium at the server's own priority.
+* **viewer**: the same with a real Chromium page on the 3D view following that run live;
+  the server is pinned to CPU 0 and this Chromium to CPU 1 at niceness ``--nice`` (19):
+  what the service pays for a watching browser;
+* **viewer, shared cores**: the same with Chromium at the server's priority on any core.
 
 The page is loaded and idle before its run starts, so a figure is the steady state of
 watching, not the page's start-up. For each run: tick lateness p99 and max and overruns,
@@ -17,17 +18,19 @@ from the engine's own live figures (GET /api/runs/{id}), the ticks the page show
 the CPU shares of the server, Chromium and the rest of the machine. The goal: the viewer's
 lateness p99 within 1 ms of none's.
 
-Chromium has no GPU here: it renders WebGL with SwiftShader, and viser's page redraws
-continuously, so an idle page alone takes about 0.8 of a core at 1280x800. On two cores
-that competes with the server for the CPU as a browser on the user's own machine never
-would; the niced phase keeps it out of the server's way, the last phase shows the cost of
-sharing the cores with it as well.
+Why the pinning: Chromium has no GPU here, it renders WebGL with SwiftShader, and viser's
+page redraws continuously, so an idle page alone takes about 0.8 of a core at 1280x800 -
+a load a browser on the user's own machine puts on that machine, not on the service's.
+Sharing the two cores, it also makes this process group look busy to the kernel's
+scheduler, whose wake-ups then no longer pre-empt other work for the server; the last
+phase shows that cost too. ``--no-pin`` leaves every process on any core.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import re
 import signal
@@ -183,17 +186,23 @@ async def measure(
     )
 
 
-def chromium_command(folder: Path, nice: int) -> Path:
-    """Chromium itself, or a wrapper that starts it `nice`d (its children inherit it)."""
-    if nice == 0:
-        return CHROMIUM
-    wrapper = folder / "chromium-nice"
-    wrapper.write_text(f'#!/bin/sh\nexec nice -n {nice} "{CHROMIUM}" "$@"\n')
+def chromium_command(folder: Path, nice: int, cpu: int | None) -> Path:
+    """A wrapper that starts Chromium `nice`d and pinned to `cpu` (its children inherit)."""
+    wrapper = folder / f"chromium-{nice}-{cpu}"
+    pin = f"taskset -c {cpu} " if cpu is not None else ""
+    wrapper.write_text(f'#!/bin/sh\nexec {pin}nice -n {nice} "{CHROMIUM}" "$@"\n')
     wrapper.chmod(0o755)
     return wrapper
 
 
-PHASES = ("none", "viewer", "viewer, same priority")
+def pin_process(pid: int, cpu: int) -> None:
+    """Pin every thread of a process to one CPU (threads it starts later inherit it)."""
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(int(task.name), {cpu})
+
+
+PHASES = ("none", "viewer", "viewer, shared cores")
 
 
 async def bench(args: argparse.Namespace, server: Server) -> None:
@@ -213,13 +222,21 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
         await stop_run(client, int(warm["id"]))
         phases: list[Phase] = []
         async with async_playwright() as pw:
-            niced = chromium_command(server.folder, args.nice)
+            pinned = args.pin and (os.cpu_count() or 1) >= 2
+            if pinned:
+                pin_process(server.pid, 0)
             browsers = {
                 "viewer": await pw.chromium.launch(
-                    executable_path=str(niced), args=FLAGS, headless=True
+                    executable_path=str(
+                        chromium_command(server.folder, args.nice, 1 if pinned else None)
+                    ),
+                    args=FLAGS,
+                    headless=True,
                 ),
-                "viewer, same priority": await pw.chromium.launch(
-                    executable_path=str(CHROMIUM), args=FLAGS, headless=True
+                "viewer, shared cores": await pw.chromium.launch(
+                    executable_path=str(chromium_command(server.folder, 0, None)),
+                    args=FLAGS,
+                    headless=True,
                 ),
             }
             try:
@@ -266,7 +283,12 @@ def report(phases: list[Phase], args: argparse.Namespace) -> None:
     print()
     print(
         f"realtime kp runs at {args.hz:g} Hz, {args.seconds:g} s each, {args.rounds} rounds; "
-        f"Chromium {args.width}x{args.height}; 'viewer' runs it at niceness {args.nice}"
+        f"Chromium {args.width}x{args.height}; "
+        + (
+            f"the server on CPU 0, 'viewer' runs Chromium on CPU 1 at niceness {args.nice}"
+            if args.pin
+            else f"'viewer' runs Chromium at niceness {args.nice}"
+        )
     )
     base = p99s("none")
     if not base:
@@ -300,11 +322,17 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=1280, help="page width (1280)")
     parser.add_argument("--height", type=int, default=800, help="page height (800)")
     parser.add_argument(
+        "--no-pin",
+        dest="pin",
+        action="store_false",
+        help="do not pin the server to CPU 0 and the 'viewer' phase's Chromium to CPU 1",
+    )
+    parser.add_argument(
         "--nice",
         type=int,
         default=19,
-        help="niceness of the 'viewer' phase's Chromium (19: out of the server's way, as a "
-        "browser on another machine would be); 'viewer, same priority' runs it at 0",
+        help="niceness of the 'viewer' phase's Chromium (19); 'viewer, shared cores' runs it "
+        "at 0 on any core",
     )
     args = parser.parse_args()
     if args.seconds <= 0 or args.rounds < 1 or not 0 < args.hz <= 1000:
