@@ -69,6 +69,20 @@ _BOX = (180, 128, 72)
 _FOV = (250, 204, 21)
 
 
+def late(state: ViewState, since_tick_s: float) -> bool:
+    """Whether a frame of a realtime run's tick `since_tick_s` old is too late to draw.
+
+    A frame is drawn right after the tick that caused it, in the quiet first half of the
+    tick period. If this thread ran late (a busy machine), drawing now could hold the
+    interpreter just as the next tick is due: the frame is dropped, the next tick's
+    comes soon.
+    """
+    live = state.live
+    if state.mode != "live" or live is None or not live.realtime or live.status != "running":
+        return False
+    return since_tick_s > 0.5 / live.hz
+
+
 def run_label(run_id: int, condition: str, mode: str) -> str:
     """A dropdown entry; it starts with ``#<id>`` so the id can be read back."""
     return f"#{run_id} {condition} {mode}"
@@ -141,6 +155,8 @@ class Renderer:
         self.post = post
         self.frames = 0
         """Frames drawn (for tests and the bench)."""
+        self.dropped = 0
+        """Frames dropped because the tick they showed was too old (see `late`)."""
         self.last_frame: SceneFrame | None = None
         self.last_view: TickView | None = None
         """The newest live tick of the selected run."""
@@ -387,8 +403,13 @@ class Renderer:
                 # At most MAX_HZ: what arrives meanwhile is drawn together, newest on top.
                 self._stop.wait(next_at - now)
             next_at = time.monotonic() + period
+            now = time.monotonic()
+            state = inbox.state
             try:
-                self.draw(inbox.state, inbox.drain(), time.monotonic())
+                send = not late(state, now - inbox.pushed_at)
+                if not send:
+                    self.dropped += 1
+                self.draw(state, inbox.drain(), now, send=send)
             except Exception:  # a bad frame must not end the view
                 log.exception("the 3D view could not draw a frame")
 
@@ -405,8 +426,13 @@ class Renderer:
             self._layouts[key] = found
         return found
 
-    def draw(self, state: ViewState, ticks: Sequence[TickView], now: float) -> None:
-        """Draw one frame of `state` with the live ticks that arrived since the last one."""
+    def draw(
+        self, state: ViewState, ticks: Sequence[TickView], now: float, *, send: bool = True
+    ) -> None:
+        """Draw one frame of `state` with the live ticks that arrived since the last one.
+
+        With `send` false (or nobody watching) only the trail takes the ticks in.
+        """
         if state.version != self._version:
             self._version = state.version
             self._trail.clear()
@@ -430,8 +456,8 @@ class Renderer:
             trail = self._trail
             if view is not None and state.live is not None:
                 layout = self.layout(state.live.seed, view.episode)
-        if state.clients == 0:
-            return  # nobody watches: keep the trail, send nothing
+        if state.clients == 0 or not send:
+            return  # nobody watches, or a dropped frame: keep the trail, send nothing
         frame = scene_frame(self.static, view, layout) if view is not None else None
         with self.server.atomic():
             if frame is not None:
@@ -566,6 +592,7 @@ __all__ = [
     "REWARD_NOTE",
     "Renderer",
     "episode_of_label",
+    "late",
     "run_label",
     "run_of_label",
     "speed_label",

@@ -9,6 +9,7 @@ reads both and draws. Panel controls, which viser calls back on its own thread, 
 from __future__ import annotations
 
 import threading
+import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -149,6 +150,8 @@ class Inbox:
     def __init__(self, max_ticks: int = 512) -> None:
         self.state = ViewState()
         self.ticks: deque[TickView] = deque(maxlen=max_ticks)
+        self.pushed_at = 0.0
+        """When the newest live tick was pushed (time.monotonic)."""
         self.wake = threading.Event()
 
     def publish(self, state: ViewState) -> None:
@@ -159,6 +162,7 @@ class Inbox:
     def push(self, view: TickView) -> None:
         """A live tick to draw (the oldest is dropped when the renderer is behind)."""
         self.ticks.append(view)
+        self.pushed_at = time.monotonic()
         self.wake.set()
 
     def drain(self) -> list[TickView]:

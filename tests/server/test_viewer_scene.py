@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -242,3 +243,19 @@ def test_yaw_quaternions_are_unit_and_about_z() -> None:
         assert (x, y) == (0.0, 0.0)
         assert w * w + z * z == pytest.approx(1.0)
         assert 2 * math.atan2(z, w) == pytest.approx(float(yaw))
+
+
+def test_a_realtime_frame_drawn_later_than_half_a_tick_is_dropped() -> None:
+    from server.viewer.render import late
+    from server.viewer.state import LiveInfo, ViewState
+
+    live = LiveInfo(1, "kp", 3, "running", True, 20.0, True)
+    state = ViewState(clients=1, run_id=1, live=live)
+    assert not late(state, 0.001)
+    assert not late(state, 0.024)
+    assert late(state, 0.026)  # half of 50 ms
+    assert not late(replace(state, live=replace(live, hz=10.0)), 0.026)
+    # Nothing to protect: a fast run, a paused one, a replay.
+    assert not late(replace(state, live=replace(live, realtime=False)), 1.0)
+    assert not late(replace(state, live=replace(live, status="paused")), 1.0)
+    assert not late(replace(state, mode="replay"), 1.0)
