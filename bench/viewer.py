@@ -1,15 +1,18 @@
 """Realtime tick lateness of `srlab serve` with a 3D view watching, against none.
 
-Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 5 minutes, ``--seconds
+Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 7 minutes, ``--seconds
 10 --rounds 1`` for a quick check). It starts ``srlab serve`` itself on 127.0.0.1 (free
 ports, a temporary SQLite database) and Debian's Chromium twice (Playwright, the flags of
 tests/browser.py), then measures in one run, ``--rounds`` times in turn:
 
 * **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (40), no browser on
   the 3D view's port;
-* **viewer**: the same with a real Chromium page on the 3D view following that run live;
-  the server is pinned to CPU 0 and this Chromium to CPU 1 at niceness ``--nice`` (19):
-  what the service pays for a watching browser;
+* **viewer**: the same with a real Chromium page (``--width`` x ``--height``, 1280x800)
+  on the 3D view following that run live; the server is pinned to CPU 0 and this Chromium
+  to CPU 1 at niceness ``--nice`` (19);
+* **viewer, small page**: the same with a 64x64 page: the same messages to receive and
+  apply, next to nothing to render - what the service itself pays, apart from the
+  browser's rendering;
 * **viewer, shared cores**: the same with Chromium at the server's priority on any core.
 
 The page is loaded and idle before its run starts, so a figure is the steady state of
@@ -202,7 +205,9 @@ def pin_process(pid: int, cpu: int) -> None:
             os.sched_setaffinity(int(task.name), {cpu})
 
 
-PHASES = ("none", "viewer", "viewer, shared cores")
+PHASES = ("none", "viewer", "viewer, small page", "viewer, shared cores")
+SMALL = (64, 64)
+"""The small page's viewport: the same messages to handle, next to nothing to render."""
 
 
 async def bench(args: argparse.Namespace, server: Server) -> None:
@@ -243,9 +248,13 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
                 for r in range(args.rounds):
                     for name in PHASES:
                         page = None
-                        if name in browsers:
-                            page = await browsers[name].new_page(
-                                viewport={"width": args.width, "height": args.height}
+                        if name != "none":
+                            width, height = (
+                                SMALL if name.endswith("small page") else (args.width, args.height)
+                            )
+                            key = "viewer, shared cores" if "shared" in name else "viewer"
+                            page = await browsers[key].new_page(
+                                viewport={"width": width, "height": height}
                             )
                             await page.goto(f"http://{HOST}:{port}/")
                             await page.get_by_text("srlab 3D view").wait_for(timeout=60_000)
