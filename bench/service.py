@@ -507,6 +507,8 @@ class Server:
     folder: Path
     port: int = field(default_factory=free_port)
     proc: subprocess.Popen[bytes] | None = None
+    env: dict[str, str] = field(default_factory=lambda: {"SRLAB_VISER_PORT": str(free_port())})
+    """More SRLAB_* settings (by default the 3D view on a free port, not on 8080)."""
 
     @property
     def log(self) -> Path:
@@ -528,6 +530,7 @@ class Server:
             SRLAB_REWARD_RATE_PER_S=str(REWARD_LIMIT),
             SRLAB_REWARD_BURST=str(REWARD_LIMIT),
         )
+        env.update(self.env)
         script = Path(sys.executable).with_name("srlab")
         command = [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
         with self.log.open("wb") as out:

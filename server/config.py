@@ -26,7 +26,8 @@ class Settings(BaseSettings):
         cors_origins: origins allowed to call the API from a browser (besides the editor
             served by the service itself).
         allowed_hosts: Host headers accepted besides loopback names and `host`.
-        viser_port: port of the 3D view.
+        viser: serve the 3D view (viser) beside the API; false runs without it.
+        viser_port: port of the 3D view (on `host`).
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -41,6 +42,7 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(64 * 1024, ge=1024)
     cors_origins: list[str] = Field(default_factory=list)
     allowed_hosts: list[str] = Field(default_factory=list)
+    viser: bool = True
     viser_port: int = Field(8080, ge=1, le=65535)
 
     @field_validator("token")
@@ -64,7 +66,12 @@ class Settings(BaseSettings):
         return not self.loopback or self.token is not None
 
     def check(self) -> None:
-        """Refuse to serve beyond loopback without a token."""
+        """Refuse to serve beyond loopback without a token, or two servers on one port."""
+        if self.viser and self.viser_port == self.port:
+            raise ValueError(
+                f"SRLAB_VISER_PORT and SRLAB_PORT are both {self.port}: the 3D view needs a "
+                "port of its own"
+            )
         if not self.loopback and not self.token:
             raise ValueError(
                 f"srlab listens on {self.host}, beyond loopback: set SRLAB_TOKEN so that "

@@ -148,12 +148,25 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
         # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
         # them short (tests/reliability/test_load.py).
-        limiter = anyio.to_thread.current_default_thread_limiter()
-        limiter.total_tokens = REQUEST_THREADS
+        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
         for run in store.list_runs():
             if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
                 # Its process died: it can be resumed from its checkpoint and log.
                 store.set_status(run.id, RunStatus.INTERRUPTED, run.error)
+        rewards_limiter = RateLimiter(settings.reward_rate_per_s, settings.reward_burst)
+        viewer = None
+        if settings.viser:
+            from server.viewer import Viewer
+
+            viewer = await Viewer.start(
+                host=settings.host,
+                port=settings.viser_port,
+                manager=manager,
+                store=store,
+                catalog=catalog,
+                limiter=rewards_limiter,
+                writable=not settings.writes_need_token,
+            )
         app.state.srlab = AppState(
             settings=settings,
             catalog=catalog,
@@ -161,11 +174,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             store=store,
             networks=SqlAlchemyNetworkRepository(sessions),
             engines=manager,
-            rewards_limiter=RateLimiter(settings.reward_rate_per_s, settings.reward_burst),
+            rewards_limiter=rewards_limiter,
+            viewer=viewer,
         )
         try:
             yield
         finally:
+            if viewer is not None:
+                await viewer.stop()
             await manager.shutdown()
             engine.dispose()
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import socket
 
@@ -61,5 +62,8 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         timeout_graceful_shutdown=5,
     )
     server = _Server(config, app)
-    server.run()
+    with contextlib.suppress(KeyboardInterrupt):
+        server.run()
+    # As uvicorn.run: a server that never started (a failed lifespan, a taken port) is an
+    # error.
     return 0 if server.started else STARTUP_FAILURE

@@ -17,9 +17,13 @@ from server.persistence import upgrade
 
 
 def settings_for(tmp_path: Path, **overrides: Any) -> Settings:
-    """Settings on a fresh, migrated and seeded SQLite file under `tmp_path`."""
+    """Settings on a fresh, migrated and seeded SQLite file under `tmp_path`.
+
+    The 3D view is off unless a test asks for it (`viser=True`): it needs a port.
+    """
     url = f"sqlite:///{tmp_path / 'api.db'}"
     upgrade(url)
+    overrides.setdefault("viser", False)
     return Settings(database_url=url, **overrides)
 
 

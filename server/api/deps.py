@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hmac
 from dataclasses import dataclass
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 from fastapi import Depends, HTTPException, Request, status
 from sqlalchemy.orm import Session, sessionmaker
@@ -15,6 +15,9 @@ from server.engines import EngineManager
 from server.persistence import SqlAlchemyRunStore
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.ratelimit import RateLimiter
+
+if TYPE_CHECKING:
+    from server.viewer import Viewer
 
 
 @dataclass
@@ -28,6 +31,7 @@ class AppState:
     networks: SqlAlchemyNetworkRepository
     engines: EngineManager
     rewards_limiter: RateLimiter
+    viewer: Viewer | None = None
 
 
 def _state(request: Request) -> AppState:

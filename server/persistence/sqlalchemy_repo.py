@@ -566,6 +566,31 @@ class SqlAlchemyRunStore:
                 for e in rows
             ]
 
+    def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:
+        """One episode of a run with its trace, None if it has no such episode."""
+        with self._transaction(f"reading episode {episode} of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            e = s.scalars(
+                select(EpisodeRow).where(EpisodeRow.run_id == run_id, EpisodeRow.episode == episode)
+            ).first()
+            if e is None:
+                return None
+            return EpisodeRecord(
+                e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards, bytes(e.trace)
+            )
+
+    def episode_summaries(self, run_id: int) -> list[EpisodeRecord]:
+        """The run's episodes by number, without their traces (`trace` is empty)."""
+        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            e = EpisodeRow
+            rows = s.execute(
+                select(e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards)
+                .where(e.run_id == run_id)
+                .order_by(e.episode)
+            )
+            return [EpisodeRecord(*row, trace=b"") for row in rows]
+
     def list_runs(self) -> list[StoredRun]:
         """Every run, by id."""
         with self._transaction("listing runs", write=False) as s:

@@ -24,5 +24,5 @@ def health(state: StateDep) -> Health:
         version=version("srlab"),
         database=state.sessions.kw["bind"].dialect.name,
         runs_active=state.engines.running(),
-        viser_port=state.settings.viser_port,
+        viser_port=state.viewer.port if state.viewer is not None else None,
     )

@@ -1,0 +1,433 @@
+"""The 3D view's controller: it runs on the service's event loop, beside the engines.
+
+It carries out the panel's commands (select a run, reward it, change its rate, replay a
+stored episode) with the same engine calls and store reads the HTTP API uses, and feeds
+the renderer: while a browser watches a live run, it subscribes to that run's events
+(tick snapshots throttled to `MAX_HZ` by the engine, in a bounded queue that drops the
+oldest), turns each snapshot into a `TickView` with names resolved, and pushes it to the
+`Inbox`. With nobody watching it subscribes to nothing, so the engines pay nothing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from dataclasses import replace
+
+from core.brain.catalog import Catalog
+from core.engine import Engine, StatusChanged, TickPublished
+from core.errors import CoreError, SimulationStateError
+from core.events import EpisodeEnded
+from core.ports import Mode, RunStatus
+from core.sim.world import WorldConfig
+from core.simulation import Snapshot
+from server.engines import EngineManager
+from server.persistence import SqlAlchemyRunStore
+from server.ratelimit import RateLimiter
+from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
+from server.viewer.replay import ReplayClock, load_replay
+from server.viewer.scene import TickView
+from server.viewer.state import (
+    ChangeRate,
+    ClientsChanged,
+    GiveReward,
+    Inbox,
+    LiveInfo,
+    RefreshRuns,
+    RunChoice,
+    Seek,
+    SelectEpisode,
+    SelectRun,
+    SetMode,
+    SetSpeed,
+    TogglePlay,
+    ViewerCommand,
+    ViewState,
+)
+
+log = logging.getLogger("srlab.viewer")
+
+ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
+WATCH_S = 1.0
+"""How often, while someone watches, the controller looks for runs started or ended."""
+LIMITER_KEY = "3d-view"
+"""The rate limiter's client name for rewards given from the panel."""
+
+
+def tick_view(engine: Engine, snap: Snapshot) -> TickView:
+    """A live snapshot as the view shows it (call on the engine's event loop)."""
+    brain = engine.sim.brain
+    cat = brain.catalog
+    stimuli = tuple(cat.stimuli[i].name for i in snap.stimuli)
+    b = snap.behaviour
+    behaviour = cat.behaviours[b].name if 0 <= b < len(cat.behaviours) else None
+    kp = False
+    if snap.how.value == "released" and behaviour is not None:
+        for s in snap.stimuli:
+            a = brain.network.get(s, b)
+            if a is not None and a.source == "kp":
+                kp = True
+                break
+    totals = engine.totals
+    return TickView(
+        run_id=engine.run_id,
+        episode=snap.episode,
+        tick=snap.tick,
+        episode_tick=snap.episode_tick,
+        x=snap.x,
+        y=snap.y,
+        heading_rad=snap.heading_rad,
+        lamp=snap.lamp,
+        stimuli=stimuli,
+        behaviour=behaviour,
+        how=snap.how.value,
+        kp=kp,
+        successes=totals.successes,
+        episodes_done=totals.episodes,
+    )
+
+
+class Controller:
+    """Owns the view's state on the service's event loop.
+
+    Args:
+        inbox: where the renderer reads the state and live ticks.
+        manager: the service's engines.
+        store: the service's run store.
+        catalog: the shipped catalogue (names of stimuli and behaviours).
+        limiter: the service's reward rate limiter (the panel is one more client).
+        writable: the panel may reward and change rates (the service is on loopback).
+        world: the world the runs use.
+    """
+
+    def __init__(
+        self,
+        inbox: Inbox,
+        manager: EngineManager,
+        store: SqlAlchemyRunStore,
+        catalog: Catalog,
+        limiter: RateLimiter,
+        *,
+        writable: bool,
+        world: WorldConfig | None = None,
+    ) -> None:
+        self.inbox = inbox
+        self.manager = manager
+        self.store = store
+        self.catalog = catalog
+        self.limiter = limiter
+        self.world = world or WorldConfig()
+        self.state = ViewState(writable=writable)
+        self._commands: asyncio.Queue[ViewerCommand] = asyncio.Queue()
+        try:  # built on the service's loop: commands posted before `run` starts wait
+            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
+        except RuntimeError:
+            self._loop = None
+        self._follow: asyncio.Task[None] | None = None
+        self._signature: tuple[tuple[int, str], ...] | None = None
+        self._stored: dict[int, tuple[str, str, int, str, float]] = {}
+        """Per stored run: condition, mode, seed, status, hz (from the last refresh)."""
+        self._background: set[asyncio.Task[None]] = set()
+        self.handled = 0
+        """Commands handled so far (tests wait on it)."""
+
+    # --- from other threads -----------------------------------------------------------
+
+    def post(self, command: ViewerCommand) -> None:
+        """Hand a command to the controller; safe from any thread (viser's callbacks)."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+        with contextlib.suppress(RuntimeError):  # the loop is closing: nothing to do
+            loop.call_soon_threadsafe(self._commands.put_nowait, command)
+
+    # --- the task ---------------------------------------------------------------------
+
+    async def run(self) -> None:
+        """Carry out commands and watch the runs until cancelled."""
+        self._loop = asyncio.get_running_loop()
+        watcher = asyncio.create_task(self._watch(), name="viewer watch")
+        try:
+            while True:
+                command = await self._commands.get()
+                try:
+                    await self.handle(command)
+                except (CoreError, LookupError, ValueError) as e:
+                    self._publish(notice=f"**Not done:** {e}")
+                except Exception as e:
+                    log.exception("the 3D view's command %r failed", command)
+                    self._publish(notice=f"**Failed:** {type(e).__name__}: {e}")
+                self.handled += 1
+        finally:
+            watcher.cancel()
+            await self._stop_following()
+            for t in list(self._background):
+                t.cancel()
+            await asyncio.gather(watcher, *self._background, return_exceptions=True)
+
+    def _publish(self, **changes: object) -> None:
+        self.state = replace(self.state, **changes)  # type: ignore[arg-type]
+        self.inbox.publish(self.state)
+
+    async def handle(self, command: ViewerCommand) -> None:
+        """Carry out one command (on the event loop)."""
+        st = self.state
+        now = time.monotonic()
+        if isinstance(command, ClientsChanged):
+            self._publish(clients=command.clients)
+            if command.clients > 0:
+                await self._refresh_runs(force=True)
+            self._update_following()
+        elif isinstance(command, RefreshRuns):
+            await self._refresh_runs(force=True)
+        elif isinstance(command, SelectRun):
+            await self._select(command.run_id)
+        elif isinstance(command, SetMode):
+            if command.mode == st.mode:
+                return
+            self._publish(mode=command.mode, version=st.version + 1, notice="")
+            if command.mode == "replay":
+                await self._load_episodes()
+                if self.state.replay is None and self.state.episodes:
+                    await self._load_replay(self.state.episodes[-1][0])
+            self._update_following()
+        elif isinstance(command, SelectEpisode):
+            await self._load_replay(command.episode)
+        elif isinstance(command, TogglePlay):
+            if st.clock is not None:
+                clock = st.clock.pause(now) if st.clock.playing else st.clock.play(now)
+                self._publish(clock=clock)
+        elif isinstance(command, Seek):
+            if st.clock is not None:
+                self._publish(clock=st.clock.seek(command.index, now))
+        elif isinstance(command, SetSpeed):
+            if st.clock is not None:
+                self._publish(clock=st.clock.with_speed(command.speed, now))
+        elif isinstance(command, ChangeRate):
+            self._change_rate(command.hz)
+        elif isinstance(command, GiveReward):
+            self._spawn(self._reward(command.value))
+
+    def _spawn(self, coro: object) -> None:
+        task: asyncio.Task[None] = asyncio.create_task(coro)  # type: ignore[arg-type]
+        self._background.add(task)
+        task.add_done_callback(self._background.discard)
+
+    # --- runs -------------------------------------------------------------------------
+
+    def _engines_signature(self) -> tuple[tuple[int, str], ...]:
+        return tuple(sorted((e.run_id, e.status.value) for e in self.manager.engines()))
+
+    async def _refresh_runs(self, *, force: bool = False) -> None:
+        signature = self._engines_signature()
+        if not force and signature == self._signature:
+            return
+        self._signature = signature
+        stored = await asyncio.to_thread(self.store.list_runs)
+        self._stored = {
+            r.id: (r.spec.condition, r.spec.mode.value, r.spec.seed, r.status.value, r.spec.hz)
+            for r in stored
+        }
+        runs = []
+        for r in stored:
+            engine = self.manager.get(r.id)
+            live = engine is not None and engine.status in ACTIVE
+            runs.append(RunChoice(r.id, run_label(r.id, r.spec.condition, r.spec.mode.value), live))
+        self._publish(runs=tuple(runs))
+        st = self.state
+        newest = max((r.id for r in runs if r.live), default=None)
+        selected = next((r for r in runs if r.id == st.run_id), None)
+        if st.run_id is None or selected is None:
+            target = newest if newest is not None else (runs[-1].id if runs else None)
+            if target is not None:
+                await self._select(target)
+        elif st.mode == "live" and not selected.live and newest is not None:
+            # Follow the newest live run, unless the user is looking at a replay.
+            await self._select(newest)
+        else:
+            self._publish(live=self._live_info(st.run_id))
+
+    def _live_info(self, run_id: int | None) -> LiveInfo | None:
+        if run_id is None:
+            return None
+        engine = self.manager.get(run_id)
+        if engine is not None:
+            spec = engine.spec
+            return LiveInfo(
+                run_id,
+                spec.condition,
+                spec.seed,
+                engine.status.value,
+                spec.mode is Mode.REALTIME,
+                engine.hz,
+                engine.status in ACTIVE,
+            )
+        stored = self._stored.get(run_id)
+        if stored is None:
+            return None
+        condition, mode, seed, status, hz = stored
+        return LiveInfo(run_id, condition, seed, status, mode == Mode.REALTIME.value, hz, False)
+
+    async def _select(self, run_id: int) -> None:
+        st = self.state
+        if run_id == st.run_id and st.live is not None:
+            return
+        if run_id not in self._stored and self.manager.get(run_id) is None:
+            await self._refresh_runs(force=True)
+            if run_id not in self._stored:
+                raise LookupError(f"there is no run {run_id}")
+        self._publish(
+            run_id=run_id,
+            live=self._live_info(run_id),
+            replay=None,
+            clock=None,
+            episodes=(),
+            version=st.version + 1,
+            notice="",
+        )
+        if self.state.mode == "replay":
+            await self._load_episodes()
+            if self.state.episodes:
+                await self._load_replay(self.state.episodes[-1][0])
+        self._update_following()
+
+    async def _watch(self) -> None:
+        """While someone watches: notice runs started or ended, and the replay's end."""
+        while True:
+            await asyncio.sleep(WATCH_S)
+            st = self.state
+            if st.clients == 0:
+                continue
+            try:
+                await self._refresh_runs()
+                if st.clock is not None and st.clock.playing:
+                    settled = st.clock.settle(time.monotonic())
+                    if settled is not st.clock:
+                        self._publish(clock=settled)
+                if st.mode == "replay" and st.live is not None and st.live.ticking:
+                    await self._load_episodes()
+            except CoreError as e:  # storage trouble: say so, keep watching
+                self._publish(notice=f"**Storage:** {e}")
+
+    # --- replay -----------------------------------------------------------------------
+
+    async def _load_episodes(self) -> None:
+        run_id = self.state.run_id
+        if run_id is None:
+            return
+        records = await asyncio.to_thread(self.store.episode_summaries, run_id)
+        episodes = tuple((e.episode, f"{e.episode} {e.outcome}, {e.ticks} ticks") for e in records)
+        if episodes != self.state.episodes:
+            self._publish(episodes=episodes)
+
+    async def _load_replay(self, episode: int) -> None:
+        run_id = self.state.run_id
+        if run_id is None:
+            raise LookupError("select a run first")
+        replay = await asyncio.to_thread(
+            load_replay, self.store, self.catalog, run_id, episode, self.world
+        )
+        if self.state.run_id != run_id:
+            return  # another run was selected meanwhile
+        speed = self.state.clock.speed if self.state.clock is not None else 1.0
+        clock = ReplayClock(replay.ticks, self.world.dt_s, speed=speed).play(time.monotonic())
+        self._publish(
+            mode="replay", replay=replay, clock=clock, version=self.state.version + 1, notice=""
+        )
+        self._update_following()
+
+    # --- live -------------------------------------------------------------------------
+
+    def _update_following(self) -> None:
+        """Follow the selected run's events only while someone watches it live."""
+        st = self.state
+        want = st.clients > 0 and st.mode == "live" and st.run_id is not None
+        current = self._follow
+        if current is not None and not current.done():
+            if want and current.get_name() == f"viewer follows run {st.run_id}":
+                return
+            current.cancel()
+            self._follow = None
+        if want:
+            assert st.run_id is not None
+            self._follow = asyncio.create_task(
+                self._follow_run(st.run_id), name=f"viewer follows run {st.run_id}"
+            )
+
+    async def _stop_following(self) -> None:
+        task, self._follow = self._follow, None
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+
+    async def _follow_run(self, run_id: int) -> None:
+        """Push the run's tick snapshots to the renderer; wait out its pauses and restarts."""
+        shown: Engine | None = None
+        while True:
+            engine = self.manager.get(run_id)
+            if engine is None or engine.status not in ACTIVE:
+                if engine is not None and engine is not shown:
+                    # A run that ended here: show where it stopped.
+                    shown = engine
+                    with contextlib.suppress(SimulationStateError):
+                        self.inbox.push(tick_view(engine, engine.sim.snapshot))
+                await asyncio.sleep(0.5)
+                continue
+            sub = engine.subscribe(maxsize=64, tick_hz=MAX_HZ)
+            try:
+                self._publish(live=self._live_info(run_id))
+                with contextlib.suppress(SimulationStateError):  # not reset yet
+                    self.inbox.push(tick_view(engine, engine.sim.snapshot))
+                while not (sub.closed and sub.queue.empty()):
+                    try:
+                        async with asyncio.timeout(1.0):
+                            event = await sub.get()
+                    except TimeoutError:
+                        continue
+                    if isinstance(event, TickPublished):
+                        self.inbox.push(tick_view(engine, event.snapshot))
+                    elif isinstance(event, StatusChanged | EpisodeEnded):
+                        self._publish(live=self._live_info(run_id))
+            finally:
+                engine.unsubscribe(sub)
+            self._publish(live=self._live_info(run_id))
+
+    def _change_rate(self, hz: float) -> None:
+        st = self.state
+        if not st.writable:
+            raise ValueError("the panel changes rates on loopback only: use the API's token")
+        engine = self.manager.get(st.run_id) if st.run_id is not None else None
+        if engine is None or engine.status not in ACTIVE:
+            raise ValueError("the selected run is not running here")
+        if engine.spec.mode is not Mode.REALTIME:
+            raise ValueError("a fast run has no tick rate to change")
+        if not (math.isfinite(hz) and 0 < hz <= 1000):
+            raise ValueError("the tick rate must be in (0, 1000] Hz")
+        engine.set_rate(hz)
+        self._publish(live=self._live_info(st.run_id), notice=f"Tick rate set to {hz:g} Hz")
+
+    async def _reward(self, value: float) -> None:
+        st = self.state
+        sign = f"{value:+g}"
+        try:
+            if not st.writable:
+                raise ValueError("the panel rewards on loopback only: use the API's token")
+            engine = self.manager.get(st.run_id) if st.run_id is not None else None
+            if engine is None or engine.status is not RunStatus.RUNNING:
+                raise ValueError("the selected run is not running")
+            wait = self.limiter.allow(LIMITER_KEY)
+            if wait > 0:
+                raise ValueError(f"too many rewards: wait {wait:.1f} s")
+            ack = await engine.reward(value, note=REWARD_NOTE, source="trainer")
+        except (CoreError, ValueError) as e:
+            self._publish(notice=f"**Reward {sign} not given:** {e}")
+            return
+        self._publish(
+            notice=f"Reward {sign} stored as #{ack.id}, at tick {ack.tick} of episode {ack.episode}"
+        )
+
+
+__all__ = ["Controller", "tick_view"]

@@ -1,0 +1,136 @@
+"""End to end: `srlab serve`, its 3D view in Debian's Chromium, the panel clicked for real.
+
+Chromium runs with --disable-gpu (tests/browser.py); it renders WebGL with SwiftShader,
+its software fallback, without further flags (checked with Chromium 150), so the
+screenshot is a real rendering and the test reads its pixels.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from browser import artifact
+from liveserver import LiveServer, start_server, stop_server, wait_status
+from PIL import Image
+from playwright.sync_api import Browser, Page
+
+from server.viewer.render import REWARD_NOTE
+
+VIEWPORT = {"width": 1280, "height": 800}
+PANEL_LEFT = 900
+"""The panel floats at the right: the scene is read left of it."""
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A live server of this module's own (`browser` is the session's, tests/conftest.py)."""
+    live = start_server(tmp_path_factory.mktemp("viewer") / "viewer.db")
+    try:
+        yield live
+    finally:
+        # The browser may still be connected: shutdown must be clean all the same.
+        stop_server(live)
+
+
+def robot_pixels(png: bytes) -> np.ndarray:
+    """(row, column) of the pixels with the robot's red, left of the panel."""
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    scene = image[:, :PANEL_LEFT]
+    r, g, b = scene[..., 0], scene[..., 1], scene[..., 2]
+    red = (r > 120) & (g < 0.45 * r) & (b < 0.45 * r)
+    return np.argwhere(red)
+
+
+def open_view(browser: Browser, server: LiveServer) -> Page:
+    port = server.client.get("/api/health").json()["viser_port"]
+    assert isinstance(port, int)
+    page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.get_by_text("srlab 3D view").wait_for(timeout=30_000)
+    # The notice that WebGL runs in software covers a corner of the scene: hide it.
+    page.add_style_tag(content=".mantine-Notification-root { display: none !important; }")
+    return page
+
+
+def wait_for_robot(page: Page, timeout: float = 30.0) -> tuple[bytes, np.ndarray]:
+    deadline = time.monotonic() + timeout
+    while True:
+        png = page.screenshot()
+        pixels = robot_pixels(png)
+        if len(pixels) >= 150:
+            return png, pixels
+        if time.monotonic() > deadline:
+            Path(artifact("viewer-no-robot.png")).write_bytes(png)
+            raise AssertionError(f"no robot in the 3D view ({len(pixels)} red pixels)")
+        time.sleep(0.25)
+
+
+def rewards(api: httpx.Client, run_id: int) -> list[dict[str, Any]]:
+    data: list[dict[str, Any]] = api.get(f"/api/runs/{run_id}/rewards").json()["data"]
+    return data
+
+
+def test_the_view_shows_the_live_robot_and_its_panel_rewards_it(
+    server: LiveServer, browser: Browser
+) -> None:
+    api = server.client
+
+    r = api.post("/api/runs", json={"condition": "kp", "mode": "realtime", "hz": 20, "seed": 3})
+    run_id = r.json()["id"]
+    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    page = open_view(browser, server)
+    try:
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
+        png, first = wait_for_robot(page)
+        artifact("viewer.png").write_bytes(png)
+        # The panel tells the decision of the tick shown.
+        page.get_by_text("Behaviour:").wait_for(timeout=10_000)
+        page.get_by_text("Stimuli:").wait_for(timeout=10_000)
+        time.sleep(1.5)
+        _, later = wait_for_robot(page)
+        moved = np.abs(later.mean(axis=0) - first.mean(axis=0)).max()
+        assert moved > 3, f"the robot did not move on screen ({moved:.1f} px)"
+        page.get_by_role("button", name="+ reward").click()
+        deadline = time.monotonic() + 20
+        log = rewards(api, run_id)
+        while not (log and log[-1]["applied"]) and time.monotonic() < deadline:
+            time.sleep(0.1)
+            log = rewards(api, run_id)
+        mine = [x for x in log if x["note"] == REWARD_NOTE]
+        assert len(mine) == 1, log
+        assert mine[0]["value"] == 1.0 and mine[0]["source"] == "trainer"
+        assert mine[0]["applied"] and mine[0]["credited"] > 0
+        page.get_by_text(f"stored as #{mine[0]['id']}").wait_for(timeout=10_000)
+    finally:
+        page.close()
+        api.post(f"/api/runs/{run_id}/stop")
+
+
+def test_a_stored_episode_replays_in_the_view(server: LiveServer, browser: Browser) -> None:
+    api = server.client
+    r = api.post("/api/runs", json={"condition": "kp", "mode": "fast", "seed": 6, "episodes": 2})
+    run_id = r.json()["id"]
+    api.post(f"/api/runs/{run_id}/start")
+    wait_status(api, run_id, "finished")
+    page = open_view(browser, server)
+    try:
+        # Pick the run in the dropdown, then the replay view.
+        page.get_by_role("combobox", name="Run").click()
+        page.get_by_role("option", name=f"#{run_id} kp fast").click()
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
+        page.get_by_role("button", name="Replay", exact=True).click()
+        page.get_by_text(f"of run {run_id}, episode 1").first.wait_for(timeout=30_000)
+        page.get_by_role("button", name="Pause", exact=True).click()
+        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=10_000)
+        png, _ = wait_for_robot(page)
+        artifact("viewer-replay.png").write_bytes(png)
+        page.get_by_text("Replay of a stored episode").wait_for(timeout=10_000)
+    finally:
+        page.close()
