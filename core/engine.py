@@ -380,6 +380,16 @@ class Engine:
             self._tick_subscribers -= sub.tick_period < math.inf
             sub.closed = True
 
+    def close_subscriptions(self) -> None:
+        """End every subscription: its reader gets the current status, then the end.
+
+        For a service shutting down: the live streams of a run that is not ticking (created,
+        finished) end instead of holding their connections open.
+        """
+        for sub in list(self._subscribers):
+            sub.offer(StatusChanged(self.run_id, self.status, self.error))
+            self.unsubscribe(sub)
+
     async def reward(self, value: float, note: str = "", source: str = "trainer") -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 

@@ -126,10 +126,14 @@ class EngineManager:
     def interrupt_all(self) -> None:
         """Ask every run to end at its next tick boundary, as interrupted (resumable).
 
-        Its event streams end with it, with a last status event.
+        Its event streams end with it, with a last status event; those of a run that is not
+        ticking (created, finished) end at once.
         """
-        for engine in self._engines.values():
+        for run_id, engine in self._engines.items():
             engine.interrupt()
+            task = self._tasks.get(run_id)
+            if task is None or task.done():
+                engine.close_subscriptions()
 
     async def shutdown(self, grace_s: float = 5.0) -> None:
         """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""
