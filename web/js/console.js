@@ -25,6 +25,7 @@ const state = {
   active: false,
   viserPort: null,
   lastReward: null,
+  credited: new Set(),
   tick: null,
 };
 
@@ -107,6 +108,7 @@ async function select(id) {
   state.network = new Map();
   state.tick = null;
   state.lastReward = null;
+  state.credited = new Set();
   $("#reward-effect").replaceChildren(el("p", { class: "muted", text: "No reward yet." }));
   $("#assoc-feed").replaceChildren();
   resetLive();
@@ -274,6 +276,7 @@ function onReward(r) {
   refreshMemory();
   if (r.source !== "trainer") return;
   state.lastReward = r;
+  state.credited.add(`${r.tick}:${r.value}`);
   const rows_ = r.credits.map((c) => el("tr", {},
     el("td", { text: c.tick }), el("td", { text: `${c.stimulus} → ${c.behaviour}` }),
     el("td", { text: c.d_k }), el("td", { text: `${fmt(c.before, 3)} → ${fmt(c.after, 3)}` })));
@@ -395,6 +398,8 @@ async function reward(value) {
   }
   const ack = await attempt(() => post(`/runs/${run.id}/rewards`, { value }), "Reward");
   if (!ack) return;
+  // The stream may have shown its credit before the acknowledgement came back.
+  if (state.credited.has(`${ack.tick}:${ack.value}`)) return;
   $("#reward-effect").replaceChildren(el("div", { class: "head" },
     `${value > 0 ? "+" : "−"}1 logged as reward #${ack.id} at tick ${ack.tick} (episode ${ack.episode}); crediting…`));
 }
