@@ -26,8 +26,8 @@ from core.runner import EpisodeSummary, RunSummary, run
 from core.simulation import Snapshot
 from server.ray_backend import BackendError
 from server.sweep_cli import (
-    add_backend_arguments,
     add_sweep_parser,
+    add_task_arguments,
     on_result_updater,
     open_backend,
     progress_display,
@@ -108,20 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"comma-separated, from: {', '.join(CONDITIONS)} (default: the paper's four, "
         "innate and qlambda)",
     )
-    exp.add_argument("--seeds", type=_positive_int, default=20, help="seeds 0..N-1 (default 20)")
-    exp.add_argument("--seed-base", type=_seed, default=0, help="first seed (default 0)")
-    exp.add_argument(
-        "--episodes", type=_positive_int, default=50, help="episodes per seed (default 50)"
-    )
-    exp.add_argument(
-        "--jobs",
-        type=_positive_int,
-        default=os.cpu_count() or 1,
-        help="parallel processes, or CPUs of a private Ray instance",
-    )
-    add_backend_arguments(exp)
-    exp.add_argument("--out", type=Path, default=Path("results"), help="output folder")
-    exp.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_task_arguments(exp, _positive_int, _seed, Path("results"))
     add_sweep_parser(sub, _positive_int, _seed)
 
     sweep = sub.add_parser(

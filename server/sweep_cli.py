@@ -29,6 +29,29 @@ from core.params import PARAMETERS
 from core.sweep import point_label
 
 
+def add_task_arguments(
+    parser: argparse.ArgumentParser,
+    positive_int: Callable[[str], Any],
+    seed: Callable[[str], Any],
+    out: Path,
+) -> None:
+    """What `experiment` and `sweep` share: seeds, episodes, jobs, the backend, --out."""
+    parser.add_argument("--seeds", type=positive_int, default=20, help="seeds (default 20)")
+    parser.add_argument("--seed-base", type=seed, default=0, help="first seed (default 0)")
+    parser.add_argument(
+        "--episodes", type=positive_int, default=50, help="episodes per seed (default 50)"
+    )
+    parser.add_argument(
+        "--jobs",
+        type=positive_int,
+        default=os.cpu_count() or 1,
+        help="local processes, or CPUs of a private Ray instance",
+    )
+    add_backend_arguments(parser)
+    parser.add_argument("--out", type=Path, default=out, help="output folder")
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
 def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
     """--backend, --address and --ship-code."""
     parser.add_argument(
@@ -132,20 +155,7 @@ def add_sweep_parser(
         default="kp,qlambda",
         help=f"comma-separated, from: {', '.join(CONDITIONS)} (default: kp,qlambda)",
     )
-    sweep.add_argument("--seeds", type=positive_int, default=20, help="seeds (default 20)")
-    sweep.add_argument("--seed-base", type=seed, default=0, help="first seed (default 0)")
-    sweep.add_argument(
-        "--episodes", type=positive_int, default=50, help="episodes per seed (default 50)"
-    )
-    sweep.add_argument(
-        "--jobs",
-        type=positive_int,
-        default=os.cpu_count() or 1,
-        help="local processes, or CPUs of a private Ray instance",
-    )
-    add_backend_arguments(sweep)
-    sweep.add_argument("--out", type=Path, default=Path("results/sweep"), help="output folder")
-    sweep.add_argument("--quiet", action="store_true", help="no progress display")
+    add_task_arguments(sweep, positive_int, seed, Path("results/sweep"))
 
 
 def command_line() -> str:
