@@ -45,6 +45,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
+
 from bench.service import (
     HOST,
     RawClient,
@@ -59,16 +62,6 @@ from bench.service import (
     wait_healthy,
 )
 
-CHROMIUM = Path(os.environ.get("SRLAB_CHROMIUM", "/usr/bin/chromium"))
-FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 TICK = re.compile(r"Episode (\d+), tick (\d+)")
 
 

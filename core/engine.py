@@ -98,8 +98,15 @@ class TickPublished:
     snapshot: Snapshot
 
 
+class SubscriptionClosed(Exception):
+    """A subscription has ended and every event it held has been read."""
+
+
 class Subscription:
     """A bounded queue of engine events; when full, the oldest event is dropped.
+
+    A reader waiting in `get` is woken when the subscription closes, so a stream never outlives
+    its run: once closed and drained, `get` raises `SubscriptionClosed` and iteration stops.
 
     Args:
         maxsize: how many events it holds.
@@ -107,29 +114,59 @@ class Subscription:
     """
 
     def __init__(self, maxsize: int = 256, tick_hz: float = 0.0) -> None:
-        self.queue: asyncio.Queue[object] = asyncio.Queue(maxsize)
+        if maxsize < 1:
+            raise ValueError(f"a subscription holds at least one event, not {maxsize}")
+        self._events: deque[object] = deque(maxlen=maxsize)
+        self._ready = asyncio.Event()
         self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
         self.next_tick_at = 0.0
         self.dropped = 0
         self.closed = False
 
+    @property
+    def pending(self) -> int:
+        """How many events wait to be read."""
+        return len(self._events)
+
+    @property
+    def ended(self) -> bool:
+        """Closed, and every event read."""
+        return self.closed and not self._events
+
     def offer(self, event: object) -> bool:
         """Queue an event without blocking; False when an older one had to go."""
-        dropped = False
-        if self.queue.full():
-            self.queue.get_nowait()
-            self.dropped += 1
-            dropped = True
-        self.queue.put_nowait(event)
+        dropped = len(self._events) == self._events.maxlen
+        self.dropped += dropped
+        self._events.append(event)
+        self._ready.set()
         return not dropped
 
+    def close(self) -> None:
+        """No more events; a waiting reader gets what is left, then `SubscriptionClosed`."""
+        self.closed = True
+        self._ready.set()
+
+    def drain(self) -> list[object]:
+        """Every waiting event, without blocking."""
+        out = list(self._events)
+        self._events.clear()
+        return out
+
     async def get(self) -> object:
-        """The next event."""
-        return await self.queue.get()
+        """The next event; raises `SubscriptionClosed` once closed and drained."""
+        while not self._events:
+            if self.closed:
+                raise SubscriptionClosed
+            self._ready.clear()
+            await self._ready.wait()
+        return self._events.popleft()
 
     async def __aiter__(self) -> AsyncIterator[object]:
-        while not (self.closed and self.queue.empty()):
-            yield await self.queue.get()
+        while True:
+            try:
+                yield await self.get()
+            except SubscriptionClosed:
+                return
 
 
 @dataclass
@@ -378,7 +415,7 @@ class Engine:
         if sub in self._subscribers:
             self._subscribers.remove(sub)
             self._tick_subscribers -= sub.tick_period < math.inf
-            sub.closed = True
+            sub.close()
 
     def close_subscriptions(self) -> None:
         """End every subscription: its reader gets the current status, then the end.
@@ -537,7 +574,7 @@ class Engine:
                 status = RunStatus.FAILED
         self._set_status(status)
         for sub in self._subscribers:
-            sub.closed = True
+            sub.close()
 
     def _fail_pending(self, error: BaseException) -> None:
         # Held rewards (stamped while a boundary was being settled) are not due yet, but
@@ -1022,6 +1059,7 @@ __all__ = [
     "RewardAck",
     "StatusChanged",
     "Subscription",
+    "SubscriptionClosed",
     "TickPublished",
 ]
 _ = RewardApplied  # re-exported type of published reward events

@@ -18,7 +18,7 @@ import time
 from dataclasses import replace
 
 from core.brain.catalog import Catalog
-from core.engine import Engine, StatusChanged, TickPublished
+from core.engine import Engine, StatusChanged, SubscriptionClosed, TickPublished
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
 from core.ports import Mode, RunStatus
@@ -381,12 +381,11 @@ class Controller:
                 self._publish(live=self._live_info(run_id))
                 with contextlib.suppress(SimulationStateError):  # not reset yet
                     self.inbox.push(tick_view(engine, engine.sim.snapshot))
-                while not (sub.closed and sub.queue.empty()):
+                while True:
                     try:
-                        async with asyncio.timeout(1.0):
-                            event = await sub.get()
-                    except TimeoutError:
-                        continue
+                        event = await sub.get()
+                    except SubscriptionClosed:
+                        break
                     if isinstance(event, TickPublished):
                         self.inbox.push(tick_view(engine, event.snapshot))
                     elif isinstance(event, StatusChanged | EpisodeEnded):

@@ -14,7 +14,7 @@ from fakes import InMemoryRunStore
 from core.brain.catalog import Catalog, load_catalog
 from core.commands import EditAssociation
 from core.conditions import get_condition
-from core.engine import Engine, StatusChanged, Subscription, TickPublished
+from core.engine import Engine, StatusChanged, Subscription, SubscriptionClosed, TickPublished
 from core.errors import RunStateError, StorageError
 from core.events import EpisodeEnded, RewardApplied
 from core.ports import LearningUpdate, Mode, RewardRecord, RunSpec, RunStatus
@@ -78,7 +78,7 @@ def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
 
     asyncio.run(drive(engine, script))
     ack = acks[0]
-    applied = [ev for ev in drain(sub) if isinstance(ev, RewardApplied) and ev.source == "trainer"]
+    applied = [ev for ev in sub.drain() if isinstance(ev, RewardApplied) and ev.source == "trainer"]
     assert len(applied) == 1
     event = applied[0]
     assert event.tick == ack.tick
@@ -92,13 +92,6 @@ def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
     assert [(r.id, r.record.tick, r.record.note, r.applied) for r in logged] == [
         (ack.id, ack.tick, "good", True)
     ]
-
-
-def drain(sub: Subscription) -> list[object]:
-    out = []
-    while not sub.queue.empty():
-        out.append(sub.queue.get_nowait())
-    return out
 
 
 def test_a_run_replays_from_its_seed_and_command_log() -> None:
@@ -175,7 +168,7 @@ def test_pause_resume_and_rewards_need_a_running_run() -> None:
         e.stop()
 
     assert asyncio.run(drive(engine, script)) is RunStatus.STOPPED
-    statuses = [ev.status for ev in drain(sub) if isinstance(ev, StatusChanged)]
+    statuses = [ev.status for ev in sub.drain() if isinstance(ev, StatusChanged)]
     assert statuses == [
         RunStatus.RUNNING,
         RunStatus.PAUSED,
@@ -231,7 +224,7 @@ def test_a_slow_subscriber_never_stalls_the_tick_task() -> None:
     assert asyncio.run(engine.run()) is RunStatus.FINISHED
     assert engine.totals.episodes == 20
     assert slow.dropped > 0
-    assert slow.queue.qsize() == 2
+    assert slow.pending == 2
 
 
 def test_tick_snapshots_are_throttled_per_subscriber() -> None:
@@ -244,9 +237,46 @@ def test_tick_snapshots_are_throttled_per_subscriber() -> None:
         e.stop()
 
     asyncio.run(drive(engine, script))
-    ticks = [ev for ev in drain(few) if isinstance(ev, TickPublished)]
+    ticks = [ev for ev in few.drain() if isinstance(ev, TickPublished)]
     assert 1 <= len(ticks) < engine.stats.ticks / 2
-    assert not any(isinstance(ev, TickPublished) for ev in drain(none))
+    assert not any(isinstance(ev, TickPublished) for ev in none.drain())
+
+
+def test_a_waiting_reader_is_released_when_its_subscription_closes() -> None:
+    """A stream of a run that is not ticking ends at shutdown instead of waiting forever."""
+    engine = Engine.create(fast("delayed", 3, 2), InMemoryRunStore(CATALOG))
+    waiting = engine.subscribe(maxsize=4)
+    iterating = engine.subscribe(maxsize=4)
+
+    async def scenario() -> tuple[list[object], list[object]]:
+        async def read_all(sub: Subscription) -> list[object]:
+            return [ev async for ev in sub]
+
+        readers = [asyncio.create_task(read_all(s)) for s in (waiting, iterating)]
+        await asyncio.sleep(0.01)
+        assert not any(r.done() for r in readers)  # nothing to read yet: they wait
+        engine.unsubscribe(waiting)  # no event comes: closing alone must wake it
+        engine.close_subscriptions()  # the status, then the end
+        async with asyncio.timeout(2.0):
+            first, second = await asyncio.gather(*readers)
+        return first, second
+
+    first, second = asyncio.run(scenario())
+    assert first == []
+    assert [type(ev) for ev in second] == [StatusChanged]
+    assert waiting.ended and iterating.ended
+    with pytest.raises(SubscriptionClosed):
+        asyncio.run(waiting.get())
+
+
+def test_a_full_subscription_keeps_the_newest_events() -> None:
+    sub = Subscription(maxsize=3)
+    accepted = [sub.offer(n) for n in range(5)]
+    assert accepted == [True, True, True, False, False]
+    assert (sub.dropped, sub.pending) == (2, 3)
+    assert sub.drain() == [2, 3, 4]
+    with pytest.raises(ValueError, match="at least one"):
+        Subscription(maxsize=0)
 
 
 class FailingStore(InMemoryRunStore):
@@ -344,7 +374,7 @@ def test_episode_end_events_reach_subscribers() -> None:
     engine = Engine.create(fast("expert", 2, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
     sub = engine.subscribe(maxsize=100)
     asyncio.run(engine.run())
-    ended = [ev for ev in drain(sub) if isinstance(ev, EpisodeEnded)]
+    ended = [ev for ev in sub.drain() if isinstance(ev, EpisodeEnded)]
     assert [e.episode for e in ended] == [0, 1, 2]
 
 

@@ -13,7 +13,7 @@ from starlette.concurrency import run_in_threadpool
 
 from core.brain.catalog import Catalog
 from core.brain.selection import Selector
-from core.engine import StatusChanged, TickPublished
+from core.engine import StatusChanged, SubscriptionClosed, TickPublished
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
@@ -134,11 +134,11 @@ async def stream_events(
             first = {"status": engine.status.value, "run": run_id}
             yield f"event: status\ndata: {json.dumps(first)}\n\n".encode()
             while True:
-                if sub.closed and sub.queue.empty():
-                    break
                 try:
                     async with asyncio.timeout(HEARTBEAT_S):
                         event = await sub.get()
+                except SubscriptionClosed:
+                    break
                 except TimeoutError:
                     if await request.is_disconnected():
                         break
