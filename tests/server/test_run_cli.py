@@ -116,23 +116,34 @@ def srlab(*args: str, env: dict[str, str]) -> subprocess.Popen[str]:
     )
 
 
+def wait_running(db: Path, child: subprocess.Popen[str], timeout_s: float = 60) -> None:
+    """Until run 1 is running (its signal handlers are in place by then), then a moment more.
+
+    A fixed sleep is not enough on a loaded machine: the CLI's start-up takes seconds there, and
+    a signal before the handlers are installed kills it with a traceback.
+    """
+    deadline = time.monotonic() + timeout_s
+    with sqlite3.connect(db, timeout=10) as conn:
+        while time.monotonic() < deadline:
+            assert child.poll() is None, child.communicate()
+            time.sleep(0.2)
+            try:
+                row = conn.execute("select status from runs where id = 1").fetchone()
+            except sqlite3.OperationalError:
+                continue
+            if row and row[0] == "running":
+                time.sleep(0.5)
+                return
+    pytest.fail(f"run 1 was not running within {timeout_s:g} s")
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes(
     db_url: str, tmp_path: Path, sig: signal.Signals, capsys: pytest.CaptureFixture[str]
 ) -> None:
     env = {**os.environ, "SRLAB_DATABASE_URL": db_url}
     child = srlab("run", "--condition", "delayed", "--mode", "realtime", "--hz", "50", env=env)
-    deadline = time.monotonic() + 60
-    with sqlite3.connect(tmp_path / "srlab.db", timeout=10) as db:
-        while time.monotonic() < deadline:
-            time.sleep(0.2)
-            try:
-                row = db.execute("select status from runs where id = 1").fetchone()
-            except sqlite3.OperationalError:
-                continue
-            if row and row[0] == "running":
-                break
-    time.sleep(0.5)
+    wait_running(tmp_path / "srlab.db", child)
     child.send_signal(sig)
     out, err = child.communicate(timeout=30)
     assert child.returncode == 0, err
@@ -143,7 +154,7 @@ def test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes(
     assert run["status"] == "interrupted"
 
     again = srlab("run", "--resume", "1", "--quiet", env=env)
-    time.sleep(3)
+    wait_running(tmp_path / "srlab.db", again)
     again.send_signal(signal.SIGINT)
     out, err = again.communicate(timeout=30)
     assert again.returncode == 0, err
