@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 import traceback
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from functools import cache
 from typing import Any, Protocol
@@ -153,12 +154,50 @@ class LocalBackend:
             for t in tasks:
                 yield fn(t)
             return
-        with ProcessPoolExecutor(max_workers=self.jobs) as pool:
-            pending: set[Future[TaskResult]] = {pool.submit(fn, t) for t in tasks}
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    yield f.result()
+        lost = yield from _in_pool(tasks, fn, self.jobs)
+        while lost:
+            # A worker died (killed, out of memory, a crash in native code) and took down
+            # the pool's pending tasks with it. Run them again; once a round finishes none,
+            # run each alone, so that a task that kills its worker is told apart from the
+            # ones that were beside it, and comes back as a failed result with its seed.
+            again = yield from _in_pool(lost, fn, self.jobs)
+            if len(again) == len(lost):
+                for task in again:
+                    if (yield from _in_pool([task], fn, 1)):
+                        yield TaskResult(task, error=WORKER_DIED)
+                return
+            lost = again
+
+
+WORKER_DIED = (
+    "its worker process died (killed, out of memory, or a crash in native code); "
+    "run this task alone, with --jobs 1, to see why"
+)
+
+
+def _in_pool(
+    tasks: Sequence[Task], fn: TaskFunction, workers: int
+) -> Generator[TaskResult, None, list[Task]]:
+    """Yield each task's result from a pool of `workers` processes.
+
+    Returns the tasks lost to a broken pool, in the tasks' order.
+    """
+    lost: set[Task] = set()
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(fn, t): t for t in tasks}
+        pending: set[Future[TaskResult]] = set(futures)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                try:
+                    result = f.result()
+                except BrokenProcessPool:
+                    lost.add(futures[f])
+                    continue
+                except Exception as e:  # e.g. a result that cannot be pickled back
+                    result = TaskResult(futures[f], error=f"{type(e).__name__}: {e}")
+                yield result
+    return [t for t in tasks if t in lost]
 
 
 def run_tasks(

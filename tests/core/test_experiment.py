@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import math
+import os
+import signal
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -12,6 +16,8 @@ from core.conditions import Condition
 from core.errors import UnknownNameError
 from core.events import Outcome
 from core.experiment import (
+    WORKER_DIED,
+    LocalBackend,
     Task,
     TaskResult,
     episodes_to_criterion,
@@ -19,6 +25,7 @@ from core.experiment import (
     parse_conditions,
     run_experiment,
     run_task,
+    run_tasks,
     summarise,
     t_quantile_975,
 )
@@ -94,6 +101,39 @@ def test_a_failing_task_is_returned_with_its_error_and_the_others_survive(
     summary = summarise(results, ["kp", "rp"])
     assert summary["kp"]["seeds"] == 2
     assert summary["rp"]["seeds"] == 1
+
+
+def kill_worker(task: Task, doomed: Task, once: Path | None = None) -> TaskResult:
+    """`run_task`, except that `doomed` kills its worker process (every time, or the first)."""
+    if task == doomed and (once is None or not once.exists()):
+        if once is not None:
+            once.touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    return run_task(task)
+
+
+TASKS = [Task(c, s, 2) for c in ("kp", "rp") for s in range(4)]
+
+
+def test_a_task_that_kills_its_worker_fails_alone_and_the_others_survive() -> None:
+    doomed = Task("rp", 1, 2)
+    results = run_tasks(TASKS, LocalBackend(2), fn=functools.partial(kill_worker, doomed=doomed))
+    assert [r.task for r in results] == TASKS
+    assert [r.task for r in results if not r.ok] == [doomed]
+    assert results[TASKS.index(doomed)].error == WORKER_DIED
+    serial = {r.task: r for r in run_tasks([t for t in TASKS if t != doomed], LocalBackend(1))}
+    for r in results:
+        if r.task != doomed:
+            assert r == serial[r.task]
+
+
+def test_a_worker_killed_once_costs_nothing(tmp_path: Path) -> None:
+    """A worker killed from outside (the OOM killer, a user): its tasks are simply run again."""
+    fn = functools.partial(kill_worker, doomed=TASKS[2], once=tmp_path / "killed")
+    results = run_tasks(TASKS, LocalBackend(2), fn=fn)
+    assert (tmp_path / "killed").exists()
+    assert all(r.ok for r in results)
+    assert results == run_tasks(TASKS, LocalBackend(1))
 
 
 def test_run_task_reports_an_unknown_condition_as_an_error() -> None:
