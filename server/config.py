@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import ipaddress
+import json
+from typing import Annotated
 
 from pydantic import Field, field_validator
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from server.persistence.db import DEFAULT_DATABASE_URL
 
@@ -28,6 +30,10 @@ class Settings(BaseSettings):
         allowed_hosts: Host headers accepted besides loopback names and `host`.
         viser: serve the 3D view (viser) beside the API; false runs without it.
         viser_port: port of the 3D view (on `host`).
+        forwarded_allow_ips: reverse proxies (addresses or networks, "*" for any) trusted to
+            name the client in X-Forwarded-For and X-Forwarded-Proto; empty (the default)
+            ignores those headers. Behind a proxy, this is what keeps each trainer's reward
+            rate limit their own instead of one shared by everybody behind the proxy.
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -40,15 +46,43 @@ class Settings(BaseSettings):
     reward_rate_per_s: float = Field(20.0, gt=0)
     reward_burst: int = Field(40, ge=1)
     max_body_bytes: int = Field(64 * 1024, ge=1024)
-    cors_origins: list[str] = Field(default_factory=list)
-    allowed_hosts: list[str] = Field(default_factory=list)
+    cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     viser: bool = True
     viser_port: int = Field(8080, ge=1, le=65535)
+    forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
+
+    @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
+    @classmethod
+    def _list_from_text(cls, v: object) -> object:
+        """A list from the environment: JSON (`["a", "b"]`) or comma-separated (`a,b`)."""
+        if not isinstance(v, str):
+            return v
+        if v.lstrip().startswith("["):
+            try:
+                return json.loads(v)
+            except json.JSONDecodeError as e:
+                raise ValueError(f"not a JSON list: {e}") from None
+        return [item.strip() for item in v.split(",") if item.strip()]
 
     @field_validator("token")
     @classmethod
     def _no_empty_token(cls, v: str | None) -> str | None:
         return v or None
+
+    @field_validator("forwarded_allow_ips")
+    @classmethod
+    def _proxies_are_addresses(cls, v: list[str]) -> list[str]:
+        for entry in v:
+            if entry == "*":
+                continue
+            try:
+                ipaddress.ip_network(entry)
+            except ValueError:
+                raise ValueError(
+                    f"{entry!r} is not an IP address or network (e.g. 10.0.0.5, 10.0.0.0/24, *)"
+                ) from None
+        return v
 
     @property
     def loopback(self) -> bool:

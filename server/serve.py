@@ -58,7 +58,9 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         port=settings.port,
         workers=1,
         log_level="info",
-        proxy_headers=False,
+        # Only a trusted proxy may say who the client is (the rate limit keys on it).
+        proxy_headers=bool(settings.forwarded_allow_ips),
+        forwarded_allow_ips=settings.forwarded_allow_ips or None,
         timeout_graceful_shutdown=5,
     )
     server = _Server(config, app)
