@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -57,8 +58,12 @@ def cluster() -> Iterator[RayBackend]:
     The CLI finds the driver connected and uses it as it is, so the module starts Ray once.
     """
     assert not ray.is_initialized()
-    with RayBackend(None, jobs=2, ship_code=True) as backend:
-        yield backend
+    with pytest.MonkeyPatch.context() as env:
+        # Ray gives a new local instance a token; given none, it writes one to
+        # ~/.ray/auth_token, which a test has no business leaving in the user's home.
+        env.setenv("RAY_AUTH_TOKEN", secrets.token_hex(32))
+        with RayBackend(None, jobs=2, ship_code=True) as backend:
+            yield backend
     assert not ray.is_initialized()
 
 
