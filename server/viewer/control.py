@@ -131,6 +131,8 @@ class Controller:
         self._stored: dict[int, tuple[str, str, int, str, float]] = {}
         """Per stored run: condition, mode, seed, status, hz (from the last refresh)."""
         self._background: set[asyncio.Task[None]] = set()
+        self._chosen = False
+        """A user chose the run (the dropdown, a link): stop following the newest one."""
         self.handled = 0
         """Commands handled so far (tests wait on it)."""
 
@@ -185,6 +187,7 @@ class Controller:
             await self._refresh_runs(force=True)
         elif isinstance(command, SelectRun):
             await self._select(command.run_id)
+            self._chosen = True
         elif isinstance(command, SetMode):
             if command.mode == st.mode:
                 return
@@ -244,8 +247,8 @@ class Controller:
             target = newest if newest is not None else (runs[-1].id if runs else None)
             if target is not None:
                 await self._select(target)
-        elif st.mode == "live" and not selected.live and newest is not None:
-            # Follow the newest live run, unless the user is looking at a replay.
+        elif st.mode == "live" and not selected.live and newest is not None and not self._chosen:
+            # Follow the newest live run, unless the user chose one or looks at a replay.
             await self._select(newest)
         else:
             self._publish(live=self._live_info(st.run_id))

@@ -116,6 +116,33 @@ async def test_a_watched_live_run_is_drawn_and_an_unwatched_one_costs_nothing(
         await client.post(f"/api/runs/{run_id}/stop")
 
 
+async def test_the_view_link_chooses_the_run_and_it_stays_chosen(tmp_path: Path) -> None:
+    port = free_port()
+    settings = settings_for(tmp_path, viser=True, viser_port=port)
+    async with client_for(settings) as (client, app):
+        viewer = viewer_of(app)
+        chosen = await start_run(client, condition="expert", episodes=1)
+        newest = await start_run(client, condition="delayed", mode="realtime", hz=50)
+        viewer.controller.post(ClientsChanged(1))
+        await until(lambda: viewer.controller.state.run_id == newest, what="the newest followed")
+        viewer.controller.post(SetMode("replay"))
+
+        r = await client.get(f"/api/runs/{chosen}/view")
+        assert r.status_code == 303
+        assert r.headers["location"] == f"http://127.0.0.1:{port}/"
+        await until(lambda: viewer.controller.state.run_id == chosen, what="the chosen run")
+        assert viewer.controller.state.mode == "live"
+        await asyncio.sleep(2.5)  # the view looks for runs every second: it stays put
+        assert viewer.controller.state.run_id == chosen
+
+        missing = await client.get("/api/runs/999/view")
+        assert missing.status_code == 404 and "999" in missing.json()["detail"]
+        await client.post(f"/api/runs/{newest}/stop")
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        off = await client.get(f"/api/runs/{chosen}/view")
+        assert off.status_code == 409 and "SRLAB_VISER" in off.json()["detail"]
+
+
 async def test_panel_rewards_are_stored_and_credited_like_rewards_over_http(
     tmp_path: Path,
 ) -> None:

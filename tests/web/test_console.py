@@ -105,13 +105,36 @@ def test_rewarding_a_run_that_is_not_running_shows_why(page: Page, server: LiveS
     assert server.client.get(f"/api/runs/{run_id}/rewards").json()["count"] == 0
 
 
-def test_the_3d_link_points_at_the_viewer_of_the_same_run(page: Page, server: LiveServer) -> None:
-    run_id = create_run(server, condition="expert", episodes=1)
-    open_view(page, server, f"console/{run_id}")
-    port = server.client.get("/api/health").json()["viser_port"]
-    expect(page.locator("#view3d")).to_have_attribute(
-        "href", f"http://127.0.0.1:{port}/?run={run_id}"
-    )
+def shows(run_id: int) -> re.Pattern[str]:
+    """The 3D view's panel line about a run ("Run 3: kp, seed 0, ...")."""
+    return re.compile(rf"\bRun {run_id}:")
+
+
+def test_the_3d_link_opens_the_view_on_that_run_not_the_newest(
+    page: Page, server: LiveServer
+) -> None:
+    chosen = create_run(server, condition="expert", episodes=1)
+    server.client.post(f"/api/runs/{chosen}/start").raise_for_status()
+    wait_status(server.client, chosen, "finished")
+    newest = create_run(server, condition="delayed", mode="realtime", hz=20)
+    server.client.post(f"/api/runs/{newest}/start").raise_for_status()
+    try:
+        open_view(page, server, f"console/{chosen}")
+        link = page.locator("#view3d")
+        expect(link).to_have_attribute("href", f"/api/runs/{chosen}/view")
+        with page.context.expect_page() as opened:
+            link.click()
+        view = opened.value
+        port = server.client.get("/api/health").json()["viser_port"]
+        view.wait_for_url(f"http://127.0.0.1:{port}/")
+        view.get_by_text(shows(chosen)).first.wait_for(timeout=30_000)
+        for _ in range(10):  # the view looks for new runs every second: it stays put
+            view.wait_for_timeout(300)
+            text = view.inner_text("body")
+            assert shows(chosen).search(text) and not shows(newest).search(text), text
+        view.close()
+    finally:
+        server.client.post(f"/api/runs/{newest}/stop")
 
 
 def test_a_bad_run_shows_the_apis_message_and_keeps_the_form(

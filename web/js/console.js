@@ -150,7 +150,8 @@ function showRun(run) {
   $("#reward-minus").disabled = !canReward;
   const link = $("#view3d");
   if (run && state.viserPort) {
-    link.href = `${location.protocol}//${location.hostname}:${state.viserPort}/?run=${run.id}`;
+    // Through the API: it chooses the run in the view, then sends the browser there.
+    link.href = `/api/runs/${run.id}/view`;
     link.setAttribute("aria-disabled", "false");
     link.title = `Open run #${run.id} in the 3D view`;
   } else {

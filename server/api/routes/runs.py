@@ -6,7 +6,8 @@ import math
 from collections.abc import Callable
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, status
+from fastapi import APIRouter, HTTPException, Path, Request, status
+from fastapi.responses import RedirectResponse
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import Engine, EngineStats
@@ -265,3 +266,38 @@ def get_episode(
         episode=found.episode, outcome=found.outcome, cause=found.cause, ticks=found.ticks,
         start_tick=found.start_tick, rewards=found.rewards, trace=trace,
     )  # fmt: skip
+
+
+@router.get(
+    "/{run_id}/view",
+    status_code=status.HTTP_303_SEE_OTHER,
+    response_class=RedirectResponse,
+    responses={
+        303: {"description": "the 3D view, showing the run"},
+        409: {"description": "the 3D view is off on this service"},
+    },
+)
+async def view_run(
+    run_id: RunId, request: Request, state: StateDep, store: StoreDep
+) -> RedirectResponse:
+    """Show the run in the 3D view (live, or where it stopped), then go there.
+
+    The console's "3D view" link: the view shows one run to everyone watching, and this
+    chooses it, as its run dropdown does; it then no longer jumps to the newest run.
+    """
+    await io(store.load_run, run_id)
+    viewer = state.viewer
+    if viewer is None:
+        raise HTTPException(
+            status.HTTP_409_CONFLICT, "the 3D view is off on this service (SRLAB_VISER=false)"
+        )
+    from server.viewer.state import SelectRun, SetMode  # viser loads with the view only
+
+    viewer.controller.post(SetMode("live"))
+    viewer.controller.post(SelectRun(run_id))
+    host = request.url.hostname or "127.0.0.1"
+    if ":" in host:  # an IPv6 address
+        host = f"[{host}]"
+    return RedirectResponse(
+        f"{request.url.scheme}://{host}:{viewer.port}/", status.HTTP_303_SEE_OTHER
+    )
