@@ -26,6 +26,35 @@ def database_url() -> str:
     return os.environ.get("SRLAB_DATABASE_URL") or DEFAULT_DATABASE_URL
 
 
+def parse_database_url(url: str | URL) -> URL:
+    """The URL, checked: a `ValueError` that says what is wrong, and never the password.
+
+    Catches a string that is no URL, an unknown database or driver name, and a driver
+    that is not installed, before anything connects.
+    """
+    try:
+        parsed = make_url(url)
+    except sa_exc.ArgumentError:
+        raise ValueError(
+            "the database URL (SRLAB_DATABASE_URL or --url) is not a SQLAlchemy URL: "
+            "expected dialect[+driver]://user:password@host[:port]/database or "
+            "sqlite:///path/to/file.db"
+        ) from None
+    shown = parsed.render_as_string(hide_password=True)
+    try:
+        parsed.get_dialect().import_dbapi()
+    except sa_exc.NoSuchModuleError:
+        raise ValueError(
+            f"database URL {shown!r}: SQLAlchemy has no dialect or driver "
+            f"{parsed.drivername!r} (e.g. sqlite, postgresql+psycopg)"
+        ) from None
+    except ImportError as e:
+        raise ValueError(
+            f"database URL {shown!r}: its driver is not installed ({e.name or e})"
+        ) from None
+    return parsed
+
+
 def _sqlite_file(url: URL) -> Path | None:
     """The file of a SQLite URL, or None for an in-memory database."""
     database = url.database
@@ -54,7 +83,7 @@ def make_engine(
     longer for a lock fails (the run ends with a storage error) instead of hanging with
     every request that waits for it.
     """
-    url = make_url(url)
+    url = parse_database_url(url)
     if url.get_backend_name() == "postgresql":
         kwargs.setdefault("connect_args", {"options": f"-c lock_timeout={int(busy_timeout_ms)}"})
     if url.get_backend_name() != "sqlite":

@@ -6,8 +6,10 @@ from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
+from sqlalchemy import exc as sa_exc
 
-from server.persistence.db import database_url, make_engine, make_sessionmaker
+from core.errors import StorageError
+from server.persistence.db import database_url, make_engine, make_sessionmaker, parse_database_url
 from server.persistence.seed import SeedReport, seed_catalog
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,14 +30,19 @@ def alembic_config(url: str | None = None) -> Config:
 def upgrade(url: str | None = None, *, seed: bool = True) -> SeedReport | None:
     """Migrate the database to the newest schema, then seed the catalogue into it."""
     url = url or database_url()
-    command.upgrade(alembic_config(url), "head")
-    if not seed:
-        return None
-    engine = make_engine(url)
+    shown = parse_database_url(url).render_as_string(hide_password=True)
     try:
-        return seed_catalog(make_sessionmaker(engine))
-    finally:
-        engine.dispose()
+        command.upgrade(alembic_config(url), "head")
+        if not seed:
+            return None
+        engine = make_engine(url)
+        try:
+            return seed_catalog(make_sessionmaker(engine))
+        finally:
+            engine.dispose()
+    except sa_exc.DBAPIError as e:  # unreachable, refused, unwritable: say so, in one line
+        detail = str(e.orig).strip().splitlines()[0] if e.orig is not None else str(e)
+        raise StorageError(f"database {shown!r}: {detail}") from e
 
 
 def downgrade(url: str | None, revision: str) -> None:

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from liveserver import free_port
 
 from server.cli import main
 
@@ -134,6 +135,43 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
         timeout=120,
         check=False,
     )
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["runs", "--url", "nope://x"], "SQLAlchemy has no dialect or driver 'nope'"),
+        (
+            ["db", "upgrade", "--url", "postgresql+nodriver://u:secret@h/db"],
+            "'postgresql+nodriver://u:***@h/db'",
+        ),
+        (["db", "upgrade", "--url", "mysql://u:secret@h/db"], "driver is not installed (MySQLdb)"),
+        (["db", "upgrade", "--url", "a file name"], "is not a SQLAlchemy URL"),
+        (
+            ["run", "--condition", "kp", "--episodes", "1", "--url", "REFUSED"],
+            "Connection refused",
+        ),
+        (["runs", "--url", "sqlite:////proc/srlab.db"], "unable to open database file"),
+    ],
+)
+def test_a_bad_or_unreachable_database_is_one_line_without_the_password(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    url = f"postgresql+psycopg://u:secret@127.0.0.1:{free_port()}/db"
+    err = fail([url if a == "REFUSED" else a for a in argv], capsys)
+    assert message in err
+    assert err.startswith("srlab: error: ") and err.count("\n") == 1
+    assert "secret" not in err
+
+
+def test_serve_with_an_unreachable_database_exits_2_with_a_message(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    url = f"postgresql+psycopg://srlab:secret@127.0.0.1:{free_port()}/srlab"
+    monkeypatch.setenv("SRLAB_DATABASE_URL", url)
+    err = fail(["serve"], capsys)
+    assert "srlab:***@127.0.0.1" in err and "Connection refused" in err
+    assert "secret" not in err
 
 
 def test_console_script_exits_2_without_a_traceback() -> None:
