@@ -6,7 +6,7 @@ import ipaddress
 import json
 from typing import Annotated
 
-from pydantic import Field, field_validator
+from pydantic import Field, ValidationError, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from server.persistence.db import DEFAULT_DATABASE_URL
@@ -84,6 +84,19 @@ class Settings(BaseSettings):
                 ) from None
         return v
 
+    @classmethod
+    def load(cls, **overrides: object) -> Settings:
+        """The settings from the environment and `overrides` (command-line options).
+
+        Raises:
+            ValueError: one line per bad setting, naming its variable, e.g.
+                ``SRLAB_PORT: must be >= 1, got 0``.
+        """
+        try:
+            return cls(**overrides)  # type: ignore[arg-type]
+        except ValidationError as e:
+            raise ValueError(settings_problems(e)) from None
+
     @property
     def loopback(self) -> bool:
         """Whether the service listens on loopback only."""
@@ -111,3 +124,15 @@ class Settings(BaseSettings):
                 f"srlab listens on {self.host}, beyond loopback: set SRLAB_TOKEN so that "
                 "writes (rewards, edits, run control) need `Authorization: Bearer <token>`"
             )
+
+
+def settings_problems(error: ValidationError) -> str:
+    """A pydantic error about settings, for people: one line per variable."""
+    lines = []
+    for problem in error.errors():
+        name = "SRLAB_" + "_".join(str(part) for part in problem["loc"][:1]).upper()
+        message = problem["msg"].removeprefix("Value error, ")
+        given = problem.get("input")
+        got = f", got {given!r}" if given is not None and not isinstance(given, dict) else ""
+        lines.append(f"{name}: {message}{got}")
+    return "\n".join(lines)

@@ -45,7 +45,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         overrides["host"] = host
     if port is not None:
         overrides["port"] = port
-    settings = Settings(**overrides)  # type: ignore[arg-type]
+    settings = Settings.load(**overrides)
     settings.check()
     upgrade(settings.database_url)
     configure_process()

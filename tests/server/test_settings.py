@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
+from server.cli import main
 from server.config import Settings
 
 
@@ -46,3 +47,30 @@ def test_a_bad_proxy_list_is_refused_with_a_message(
 
 def test_proxy_headers_are_ignored_unless_a_proxy_is_trusted() -> None:
     assert Settings().forwarded_allow_ips == []
+
+
+def test_bad_settings_name_their_variables_one_line_each(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SRLAB_MAX_RUNS", "many")
+    monkeypatch.setenv("SRLAB_VISER", "maybe")
+    with pytest.raises(ValueError) as e:
+        Settings.load(port=0)
+    lines = str(e.value).splitlines()
+    assert len(lines) == 3
+    assert lines[0].startswith("SRLAB_PORT: ") and lines[0].endswith(", got 0")
+    assert lines[1].startswith("SRLAB_MAX_RUNS: ") and lines[1].endswith(", got 'many'")
+    assert lines[2].startswith("SRLAB_VISER: ")
+    monkeypatch.delenv("SRLAB_MAX_RUNS")
+    monkeypatch.delenv("SRLAB_VISER")
+    assert Settings.load(port=8001).port == 8001
+
+
+def test_serve_with_a_bad_setting_exits_2_without_a_traceback(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("SRLAB_REWARD_RATE_PER_S", "-1")
+    with pytest.raises(SystemExit) as e:
+        main(["serve"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("srlab: error: SRLAB_REWARD_RATE_PER_S: ")
+    assert "got '-1'" in err and "Traceback" not in err and "pydantic.dev" not in err
