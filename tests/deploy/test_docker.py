@@ -360,6 +360,14 @@ def _shell(command: str, env: dict[str, str], cwd: Path) -> None:
     assert done.returncode == 0, f"{command}\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}"
 
 
+def _uv() -> Path:
+    """The uv the Makefile uses: the one on PATH, else the one it installs into .tools/."""
+    found = shutil.which("uv")
+    uv = Path(found) if found else ROOT / ".tools" / "bin" / "uv"
+    assert uv.exists(), "no uv on PATH or in .tools/bin: run `make test`, which installs it"
+    return uv
+
+
 @pytest.fixture(scope="module")
 def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
     """The image's contents, made by the Dockerfile's own steps."""
@@ -389,6 +397,7 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
         "UV_COMPILE_BYTECODE": "0",
     }
     env.pop("UV_LINK_MODE")
+    env["PATH"] = f"{_uv().parent}:{env.get('PATH', '')}"  # the image pip-installs uv
     for command in build.runs:
         if command.startswith("uv "):
             _shell(command, env, app)
