@@ -204,8 +204,12 @@ function follow() {
   source.addEventListener("status", (e) => {
     const d = data(e);
     if (state.run && state.run.id === run.id && d.status !== state.run.status) {
+      const wasLive = LIVE.has(state.run.status);
       showRun({ ...state.run, status: d.status, error: d.error });
       if (d.error) toast(`Run ${run.id} ${d.status}: ${d.error}`, "error");
+      // The engine commits learning behind the ticks; once the run has ended all of it is
+      // stored, so the final state is read again rather than left as the last refresh saw it.
+      if (wasLive && !LIVE.has(d.status)) Promise.all([loadEpisodes(), loadMemory()]);
     }
   });
   source.onerror = () => {
