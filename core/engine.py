@@ -3,9 +3,11 @@
 The **tick task** paces ticks (realtime: drift-free deadlines; fast: no sleeping) and at
 each tick boundary makes sure every reward stamped with that boundary has been applied,
 then applies commands (association edits), then runs the tick (sense, perceive, select,
-KP percept, motor, STM). The **reward task** takes rewards off a queue in order, logs
-external ones durably (that is the acknowledgement), applies them (pop STM, Eq. (1),
-network insertions, KP) and commits what they changed before it takes the next one.
+KP percept, motor, STM). The **reward task** takes rewards off a queue in order and
+applies them (pop STM, Eq. (1), network insertions, KP). Around them, writer tasks keep
+storage in step without holding either up: trainers' rewards are logged durably on arrival
+(that is the acknowledgement), what each applied reward and edit changed is committed in
+the order it happened, and episodes with their checkpoints after the rewards before them.
 
 A reward is stamped with the boundary it arrives before and credits exactly the STM
 records of earlier ticks, so a run is reproducible from its seed and command log: in fast
@@ -49,6 +51,7 @@ from core.ports import (
     LearningUpdate,
     Mode,
     NetworkPair,
+    RewardCommit,
     RewardRecord,
     RunSpec,
     RunStatus,
@@ -66,6 +69,11 @@ EPISODE_BATCH_S = 0.05
 """How long the episode writer gathers episodes before it commits them together."""
 EPISODE_BATCH_MAX = 64
 """The most episodes it commits in one transaction."""
+
+WRITE_BATCH_S = 0.05
+"""In fast mode, how long the learning writer gathers rewards before it commits them."""
+WRITE_BATCH_MAX = 256
+"""The most rewards it commits in one transaction."""
 
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
@@ -222,13 +230,55 @@ class _CommandJob:
 @dataclass
 class _EpisodeJob:
     record: EpisodeRecord
-    checkpoint: Checkpoint
+    next_episode: int
+    tick: int
+    state: dict[str, Any]
+    """The learning state after the episode: encoded only if it is a batch's last."""
     totals: RunTotals
     after: _RewardJob | None
     """The last reward applied before the checkpoint: it is committed first."""
 
 
+@dataclass
+class _RewardWrite:
+    job: _RewardJob
+    commit: RewardCommit
+    queued: float
+    """perf_counter() when it was handed to the writer."""
+
+
 _CLOSE = object()
+
+
+async def _gather(
+    queue: asyncio.Queue[object], window_s: float, limit: int
+) -> tuple[list[object], bool]:
+    """The next item of `queue` and those arriving within `window_s` after it.
+
+    At most `limit` items; the flag says whether `_CLOSE` came (it ends the gathering and
+    is not returned).
+    """
+    item = await queue.get()
+    deadline = asyncio.get_running_loop().time() + window_s
+    batch: list[object] = []
+    while True:
+        if item is _CLOSE:
+            return batch, True
+        batch.append(item)
+        if len(batch) >= limit:
+            return batch, False
+        if not queue.empty():
+            item = queue.get_nowait()
+            continue
+        if window_s <= 0:
+            return batch, False
+        try:
+            # asyncio.timeout, not wait_for: 3.11's wait_for can swallow the cancellation
+            # of a task group whose other task failed.
+            async with asyncio.timeout_at(deadline):
+                item = await queue.get()
+        except TimeoutError:
+            return batch, False
 
 
 class Engine:
@@ -266,8 +316,11 @@ class Engine:
         self._trace = TraceRecorder() if trace else None
         self._due: deque[_RewardJob] = deque()
         self._commands: deque[_CommandJob] = deque()
+        self._unlogged: list[_CommandJob] = []
+        """Edits applied whose log entry the writer has yet to commit."""
         self._queue: asyncio.Queue[object] = asyncio.Queue()
         self._episode_queue: asyncio.Queue[object] = asyncio.Queue()
+        self._write_queue: asyncio.Queue[object] = asyncio.Queue()
         self._last_reward_job: _RewardJob | None = None
         self._subscribers: list[Subscription] = []
         self._tick_subscribers = 0
@@ -541,6 +594,7 @@ class Engine:
         try:
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._reward_task(), name=f"run {self.run_id} rewards")
+                tg.create_task(self._write_task(), name=f"run {self.run_id} learning writer")
                 tg.create_task(self._episode_task(), name=f"run {self.run_id} episodes")
                 tg.create_task(self._ack_task(), name=f"run {self.run_id} acknowledgements")
                 tg.create_task(self._tick_task(), name=f"run {self.run_id} ticks")
@@ -582,7 +636,7 @@ class Engine:
         for job in (*self._due, *self._held):
             if job.ack is not None and not job.ack.done():
                 job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
-        for c in self._commands:
+        for c in (*self._commands, *self._unlogged):
             if c.ack is not None and not c.ack.done():
                 c.ack.set_exception(StorageError(f"the edit was not stored: {error}"))
 
@@ -770,6 +824,7 @@ class Engine:
         while self._commands and self._commands[0].stamp <= boundary:
             job = self._commands.popleft()
             job.update = self._apply_edit(job.command)
+            self._unlogged.append(job)
             self._queue.put_nowait(job)
 
     def _apply_edit(self, edit: EditAssociation) -> LearningUpdate:
@@ -804,9 +859,10 @@ class Engine:
         # Trainer rewards stamped with the next boundary may already be in this state;
         # replay skips those the checkpoint includes.
         state["last_external_reward_id"] = self._last_external_id
-        checkpoint = Checkpoint(sim.episode + 1, sim.tick_count, encode(state))
         self._episode_queue.put_nowait(
-            _EpisodeJob(record, checkpoint, self.totals, self._last_reward_job)
+            _EpisodeJob(
+                record, sim.episode + 1, sim.tick_count, state, self.totals, self._last_reward_job
+            )
         )
         self._need_reset = True
         self._publish(ended)
@@ -876,29 +932,71 @@ class Engine:
     # --- the reward task ------------------------------------------------------------
 
     async def _reward_task(self) -> None:
-        while True:
-            job = await self._queue.get()
-            if job is _CLOSE:
-                break
-            if isinstance(job, _RewardJob):
-                await self._process_reward(job)
-            elif isinstance(job, _CommandJob):
-                assert job.update is not None
-                c = job.command
-                record = CommandRecord(
-                    job.stamp,
-                    "edit_association",
-                    {
-                        "stimulus": c.stimulus,
-                        "behaviour": c.behaviour,
-                        "strength": c.strength,
-                        "source": c.source,
-                        "locked": c.locked,
-                    },
-                )
-                command_id = await self._io(self.store.log_command, self.run_id, record, job.update)
-                if job.ack is not None and not job.ack.done():
-                    job.ack.set_result(command_id)
+        try:
+            while True:
+                job = await self._queue.get()
+                if job is _CLOSE:
+                    break
+                if isinstance(job, _RewardJob):
+                    await self._process_reward(job)
+                else:  # an edit, applied by the tick task: stored in its place in order
+                    self._write_queue.put_nowait(job)
+        finally:
+            self._write_queue.put_nowait(_CLOSE)
+
+    async def _write_task(self) -> None:
+        """Commits what applied rewards and edits changed, in the order they happened.
+
+        What queued up while the last commit ran goes into one transaction; in fast mode,
+        where only the episode writer waits for these commits, it also gathers for
+        `WRITE_BATCH_S`, so a fast run commits its learning a few times a second instead
+        of once a reward.
+        """
+        window = WRITE_BATCH_S if self.spec.mode is Mode.FAST else 0.0
+        closing = False
+        while not closing:
+            batch, closing = await _gather(self._write_queue, window, WRITE_BATCH_MAX)
+            rewards: list[_RewardWrite] = []
+            for item in batch:
+                if isinstance(item, _RewardWrite):
+                    rewards.append(item)
+                    continue
+                assert isinstance(item, _CommandJob)
+                await self._commit_rewards(rewards)  # the rewards before it come first
+                rewards = []
+                await self._log_command(item)
+            await self._commit_rewards(rewards)
+
+    async def _commit_rewards(self, writes: list[_RewardWrite]) -> None:
+        if not writes:
+            return
+        ids = await self._io(
+            self.store.commit_rewards, self.run_id, tuple(w.commit for w in writes)
+        )
+        done = time.perf_counter()
+        for w, reward_id in zip(writes, ids, strict=True):
+            w.job.logged_id = reward_id
+            self.stats.reward_commit_s.append(done - w.queued)
+            w.job.committed.set()
+
+    async def _log_command(self, job: _CommandJob) -> None:
+        assert job.update is not None
+        c = job.command
+        record = CommandRecord(
+            job.stamp,
+            "edit_association",
+            {
+                "stimulus": c.stimulus,
+                "behaviour": c.behaviour,
+                "strength": c.strength,
+                "source": c.source,
+                "locked": c.locked,
+            },
+        )
+        command_id = await self._io(self.store.log_command, self.run_id, record, job.update)
+        self._unlogged.remove(job)
+        if job.ack is not None and not job.ack.done():
+            job.ack.set_result(command_id)
 
     async def _episode_task(self) -> None:
         """Commits episodes and checkpoints, each after the rewards applied before it.
@@ -907,42 +1005,21 @@ class Engine:
         the writer gathers what arrives within `EPISODE_BATCH_S` and commits it at once:
         in fast mode that is one transaction for many episodes.
         """
-        loop = asyncio.get_running_loop()
         closing = False
         while not closing:
-            job = await self._episode_queue.get()
-            batch: list[_EpisodeJob] = []
-            deadline = loop.time() + EPISODE_BATCH_S
-            while True:
-                if job is _CLOSE:
-                    closing = True
-                    break
-                assert isinstance(job, _EpisodeJob)
-                batch.append(job)
-                if len(batch) >= EPISODE_BATCH_MAX:
-                    break
-                if self._episode_queue.empty():
-                    try:
-                        # asyncio.timeout, not wait_for: 3.11's wait_for can swallow the
-                        # cancellation of a task group whose other task failed.
-                        async with asyncio.timeout_at(deadline):
-                            job = await self._episode_queue.get()
-                    except TimeoutError:
-                        break
-                else:
-                    job = self._episode_queue.get_nowait()
+            jobs, closing = await _gather(self._episode_queue, EPISODE_BATCH_S, EPISODE_BATCH_MAX)
+            batch = [j for j in jobs if isinstance(j, _EpisodeJob)]
             if not batch:
                 continue
             last = batch[-1]
             if last.after is not None:
                 await last.after.committed.wait()
-            await self._io(
-                self.store.end_episodes,
-                self.run_id,
-                tuple(j.record for j in batch),
-                last.checkpoint,
-                last.totals,
-            )
+            await self._io(self._end_episodes, tuple(j.record for j in batch), last)
+
+    def _end_episodes(self, records: tuple[EpisodeRecord, ...], last: _EpisodeJob) -> None:
+        """Store episodes with the checkpoint after the last (on a worker thread)."""
+        checkpoint = Checkpoint(last.next_episode, last.tick, encode(last.state))
+        self.store.end_episodes(self.run_id, records, checkpoint, last.totals)
 
     async def _ack_task(self) -> None:
         """Logs trainers' rewards in arrival order; the log entry is the acknowledgement.
@@ -977,22 +1054,10 @@ class Engine:
         if job.committed_before:
             job.committed.set()
             return
-        update = self._learning_update(outcome)
-        started = time.perf_counter()
-        if job.logged_id is None:
-            job.logged_id = await self._io(
-                self.store.record_reward, self.run_id, record, update, len(outcome.credits)
-            )
-        else:
-            await self._io(
-                self.store.apply_reward,
-                self.run_id,
-                job.logged_id,
-                update,
-                len(outcome.credits),
-            )
-        self.stats.reward_commit_s.append(time.perf_counter() - started)
-        job.committed.set()
+        commit = RewardCommit(
+            record, self._learning_update(outcome), len(outcome.credits), job.logged_id
+        )
+        self._write_queue.put_nowait(_RewardWrite(job, commit, time.perf_counter()))
 
     def _apply_in_memory(self, job: _RewardJob) -> RewardOutcome:
         self._last_reward_job = job

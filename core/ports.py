@@ -106,6 +106,20 @@ class RewardRecord:
 
 
 @dataclass(frozen=True, slots=True)
+class RewardCommit:
+    """A reward's learning, ready to commit.
+
+    `logged_id` names a reward the log already holds (a trainer's, logged on arrival);
+    None means it is logged now, already applied (the task's and a program's rewards).
+    """
+
+    record: RewardRecord
+    update: LearningUpdate
+    credited: int
+    logged_id: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class StoredReward:
     """A logged reward with its id and whether its learning was committed."""
 
@@ -215,6 +229,13 @@ class RunStore(Protocol):
 
         For the task's and a program's rewards, which nobody waits to acknowledge.
         Returns the reward's id.
+        """
+        ...
+
+    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
+        """In one transaction and in order: `apply_reward` or `record_reward` for each.
+
+        Returns the rewards' ids. A writer that fell behind commits what queued up at once.
         """
         ...
 

@@ -19,6 +19,7 @@ from core.ports import (
     LearningUpdate,
     Mode,
     NetworkPair,
+    RewardCommit,
     RewardRecord,
     RunSpec,
     RunStatus,
@@ -238,6 +239,17 @@ class InMemoryRunStore:
 
     def _apply(self, run: _MemoryRun, update: LearningUpdate) -> None:
         """Store what an update changed; checks everything before changing anything."""
+        self._check(run, update)
+        run.behaviours.update({b.name: b for b in update.behaviours_added})
+        run.ltm.update(update.ltm)
+        run.rltm.update(update.rltm)
+        for pair in update.network_upserts:
+            run.network[(pair.stimulus, pair.behaviour)] = pair
+        for key in update.network_removals:
+            run.network.pop(key, None)
+
+    def _check(self, run: _MemoryRun, update: LearningUpdate) -> _MemoryRun:
+        """Raise what storing `update` would; else `run` as it would be after (a trial)."""
         added = {b.name: b for b in update.behaviours_added}
         for name in added:
             if self._behaviours is not None and name in self._behaviours:
@@ -252,13 +264,7 @@ class InMemoryRunStore:
                 *update.network_removals,
             ],
         )
-        run.behaviours.update(added)
-        run.ltm.update(update.ltm)
-        run.rltm.update(update.rltm)
-        for pair in update.network_upserts:
-            run.network[(pair.stimulus, pair.behaviour)] = pair
-        for key in update.network_removals:
-            run.network.pop(key, None)
+        return trial
 
     def _stored(self, run_id: int, run: _MemoryRun) -> StoredRun:
         after = -1 if run.checkpoint is None else run.checkpoint.tick
@@ -320,6 +326,22 @@ class InMemoryRunStore:
         reward_id = self.log_reward(run_id, reward)
         run.rewards[reward_id] = replace(run.rewards[reward_id], applied=True, credited=credited)
         return reward_id
+
+    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
+        """`apply_reward` or `record_reward` for each, in order, all or nothing."""
+        trial = self._run(run_id)
+        for r in rewards:  # everything is checked before anything changes
+            if r.logged_id is not None and r.logged_id not in trial.rewards:
+                raise StorageError(f"run {run_id} has no reward {r.logged_id}")
+            trial = self._check(trial, r.update)
+        ids = []
+        for r in rewards:
+            if r.logged_id is None:
+                ids.append(self.record_reward(run_id, r.record, r.update, r.credited))
+            else:
+                self.apply_reward(run_id, r.logged_id, r.update, r.credited)
+                ids.append(r.logged_id)
+        return tuple(ids)
 
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """Append a command to the log and store what it changed; returns its id."""

@@ -21,6 +21,7 @@ from core.ports import (
     LearningUpdate,
     Mode,
     NetworkPair,
+    RewardCommit,
     RewardRecord,
     RunSpec,
     RunStatus,
@@ -174,9 +175,11 @@ class SqlAlchemyRunStore:
         if session.scalar(select(RunRow.id).where(RunRow.id == run_id)) is None:
             raise UnknownRunError(f"no run {run_id}")
 
-    def _apply(self, session: Session, run_id: int, change: LearningUpdate) -> None:
+    def _apply(
+        self, session: Session, run_id: int, change: LearningUpdate, names: _Names | None = None
+    ) -> None:
         """Store what an update changed: synthesised behaviours first, then what names them."""
-        names = _Names(self, session, run_id)
+        names = names or _Names(self, session, run_id)
         for spec in change.behaviours_added:
             self._add_behaviour(session, run_id, spec, names)
         self._upsert_memory(session, LtmRow, run_id, change.ltm, names)
@@ -339,14 +342,7 @@ class SqlAlchemyRunStore:
     ) -> None:
         """In one transaction: mark a logged reward applied and store what it changed."""
         with self._transaction(f"applying reward {reward_id} of run {run_id}", write=True) as s:
-            done = s.execute(
-                sql_update(RewardRow)
-                .where(RewardRow.id == reward_id, RewardRow.run_id == run_id)
-                .values(applied=True, credited=credited)
-            )
-            if done.rowcount != 1:  # type: ignore[attr-defined]
-                self._require_run(s, run_id)
-                raise StorageError(f"run {run_id} has no reward {reward_id}")
+            self._mark_applied(s, run_id, reward_id, credited)
             self._apply(s, run_id, update)
 
     def record_reward(
@@ -355,9 +351,39 @@ class SqlAlchemyRunStore:
         """In one transaction: log an already applied reward and store what it changed."""
         with self._transaction(f"recording a reward for run {run_id}", write=True) as s:
             self._require_run(s, run_id)
-            reward_id = self._insert_reward(s, run_id, reward, True, credited)
-            self._apply(s, run_id, update)
-            return reward_id
+            return self._commit_reward(s, run_id, RewardCommit(reward, update, credited))
+
+    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
+        """In one transaction and in order: each reward applied or recorded, with its learning."""
+        if not rewards:
+            return ()
+        what = f"committing {len(rewards)} reward(s) of run {run_id}"
+        with self._transaction(what, write=True) as s:
+            self._require_run(s, run_id)
+            names = _Names(self, s, run_id)
+            return tuple(self._commit_reward(s, run_id, r, names) for r in rewards)
+
+    def _commit_reward(
+        self, s: Session, run_id: int, reward: RewardCommit, names: _Names | None = None
+    ) -> int:
+        """Log (or mark applied) one reward and store its learning, inside a transaction."""
+        reward_id = reward.logged_id
+        if reward_id is None:
+            reward_id = self._insert_reward(s, run_id, reward.record, True, reward.credited)
+        else:
+            self._mark_applied(s, run_id, reward_id, reward.credited)
+        self._apply(s, run_id, reward.update, names)
+        return reward_id
+
+    def _mark_applied(self, s: Session, run_id: int, reward_id: int, credited: int) -> None:
+        done = s.execute(
+            sql_update(RewardRow)
+            .where(RewardRow.id == reward_id, RewardRow.run_id == run_id)
+            .values(applied=True, credited=credited)
+        )
+        if done.rowcount != 1:  # type: ignore[attr-defined]
+            self._require_run(s, run_id)
+            raise StorageError(f"run {run_id} has no reward {reward_id}")
 
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """In one transaction: append a command to the log and store what it changed."""

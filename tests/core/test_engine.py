@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -17,7 +17,15 @@ from core.conditions import get_condition
 from core.engine import Engine, StatusChanged, Subscription, SubscriptionClosed, TickPublished
 from core.errors import RunStateError, StorageError
 from core.events import EpisodeEnded, RewardApplied
-from core.ports import LearningUpdate, Mode, RewardRecord, RunSpec, RunStatus
+from core.ports import (
+    CommandRecord,
+    LearningUpdate,
+    Mode,
+    RewardCommit,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+)
 from core.runner import run as headless_run
 
 CATALOG: Catalog = load_catalog()
@@ -280,29 +288,22 @@ def test_a_full_subscription_keeps_the_newest_events() -> None:
 
 
 class FailingStore(InMemoryRunStore):
-    """A store whose disk fills up at the n-th reward commit."""
+    """A store whose disk fills up at the n-th commit of rewards' learning."""
 
     def __init__(self, fail_at: int) -> None:
         super().__init__(CATALOG)
         self.fail_at = fail_at
         self.commits = 0
+        self.committed = 0
+        """Rewards in the commits that succeeded."""
 
-    def _commit(self) -> None:
+    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
         self.commits += 1
         if self.commits >= self.fail_at:
             raise StorageError("database or disk is full")
-
-    def apply_reward(
-        self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
-    ) -> None:
-        self._commit()
-        super().apply_reward(run_id, reward_id, update, credited)
-
-    def record_reward(
-        self, run_id: int, reward: RewardRecord, update: LearningUpdate, credited: int
-    ) -> int:
-        self._commit()
-        return super().record_reward(run_id, reward, update, credited)
+        ids = super().commit_rewards(run_id, rewards)
+        self.committed += len(ids)
+        return ids
 
 
 def test_a_storage_error_ends_the_run_with_a_clear_error_and_keeps_what_was_committed() -> None:
@@ -312,12 +313,77 @@ def test_a_storage_error_ends_the_run_with_a_clear_error_and_keeps_what_was_comm
         asyncio.run(engine.run())
     assert engine.status is RunStatus.FAILED
     assert engine.error is not None and "disk is full" in engine.error
+    # The two commits before the failing one are kept whole, however many rewards each held.
     applied = [r for r in store.rewards(engine.run_id) if r.applied]
-    assert len(applied) == 2
+    assert store.commits == 3 and len(applied) == store.committed > 0
     # Episodes are written behind in batches: what was committed is whole and consistent.
     stored = store.load_run(engine.run_id)
     assert stored.status is RunStatus.FAILED
     assert stored.totals.episodes == len(store.episodes(engine.run_id))
+
+
+class SlowDiskStore(InMemoryRunStore):
+    """A store whose first commit of rewards' learning waits until it is let go."""
+
+    def __init__(self) -> None:
+        super().__init__(CATALOG)
+        self.go = threading.Event()
+        self.batches: list[int] = []
+
+    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
+        if not self.batches:
+            self.go.wait(30)
+        self.batches.append(len(rewards))
+        return super().commit_rewards(run_id, rewards)
+
+
+def test_ticks_never_wait_for_a_commit_and_what_queued_meanwhile_goes_in_one() -> None:
+    store = SlowDiskStore()
+    engine = Engine.create(fast("rp", 4, 60), store, catalog=CATALOG)
+
+    async def main() -> None:
+        runner = asyncio.create_task(engine.run())
+        try:
+            async with asyncio.timeout(20):
+                while engine.sim.tick_count < 4000:  # the first commit is still waiting
+                    await asyncio.sleep(0.001)
+        finally:
+            store.go.set()
+            await runner
+
+    asyncio.run(main())
+    plain = headless_run(get_condition("rp"), 4, 60, catalog=CATALOG)
+    assert store.batches[1] > 1, store.batches
+    assert sum(store.batches) == len(store.rewards(engine.run_id))
+    assert len(store.rewards(engine.run_id)) == sum(e.rewards for e in plain.episodes)
+    assert engine.sim.brain.ltm.as_dict() == plain.ltm
+
+
+class CommandFailingStore(InMemoryRunStore):
+    """A store that cannot log a command."""
+
+    def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
+        raise StorageError("database or disk is full")
+
+
+def test_an_edit_that_cannot_be_stored_is_answered_with_the_error_not_left_waiting() -> None:
+    engine = Engine.create(fast("kp", 2, 500), CommandFailingStore(CATALOG), catalog=CATALOG)
+    answered: list[BaseException] = []
+
+    async def main() -> None:
+        runner = asyncio.create_task(engine.run())
+        await wait_ticks(engine, 50)
+        async with asyncio.timeout(30):  # a hang fails the test instead of stalling it
+            try:
+                await engine.edit(EditAssociation("Red", "stop", 1.0, "dp"))
+            except StorageError as e:
+                answered.append(e)
+            with pytest.raises(StorageError, match="disk is full"):
+                await runner
+
+    asyncio.run(main())
+    assert [str(e) for e in answered] == ["the edit was not stored: database or disk is full"]
+    assert engine.status is RunStatus.FAILED
 
 
 def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:

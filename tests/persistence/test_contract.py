@@ -16,6 +16,7 @@ from core.ports import (
     LearningUpdate,
     Mode,
     NetworkPair,
+    RewardCommit,
     RewardRecord,
     RunSpec,
     RunStatus,
@@ -319,6 +320,63 @@ def test_record_reward_with_an_unknown_name_stores_nothing(store: InspectableRun
 
     assert store.rewards(run_id) == []
     assert store.ltm(run_id) == {}
+
+
+def test_commit_rewards_applies_and_records_them_in_order(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    trainers = store.log_reward(run_id, reward(3))
+    made = NetworkPair("Red", SLOWER.name, 0.4, "kp")
+
+    ids = store.commit_rewards(
+        run_id,
+        (
+            RewardCommit(reward(3), LearningUpdate(ltm={("Red", "stop"): 0.1}), 2, trainers),
+            RewardCommit(
+                reward(5, value=0.5),
+                LearningUpdate(ltm={("Red", "stop"): 0.2}, behaviours_added=(SLOWER,)),
+                1,
+            ),
+            # A later reward names the behaviour an earlier one in the batch added.
+            RewardCommit(
+                reward(8),
+                LearningUpdate(rltm={("Red", SLOWER.name): 0.4}, network_upserts=(made,)),
+                3,
+            ),
+        ),
+    )
+
+    assert ids[0] == trainers and trainers < ids[1] < ids[2]
+    assert [(r.id, r.record.tick, r.applied, r.credited) for r in store.rewards(run_id)] == [
+        (trainers, 3, True, 2),
+        (ids[1], 5, True, 1),
+        (ids[2], 8, True, 3),
+    ]
+    assert store.ltm(run_id) == {("Red", "stop"): 0.2}
+    assert store.rltm(run_id) == {("Red", SLOWER.name): 0.4}
+    assert store.behaviours(run_id) == (SLOWER,)
+    assert made in store.network(run_id)
+    assert store.commit_rewards(run_id, ()) == ()
+
+
+def test_commit_rewards_is_all_or_nothing(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    trainers = store.log_reward(run_id, reward(3))
+    bad = LearningUpdate(ltm={("Red", "teleport"): 0.1})
+
+    with pytest.raises(UnknownNameError):
+        store.commit_rewards(
+            run_id,
+            (
+                RewardCommit(reward(3), LearningUpdate(ltm={("Red", "stop"): 0.1}), 1, trainers),
+                RewardCommit(reward(4), LearningUpdate(ltm={("Red", "stop"): 0.3}), 1),
+                RewardCommit(reward(5), bad, 1),
+            ),
+        )
+
+    assert [(r.id, r.applied) for r in store.rewards(run_id)] == [(trainers, False)]
+    assert store.ltm(run_id) == {}
+    with pytest.raises(UnknownRunError):
+        store.commit_rewards(run_id + 1000, (RewardCommit(reward(1), LearningUpdate(), 0),))
 
 
 def test_log_command_stores_command_and_its_update(store: InspectableRunStore) -> None:
