@@ -187,7 +187,7 @@ class EngineStats:
     lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=200_000))
     """How late each realtime tick started after its deadline."""
     reward_commit_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
-    """Time to commit each reward's learning."""
+    """Time from applying each reward to committing its learning (queueing included)."""
     reward_ack_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
     """Time from a trainer's reward arriving to its acknowledgement."""
 
