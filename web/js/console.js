@@ -130,7 +130,7 @@ async function select(id) {
   }
   $("#run-select").value = String(id);
   showRun(run);
-  await Promise.all([loadEpisodes(), loadMemory()]);
+  await loadStored();
   if (LIVE.has(run.status)) follow();
 }
 
@@ -180,7 +180,7 @@ async function poll() {
     loadMemory();
   } else if (wasLive) {
     closeStream();
-    await Promise.all([loadEpisodes(), loadMemory()]);
+    await loadStored();
   }
 }
 
@@ -209,7 +209,7 @@ function follow() {
       if (d.error) toast(`Run ${run.id} ${d.status}: ${d.error}`, "error");
       // The engine commits learning behind the ticks; once the run has ended all of it is
       // stored, so the final state is read again rather than left as the last refresh saw it.
-      if (wasLive && !LIVE.has(d.status)) Promise.all([loadEpisodes(), loadMemory()]);
+      if (wasLive && !LIVE.has(d.status)) loadStored();
     }
   });
   source.onerror = () => {
@@ -304,6 +304,11 @@ function onAssociation(a) {
 }
 
 // --- reliabilities and the learning curve ---------------------------------------------
+
+/** What the store holds of the run: its episodes and its reliabilities. */
+function loadStored() {
+  return Promise.all([loadEpisodes(), loadMemory()]);
+}
 
 const memoryKind = () => ($('input[name="memory"]:checked') || { value: "ltm" }).value;
 
