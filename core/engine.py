@@ -23,7 +23,7 @@ import asyncio
 import math
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
@@ -77,6 +77,10 @@ WRITE_BATCH_MAX = 256
 
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
+
+APPROACH_S = 0.005
+"""A realtime tick first sleeps until this long before its deadline (at most a quarter of
+the period), then sleeps the rest: see `sleep_until`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,6 +252,28 @@ class _RewardWrite:
 
 
 _CLOSE = object()
+
+
+async def sleep_until(
+    deadline: float,
+    approach_s: float,
+    clock: Callable[[], float],
+    sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
+) -> None:
+    """Sleep until `clock()` reaches `deadline`: to `approach_s` before it, then the rest.
+
+    One long sleep can overshoot by as long as its event-loop iteration goes on running
+    after the sleep is set: libuv (uvloop) works out how long to wait for a timer from a
+    clock it reads once per iteration, and the tick's iteration goes on with other
+    callbacks and waits for the GIL while the 3D view draws the tick. The second sleep is
+    set at the start of a quiet iteration, so it is exact, and it is short.
+    """
+    now = clock()
+    if now < deadline - approach_s:
+        await sleep(deadline - approach_s - now)
+        now = clock()
+    if now < deadline:
+        await sleep(deadline - now)
 
 
 async def _gather(
@@ -711,9 +737,7 @@ class Engine:
         clock = time.monotonic
         deadline = clock()
         while self._more():
-            now = clock()
-            if now < deadline:
-                await asyncio.sleep(deadline - now)
+            await sleep_until(deadline, min(APPROACH_S, 0.25 / self._hz), clock)
             if self._paused:
                 await self._resumed.wait()
                 deadline = clock()
@@ -1126,5 +1150,6 @@ __all__ = [
     "Subscription",
     "SubscriptionClosed",
     "TickPublished",
+    "sleep_until",
 ]
 _ = RewardApplied  # re-exported type of published reward events

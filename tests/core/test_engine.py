@@ -14,7 +14,14 @@ from fakes import InMemoryRunStore
 from core.brain.catalog import Catalog, load_catalog
 from core.commands import EditAssociation
 from core.conditions import get_condition
-from core.engine import Engine, StatusChanged, Subscription, SubscriptionClosed, TickPublished
+from core.engine import (
+    Engine,
+    StatusChanged,
+    Subscription,
+    SubscriptionClosed,
+    TickPublished,
+    sleep_until,
+)
 from core.errors import RunStateError, StorageError
 from core.events import EpisodeEnded, RewardApplied
 from core.ports import (
@@ -434,6 +441,38 @@ def test_realtime_pacing_is_measured() -> None:
     asyncio.run(drive(engine, script))
     assert len(engine.stats.lateness_s) >= 30
     assert all(x >= 0.0 for x in engine.stats.lateness_s)
+
+
+def overshooting_sleep(start: float, overshoot_s: float) -> tuple[list[float], Any, Any]:
+    """A clock at `start`, and a sleep whose first call overshoots by `overshoot_s` (as
+    uvloop's does when the loop iteration goes on running after the timer is set)."""
+    now = [start]
+    asked: list[float] = []
+
+    async def sleep(seconds: float) -> None:
+        asked.append(seconds)
+        now[0] += seconds + (overshoot_s if len(asked) == 1 else 0.0)
+
+    return asked, lambda: now[0], sleep
+
+
+@pytest.mark.parametrize(
+    ("start", "overshoot", "asked", "woke"),
+    [
+        (0.0, 0.003, [0.045, 0.002], 0.050),  # the short sleep absorbs the overshoot
+        (0.0, 0.0, [0.045, 0.005], 0.050),
+        (0.0, 0.007, [0.045], 0.052),  # overshot past the deadline: no second sleep
+        (0.047, 0.0, [0.003], 0.050),  # already within the approach: one sleep
+        (0.051, 0.0, [], 0.051),  # already late: no sleep
+    ],
+)
+def test_a_tick_sleeps_to_near_its_deadline_then_the_rest(
+    start: float, overshoot: float, asked: list[float], woke: float
+) -> None:
+    sleeps, clock, sleep = overshooting_sleep(start, overshoot)
+    asyncio.run(sleep_until(0.050, 0.005, clock, sleep))
+    assert sleeps == pytest.approx(asked)
+    assert clock() == pytest.approx(woke)
 
 
 def test_episode_end_events_reach_subscribers() -> None:
