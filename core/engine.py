@@ -24,7 +24,7 @@ import math
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
 from core.brain.brain import BrainConfig, RewardOutcome
@@ -241,6 +241,9 @@ class _EpisodeJob:
     totals: RunTotals
     after: _RewardJob | None
     """The last reward applied before the checkpoint: it is committed first."""
+    external: _RewardJob | None
+    """The last trainer's reward applied before the checkpoint: once `after` is committed
+    it is in the log, and its id tells a replay which logged rewards the state holds."""
 
 
 @dataclass
@@ -360,6 +363,11 @@ class Engine:
         self._logged_internal: dict[tuple[int, str, float], deque[Any]] = {}
         self._until_tick: int | None = None
         self._last_external_id = 0
+        """The newest trainer's reward in the state restored from the checkpoint."""
+        self._last_external_job: _RewardJob | None = None
+        self._unacked: deque[_RewardJob] = deque()
+        """Trainers' rewards not acknowledged yet, in arrival order (applied ones too)."""
+        """The newest trainer's reward applied since (its log id may come later)."""
         self._replay_skip_upto = 0
         self._closing = False
         self._settling = 0
@@ -454,8 +462,6 @@ class Engine:
         catalog = catalog or load_catalog()
         spec = stored.spec
         if mode is not None:
-            from dataclasses import replace
-
             spec = replace(spec, mode=mode)
         condition, config = cls._condition(spec)
         skip = 0
@@ -538,6 +544,7 @@ class Engine:
             self._due.append(job)
             self._queue.put_nowait(job)
         self._ack_queue.put_nowait(job)
+        self._unacked.append(job)
         assert job.ack is not None
         return await job.ack
 
@@ -659,7 +666,8 @@ class Engine:
     def _fail_pending(self, error: BaseException) -> None:
         # Held rewards (stamped while a boundary was being settled) are not due yet, but
         # their senders wait for an answer all the same.
-        for job in (*self._due, *self._held):
+        # A trainer's reward applied before its log entry failed is in neither.
+        for job in (*self._due, *self._held, *self._unacked):
             if job.ack is not None and not job.ack.done():
                 job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
         for c in (*self._commands, *self._unlogged):
@@ -880,12 +888,15 @@ class Engine:
             trace=trace,
         )
         state = export_state(sim)
-        # Trainer rewards stamped with the next boundary may already be in this state;
-        # replay skips those the checkpoint includes.
-        state["last_external_reward_id"] = self._last_external_id
         self._episode_queue.put_nowait(
             _EpisodeJob(
-                record, sim.episode + 1, sim.tick_count, state, self.totals, self._last_reward_job
+                record,
+                sim.episode + 1,
+                sim.tick_count,
+                state,
+                self.totals,
+                self._last_reward_job,
+                self._last_external_job,
             )
         )
         self._need_reset = True
@@ -994,6 +1005,11 @@ class Engine:
     async def _commit_rewards(self, writes: list[_RewardWrite]) -> None:
         if not writes:
             return
+        for i, w in enumerate(writes):
+            if w.job.external and w.commit.logged_id is None:
+                # Applied before its log entry was written: commit it as that entry.
+                await w.job.logged.wait()
+                writes[i] = replace(w, commit=replace(w.commit, logged_id=w.job.logged_id))
         ids = await self._io(
             self.store.commit_rewards, self.run_id, tuple(w.commit for w in writes)
         )
@@ -1038,6 +1054,15 @@ class Engine:
             last = batch[-1]
             if last.after is not None:
                 await last.after.committed.wait()
+            # Trainer rewards stamped with the next boundary may already be in this state;
+            # replay skips those the checkpoint includes. The rewards up to `after` are
+            # committed, so the last trainer's one is logged and has its id.
+            external = last.external
+            if external is not None:
+                assert external.logged_id is not None
+            last.state["last_external_reward_id"] = (
+                self._last_external_id if external is None else external.logged_id
+            )
             await self._io(self._end_episodes, tuple(j.record for j in batch), last)
 
     def _end_episodes(self, records: tuple[EpisodeRecord, ...], last: _EpisodeJob) -> None:
@@ -1061,6 +1086,7 @@ class Engine:
             )
             job.logged_id = await self._io(self.store.log_reward, self.run_id, record)
             job.logged.set()
+            self._unacked.remove(job)
             if job.ack is not None and not job.ack.done():
                 self.stats.reward_ack_s.append(time.perf_counter() - job.arrived)
                 job.ack.set_result(
@@ -1071,8 +1097,8 @@ class Engine:
         record = RewardRecord(
             job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
         )
-        if job.external and job.logged_id is None:
-            await job.logged.wait()
+        # A trainer's reward is applied at its boundary even if the log is slow to take it
+        # (the tick waits for it there); only its commit waits for the log entry.
         await job.release.wait()
         outcome = self._apply_in_memory(job)
         if job.committed_before:
@@ -1085,8 +1111,8 @@ class Engine:
 
     def _apply_in_memory(self, job: _RewardJob) -> RewardOutcome:
         self._last_reward_job = job
-        if job.external and job.logged_id is not None:
-            self._last_external_id = max(self._last_external_id, job.logged_id)
+        if job.external:
+            self._last_external_job = job
         event, outcome = self.sim.apply_reward(job.reward, job.stamp, job.episode)
         job.applied.set()
         if job.episode == self.sim.episode:

@@ -16,6 +16,7 @@ from core.commands import EditAssociation
 from core.conditions import get_condition
 from core.engine import (
     Engine,
+    RewardAck,
     StatusChanged,
     Subscription,
     SubscriptionClosed,
@@ -546,29 +547,34 @@ class StuckLog(InMemoryRunStore):
         return super().log_reward(run_id, reward)
 
 
-def test_a_storage_error_answers_every_waiting_reward_even_those_held_for_the_next_tick() -> None:
+def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward() -> None:
+    """A reward is applied at its boundary though its log entry is not written yet (a slow
+    disk must not hold the ticks), and is committed only as that entry: when the write
+    fails, the run fails, the reward and those acknowledged after it get the error, and
+    nothing of it is stored."""
     store = StuckLog()
     engine = Engine.create(realtime("rp", 1), store, catalog=CATALOG)
 
-    async def scenario() -> list[object]:
+    async def scenario() -> tuple[int, list[RewardAck | BaseException]]:
         run = asyncio.create_task(engine.run())
         await wait_ticks(engine, 5)
         await engine.reward(1.0, note="first")
         stuck = asyncio.create_task(engine.reward(1.0, note="stuck"))
         while not store.stuck.is_set():
             await asyncio.sleep(0.001)
-        # The tick task waits at the stuck reward's boundary; rewards arriving now are held
-        # for the boundary after it.
-        while not engine._settling:
-            await asyncio.sleep(0.001)
-        held = [asyncio.create_task(engine.reward(0.5, note=f"held {i}")) for i in range(3)]
-        await asyncio.sleep(0.01)
+        at = engine.sim.tick_count
+        after = [asyncio.create_task(engine.reward(0.5, note=f"after {i}")) for i in range(3)]
+        await wait_ticks(engine, 5)  # the ticks go on past the stuck reward's boundary
+        ticked = engine.sim.tick_count - at
         store.release.set()
         with pytest.raises(StorageError):
             await run
         async with asyncio.timeout(10):  # a guard against hanging, not a speed goal
-            return await asyncio.gather(stuck, *held, return_exceptions=True)
+            answers = await asyncio.gather(stuck, *after, return_exceptions=True)
+        return ticked, answers
 
-    answers = asyncio.run(scenario())
+    ticked, answers = asyncio.run(scenario())
+    assert ticked >= 5
     assert engine.status is RunStatus.FAILED
     assert all(isinstance(a, StorageError) for a in answers), answers
+    assert [r.record.note for r in store.rewards(engine.run_id)] == ["first"]
