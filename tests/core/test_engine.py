@@ -547,6 +547,57 @@ class StuckLog(InMemoryRunStore):
         return super().log_reward(run_id, reward)
 
 
+class SlowLog(InMemoryRunStore):
+    """A store whose second reward log write waits until released."""
+
+    def __init__(self) -> None:
+        super().__init__(CATALOG)
+        self.calls = 0
+        self.stuck = threading.Event()
+        self.release = threading.Event()
+
+    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
+        self.calls += 1
+        if self.calls == 2:
+            self.stuck.set()
+            self.release.wait(30)
+        return super().log_reward(run_id, reward)
+
+
+def test_an_episode_ending_while_a_reward_waits_for_its_log_resumes_to_the_same_ltm() -> None:
+    """The reward is in the episode's state before it has a log id: its checkpoint waits
+    for the log entry and names it, so a resumed run does not apply the reward twice."""
+    store = SlowLog()
+    engine = Engine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
+    held: list[int] = []
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 40)
+        await e.reward(1.0)
+        slow = asyncio.create_task(e.reward(-0.5))
+        while not store.stuck.is_set():
+            await asyncio.sleep(0.001)
+        stored = len(store.episodes(e.run_id))
+        ended = e.totals.episodes
+        while e.totals.episodes == ended:  # an episode ends while the reward waits
+            await asyncio.sleep(0.001)
+        await asyncio.sleep(0.3)  # the episode writer gathers for 50 ms, then writes
+        held.append(len(store.episodes(e.run_id)) - stored)
+        store.release.set()
+        await slow
+        await wait_ticks(e, 20)
+        e.stop()
+
+    assert asyncio.run(drive(engine, script)) is RunStatus.STOPPED
+    assert held == [0], "the episode's checkpoint waited for the reward's log entry"
+    ticks = engine.sim.tick_count
+    store.set_status(engine.run_id, RunStatus.INTERRUPTED)
+    again = Engine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
+    assert asyncio.run(again.run(until_tick=ticks)) is RunStatus.STOPPED
+    assert again.sim.tick_count == ticks
+    assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
+
+
 def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward() -> None:
     """A reward is applied at its boundary though its log entry is not written yet (a slow
     disk must not hold the ticks), and is committed only as that entry: when the write
