@@ -365,9 +365,9 @@ class Engine:
         self._last_external_id = 0
         """The newest trainer's reward in the state restored from the checkpoint."""
         self._last_external_job: _RewardJob | None = None
+        """The newest trainer's reward applied since (its log id may come later)."""
         self._unacked: deque[_RewardJob] = deque()
         """Trainers' rewards not acknowledged yet, in arrival order (applied ones too)."""
-        """The newest trainer's reward applied since (its log id may come later)."""
         self._replay_skip_upto = 0
         self._closing = False
         self._settling = 0

@@ -529,11 +529,12 @@ def test_a_stream_of_rewards_never_holds_a_boundary_open() -> None:
     assert stamps == sorted(stamps)
 
 
-class StuckLog(InMemoryRunStore):
-    """A store whose second reward log write hangs until released, then fails."""
+class HeldLog(InMemoryRunStore):
+    """A store whose second reward log write waits until released, then fails if `fail`."""
 
-    def __init__(self) -> None:
+    def __init__(self, fail: bool) -> None:
         super().__init__(CATALOG)
+        self.fail = fail
         self.calls = 0
         self.stuck = threading.Event()
         self.release = threading.Event()
@@ -543,31 +544,15 @@ class StuckLog(InMemoryRunStore):
         if self.calls == 2:
             self.stuck.set()
             self.release.wait(30)
-            raise StorageError("database is locked")
-        return super().log_reward(run_id, reward)
-
-
-class SlowLog(InMemoryRunStore):
-    """A store whose second reward log write waits until released."""
-
-    def __init__(self) -> None:
-        super().__init__(CATALOG)
-        self.calls = 0
-        self.stuck = threading.Event()
-        self.release = threading.Event()
-
-    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
-        self.calls += 1
-        if self.calls == 2:
-            self.stuck.set()
-            self.release.wait(30)
+            if self.fail:
+                raise StorageError("database is locked")
         return super().log_reward(run_id, reward)
 
 
 def test_an_episode_ending_while_a_reward_waits_for_its_log_resumes_to_the_same_ltm() -> None:
     """The reward is in the episode's state before it has a log id: its checkpoint waits
     for the log entry and names it, so a resumed run does not apply the reward twice."""
-    store = SlowLog()
+    store = HeldLog(fail=False)
     engine = Engine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
     held: list[int] = []
 
@@ -603,7 +588,7 @@ def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward
     disk must not hold the ticks), and is committed only as that entry: when the write
     fails, the run fails, the reward and those acknowledged after it get the error, and
     nothing of it is stored."""
-    store = StuckLog()
+    store = HeldLog(fail=True)
     engine = Engine.create(realtime("rp", 1), store, catalog=CATALOG)
 
     async def scenario() -> tuple[int, list[RewardAck | BaseException]]:
