@@ -68,17 +68,23 @@ from bench.service import (
 TICK = re.compile(r"Episode (\d+), tick (\d+)")
 
 
+def parent_of(pid: int) -> int | None:
+    """The parent process id of `pid` (Linux /proc), None if it is gone."""
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def descendants(root: int) -> set[int]:
     """Every process below `root` (Linux /proc)."""
     children: dict[int, list[int]] = {}
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
-        try:
-            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        children.setdefault(ppid, []).append(int(entry.name))
+        ppid = parent_of(int(entry.name))
+        if ppid is not None:
+            children.setdefault(ppid, []).append(int(entry.name))
     found: set[int] = set()
     todo = [root]
     while todo:
@@ -239,11 +245,8 @@ def browser_root(before: set[int], after: set[int]) -> int:
     """The browser process a launch started: the new process whose parent is not new."""
     new = after - before
     for pid in sorted(new):
-        try:
-            ppid = int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        if ppid not in new:
+        ppid = parent_of(pid)
+        if ppid is not None and ppid not in new:
             return pid
     raise RuntimeError("could not find the Chromium that was just started")
 
