@@ -49,7 +49,7 @@ format: install
 
 # The reliability suite at full size (~25 min; CI runs it small): kill -9 and SIGTERM of
 # srlab serve, storage faults, overload, a 50 MB body, schemathesis. It prints a table of
-# what held and writes it to docs/reliability.md and README.md.
+# what held and writes it to docs/reliability.md.
 reliability: install
 	bash scripts/pg-test-server.sh run -- $(BIN)/python -m tests.reliability.suite
 

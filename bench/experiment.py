@@ -13,6 +13,7 @@ import time
 
 from bench.ticks import bare_pymunk, measure
 from core.experiment import run_experiment
+from core.setup import Setup
 
 CONDITIONS = ["innate", "delayed", "dp", "rp", "kp", "qlambda"]
 
@@ -24,7 +25,7 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     args = parser.parse_args()
 
-    bare = measure(bare_pymunk(), seconds=3.0, warmup_s=0.5)
+    bare = measure(bare_pymunk(Setup().world_config()), seconds=3.0, warmup_s=0.5)
     started = time.perf_counter()
     results = run_experiment(CONDITIONS, list(range(args.seeds)), args.episodes, args.jobs)
     elapsed = time.perf_counter() - started

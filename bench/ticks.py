@@ -1,13 +1,13 @@
 """Ticks per second: bare pymunk against the world and the full architecture, and memory.
 
-Run as ``.venv/bin/python bench/ticks.py``. Everything is measured side by side in one run
-after a warm-up, so the ratios hold on any machine:
+Run as ``.venv/bin/python -m bench.ticks``. Everything is measured side by side in one run
+after a warm-up, so the ratios hold on any machine, for every world preset:
 
-(a) bare pymunk: the same track walls and robot box, one physics step and eight sonar ray
-    casts (``segment_query_first``) per tick;
+(a) bare pymunk: the preset's track walls and robot box, one physics step and eight sonar
+    ray casts (``segment_query_first``) per tick;
 (b) the world alone: ``PymunkWorld.step()`` (physics plus analytic sensing);
 (c) the full architecture, ``expert``: sense, perceive, select, motor, step, record;
-(d) the full architecture, ``delayed``: (c) with learning and exploration.
+(d) the full architecture, ``kp``: (c) with learning, exploration and propagation.
 
 Then ``delayed`` runs for many episodes under tracemalloc, to show memory stays flat.
 """
@@ -20,15 +20,18 @@ import math
 import time
 import tracemalloc
 from collections.abc import Callable
+from functools import partial
 
 import pymunk
 
 from core.conditions import get_condition
+from core.setup import Setup
 from core.sim.channels import Channel
 from core.sim.robot import RobotConfig
-from core.sim.track import TrackConfig, TrackGeometry
+from core.sim.track import TrackGeometry
 from core.sim.world import MotorCommand, PymunkWorld, WorldConfig
 from core.simulation import Simulation
+from core.worlds import load_world, world_names
 
 Stepper = Callable[[int], None]
 """Runs n ticks."""
@@ -53,11 +56,10 @@ def measure(run: Stepper, seconds: float, warmup_s: float) -> float:
     raise AssertionError("unreachable")
 
 
-def bare_pymunk() -> Stepper:
+def bare_pymunk(config: WorldConfig) -> Stepper:
     """The track and the robot in plain pymunk, driven up and down leg 0."""
-    config = WorldConfig()
     robot: RobotConfig = config.robot
-    geo = TrackGeometry.build(TrackConfig())
+    geo = TrackGeometry.build(config.track)
     space = pymunk.Space()
     for a, b in geo.wall_segments():
         space.add(pymunk.Segment(space.static_body, a, b, 0.01))
@@ -101,9 +103,9 @@ def bare_pymunk() -> Stepper:
     return run
 
 
-def world_only() -> Stepper:
+def world_only(config: WorldConfig) -> Stepper:
     """`PymunkWorld.step()` with a heading hold down leg 0, reset before the corner."""
-    world = PymunkWorld()
+    world = PymunkWorld(config)
     episode = 0
     frame = world.reset(0, episode)
     turn_x = float(world.geometry.vertices[0][0]) - 0.5
@@ -121,9 +123,12 @@ def world_only() -> Stepper:
     return run
 
 
-def architecture(condition: str, seed: int = 0) -> Stepper:
-    """A whole `Simulation` of a condition, reset at every episode's end."""
-    sim = Simulation(get_condition(condition), seed)
+def architecture(condition: str, world: str, seed: int = 0) -> Stepper:
+    """A whole `Simulation` of a condition in a world preset, reset at every episode's end."""
+    setup = Setup(world)
+    sim = Simulation(
+        get_condition(condition), seed, catalog=setup.catalog(), world_config=setup.world_config()
+    )
     sim.reset()
     tick, reset = sim.tick, sim.reset
 
@@ -170,6 +175,9 @@ def main() -> None:
         "--warmup", type=float, default=1.0, help="warm-up time per case (default 1)"
     )
     parser.add_argument(
+        "--world", action="append", choices=world_names(), help="a preset (default: every one)"
+    )
+    parser.add_argument(
         "--episodes",
         type=int,
         default=1000,
@@ -180,21 +188,24 @@ def main() -> None:
         parser.error("--seconds must be positive, --warmup and --episodes not negative")
 
     print(f"ticks/s, {args.seconds:g} s each after {args.warmup:g} s of warm-up")
-    cases = [
-        ("bare pymunk (step + 8 ray casts)", bare_pymunk),
-        ("world only (PymunkWorld.step)", world_only),
-        ("full architecture, expert", lambda: architecture("expert")),
-        ("full architecture, delayed", lambda: architecture("delayed")),
-    ]
-    rates: list[float] = []
-    for name, build in cases:
-        rate = measure(build(), args.seconds, args.warmup)
-        rates.append(rate)
-        print(f"  {name:<34} {rate:>10,.0f}")
-    bare, world, expert, delayed = rates
-    print(f"  world / bare    {world / bare:5.2f}")
-    print(f"  full / bare     {expert / bare:5.2f}  (expert; goal: full >= 0.7 x bare)")
-    print(f"  delayed / bare  {delayed / bare:5.2f}")
+    for name in args.world or world_names():
+        config = load_world(name).config
+        cases: list[tuple[str, Callable[[], Stepper]]] = [
+            ("bare pymunk (step + 8 ray casts)", partial(bare_pymunk, config)),
+            ("world only (PymunkWorld.step)", partial(world_only, config)),
+            ("full architecture, expert", partial(architecture, "expert", name)),
+            ("full architecture, kp", partial(architecture, "kp", name)),
+        ]
+        print(f"world {name}:")
+        rates: list[float] = []
+        for label, build in cases:
+            rate = measure(build(), args.seconds, args.warmup)
+            rates.append(rate)
+            print(f"  {label:<34} {rate:>10,.0f}")
+        bare, world, expert, kp = rates
+        print(f"  world / bare    {world / bare:5.2f}")
+        print(f"  full / bare     {expert / bare:5.2f}  (expert; goal: full >= 0.7 x bare)")
+        print(f"  kp / bare       {kp / bare:5.2f}")
 
     if args.episodes:
         print(f"memory, delayed, {args.episodes} episodes (tracemalloc):")

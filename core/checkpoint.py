@@ -57,6 +57,7 @@ def export_state(sim: Simulation) -> dict[str, Any]:
         ],
         "stm": [[t, s[i], b[j]] for t, i, j in brain.stm],
         "rng": brain.rng.bit_generator.state,
+        "ticks_by_origin": dict(sim.ticks_by_origin),
     }
 
 
@@ -125,4 +126,6 @@ def restore_simulation(
     brain.rng.bit_generator.state = state["rng"]
     sim.episode = int(state["episode"])
     sim.tick_count = int(state["tick"])
+    # Absent from checkpoints written before the counts were kept: those start at 0.
+    sim.ticks_by_origin = {str(k): int(v) for k, v in state.get("ticks_by_origin", {}).items()}
     return sim

@@ -25,6 +25,8 @@ class Condition:
         trainer: the reinforcement program that rewards responses at once (None: none).
         kp: whether knowledge propagation runs.
         agent: ``brain`` (the paper's architecture) or ``qlambda`` (the baseline learner).
+        extra_networks: knowledge sets added on top of `network` (the signal's responses
+            when they are given, see `core.setup.Setup`).
     """
 
     name: str
@@ -37,6 +39,7 @@ class Condition:
     trainer: str | None = None
     kp: bool = False
     agent: str = "brain"
+    extra_networks: tuple[str, ...] = ()
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -86,13 +89,22 @@ CONDITIONS: dict[str, Condition] = {
         ),
         Condition(
             "kp",
-            "Sonar and signal S-R designed (Fig. 13); camera obstacle responses learned by "
-            "knowledge propagation from the delayed reward.",
+            "Position and sonar S-R designed (Fig. 13); camera obstacle responses learned "
+            "by knowledge propagation, the signal's from the delayed reward.",
             network="kp",
             learning=True,
             epsilon=0.1,
             success_reward=1.0,
             kp=True,
+        ),
+        Condition(
+            "sonar",
+            "The kp condition with propagation off (its ablation): the same design, camera "
+            "and signal responses learned from the delayed reward alone.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
         ),
         Condition(
             "qlambda",
@@ -108,6 +120,17 @@ CONDITIONS: dict[str, Condition] = {
             "expert",
             "A hand-designed correct response to every stimulus, no learning.",
             network="expert",
+        ),
+        Condition(
+            "reflexes",
+            "The kp condition's design (lane keeping and sonar obstacle responses) alone, "
+            "no learning: what the low-level reflexes do by themselves.",
+            network="kp",
+        ),
+        Condition(
+            "unaware",
+            "Table I plus lane keeping, no obstacle knowledge at all, no learning.",
+            network="position",
         ),
     )
 }

@@ -28,12 +28,12 @@ from dataclasses import dataclass, field, replace
 from typing import Any, TypeVar
 
 from core.brain.brain import BrainConfig, RewardOutcome
-from core.brain.catalog import Catalog, load_catalog
+from core.brain.catalog import Catalog
 from core.brain.network import Association, BehaviourNetwork
 from core.checkpoint import decode, encode, export_state, restore_simulation
 from core.commands import EditAssociation, InjectReward
 from core.conditions import Condition, get_condition
-from core.errors import RunStateError, StorageError
+from core.errors import CatalogError, RunStateError, StorageError
 from core.events import (
     AssociationDemoted,
     AssociationPromoted,
@@ -59,6 +59,7 @@ from core.ports import (
     RunTotals,
     StoredRun,
 )
+from core.setup import Setup, condition_network
 from core.sim.world import WorldConfig
 from core.simulation import Simulation, Snapshot
 from core.trace import TraceRecorder
@@ -393,24 +394,43 @@ class Engine:
         # The API accepts these for every condition and ignores those a condition does not use.
         return configure(condition, applicable(condition, params))
 
+    @staticmethod
+    def _setup(spec: RunSpec, catalog: Catalog | None) -> tuple[Setup, Catalog]:
+        """The run's setup and catalogue: `catalog` if given (it must fit), else the setup's.
+
+        A spec that names no sensor definition takes the given catalogue's.
+        """
+        sensors = spec.sensors or (catalog.definition if catalog is not None else "")
+        setup = Setup(spec.world, sensors)
+        if catalog is None:
+            return setup, setup.catalog()
+        if catalog.definition and catalog.definition != setup.sensors_name:
+            raise CatalogError(
+                f"the catalogue uses sensor definition {catalog.definition!r}, the run "
+                f"{setup.sensors_name!r}"
+            )
+        return setup, catalog
+
     @classmethod
     def _new_simulation(
         cls,
         spec: RunSpec,
         catalog: Catalog,
-        world_config: WorldConfig | None,
+        world_config: WorldConfig,
         network: tuple[Association, ...] | None,
     ) -> Simulation:
         """A fresh simulation for a run.
 
-        Its network is `network`, else the spec's knowledge set, else the condition's own.
+        Its network is `network`, else the spec's knowledge set, else the condition's own;
+        a knowledge set is taken in its variant for the catalogue's sensor definition
+        (`core.setup.condition_network`).
         """
         condition, config = cls._condition(spec)
-        net = None if network is None else BehaviourNetwork(len(catalog.stimuli), network)
-        if net is None and spec.network is not None:
-            net = BehaviourNetwork.from_specs(
-                catalog, catalog.knowledge_set(spec.network).associations
-            )
+        if network is not None:
+            net = BehaviourNetwork(len(catalog.stimuli), network)
+        else:
+            base = condition if spec.network is None else replace(condition, network=spec.network)
+            net = condition_network(catalog, base)
         return Simulation(
             condition,
             spec.seed,
@@ -432,9 +452,17 @@ class Engine:
         network: tuple[Association, ...] | None = None,
         trace: bool = True,
     ) -> Engine:
-        """A new run, stored with status created."""
-        catalog = catalog or load_catalog()
-        sim = cls._new_simulation(spec, catalog, world_config, network)
+        """A new run, stored with status created.
+
+        It runs in the spec's world preset and sensor definition, stored by name with the
+        defaults resolved (an unknown name raises `UnknownNameError`). `catalog` and
+        `world_config` replace the setup's: a catalogue must use the definition the spec
+        names, and is the definition of a spec that names none.
+        """
+        setup, catalog = cls._setup(spec, catalog)
+        setup = setup.resolved()
+        spec = replace(spec, world=setup.world, sensors=setup.sensors)
+        sim = cls._new_simulation(spec, catalog, world_config or setup.world_config(), network)
         pairs = tuple(_pair(sim, a) for a in sim.brain.network)
         run_id = store.create_run(spec, pairs)
         # A checkpoint before the first tick: a run can be rebuilt whatever network it
@@ -455,12 +483,17 @@ class Engine:
         trace: bool = True,
         mode: Mode | None = None,
     ) -> Engine:
-        """A stored run, rebuilt from its last checkpoint; `run()` replays its log first."""
+        """A stored run, rebuilt from its last checkpoint; `run()` replays its log first.
+
+        It runs in the world and sensor definition it was stored with (the defaults for a
+        run stored before runs kept them).
+        """
         stored = store.load_run(run_id)
         if stored.status in (RunStatus.FINISHED, RunStatus.RUNNING):
             raise RunStateError(f"run {run_id} is {stored.status.value}: nothing to resume")
-        catalog = catalog or load_catalog()
         spec = stored.spec
+        setup, catalog = cls._setup(spec, catalog)
+        world_config = world_config or setup.world_config()
         if mode is not None:
             spec = replace(spec, mode=mode)
         condition, config = cls._condition(spec)

@@ -50,8 +50,12 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         success_reward: float = 1.0,
         world_config: WorldConfig | None = None,
         catalog: Catalog | None = None,
+        extra_networks: tuple[str, ...] = (),
     ) -> None:
         self.catalog = catalog or load_catalog()
+        for name in extra_networks:
+            self.catalog.knowledge_set(name)
+        self.extra_networks = extra_networks
         if not learnable:
             raise ValueError("at least one learnable logical sensor is needed")
         for name in learnable:
@@ -75,6 +79,7 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
             description="built-in behaviour for a Gymnasium learner",
             network=self.prior or "innate",
             learnable_sensors=self.learnable_sensors,
+            extra_networks=self.extra_networks if self.prior is not None else (),
         )
         network = None if self.prior is not None else BehaviourNetwork(len(self.catalog.stimuli))
         return Simulation(

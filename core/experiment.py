@@ -8,32 +8,39 @@ from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from functools import cache
 from typing import Any, Protocol
 
 import numpy as np
 
-from core.brain.catalog import Catalog, load_catalog
+from core.brain.catalog import Catalog
 from core.conditions import CONDITIONS, get_condition
 from core.errors import UnknownNameError
 from core.events import Cause, Outcome
 from core.params import Params, configure, qlambda_config
 from core.qlambda import run_qlambda
 from core.runner import EpisodeSummary, run
+from core.setup import Setup
+from core.stats import paired_difference
 
 CRITERION_WINDOW = 10
 CRITERION_RATE = 0.8
 CAMERA_SENSOR = "camera_obstacle"
+DEFAULT_SETUP = Setup()
 
 
 @dataclass(frozen=True, slots=True)
 class Task:
-    """One (condition, seed) run, with the learning parameters it sets (none: defaults)."""
+    """One (condition, seed) run, with the learning parameters it sets (none: defaults).
+
+    It runs in `setup`: a world, a sensor definition and a signal mode (the defaults
+    unless given).
+    """
 
     condition: str
     seed: int
     episodes: int
     params: Params = ()
+    setup: Setup = DEFAULT_SETUP
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +60,10 @@ class TaskResult:
     rltm: dict[str, float] = field(default_factory=dict)
     programmed: dict[str, float] = field(default_factory=dict)
     error: str | None = None
+    ticks_by_origin: dict[str, int] = field(default_factory=dict)
+    """Ticks by what made their behaviour run (see `core.runner.RunSummary`)."""
+    camera_met: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """Per camera obstacle stimulus met: (ticks it was active, encounters)."""
 
     @property
     def ok(self) -> bool:
@@ -81,12 +92,6 @@ def _camera_memory(
     }
 
 
-@cache
-def _shared_catalog() -> Catalog:
-    """The shipped catalogue, loaded once per process (it is never modified)."""
-    return load_catalog()
-
-
 def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
     """Run one task; any error is returned, not raised, so the others' results survive.
 
@@ -94,16 +99,32 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
     any machine running the same code.
     """
     try:
-        catalog = catalog or _shared_catalog()
-        condition = get_condition(task.condition)
+        setup = task.setup
+        catalog = catalog or setup.catalog()
+        condition = setup.condition(get_condition(task.condition))
         if condition.agent == "qlambda":
+            from core.envs import AmigoTrackEnv
+
             config = qlambda_config(condition, task.params)
-            episodes, _, ticks = run_qlambda(task.seed, task.episodes, config)
+            env = AmigoTrackEnv(
+                prior=config.prior,
+                learnable=condition.learnable_sensors,
+                world_config=setup.world_config(),
+                catalog=catalog,
+                extra_networks=condition.extra_networks,
+            )
+            episodes, _, ticks = run_qlambda(task.seed, task.episodes, config, env=env)
             return TaskResult(task, tuple(episodes), ticks)
         from core.simulation import Simulation
 
         condition, brain_config = configure(condition, task.params)
-        sim = Simulation(condition, task.seed, catalog=catalog, brain_config=brain_config)
+        sim = Simulation(
+            condition,
+            task.seed,
+            catalog=catalog,
+            world_config=setup.world_config(),
+            brain_config=brain_config,
+        )
         summary = run(condition, task.seed, task.episodes, simulation=sim)
         names = [b.name for b in sim.brain.catalog.behaviours]
         rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
@@ -119,6 +140,12 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
             _camera_memory(catalog, sim.brain.ltm.items(), names),
             _camera_memory(catalog, rltm, names),
             _camera_memory(catalog, designed, names),
+            ticks_by_origin=summary.ticks_by_origin,
+            camera_met={
+                st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id])
+                for st in catalog.stimuli
+                if st.sensor == CAMERA_SENSOR and sim.encounters[st.id]
+            },
         )
     except Exception as e:  # a failed task is reported with its seed, never lost silently
         return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
@@ -232,6 +259,7 @@ def run_experiment(
     jobs: int = 1,
     on_result: Callable[[TaskResult], None] | None = None,
     backend: Backend | None = None,
+    setup: Setup | None = None,
 ) -> list[TaskResult]:
     """Run every (condition, seed) task on `backend` (default: `jobs` local processes).
 
@@ -246,7 +274,8 @@ def run_experiment(
         raise ValueError("jobs must be >= 1")
     for c in conditions:
         get_condition(c)
-    tasks = [Task(c, s, episodes) for c in conditions for s in seeds]
+    setup = (setup or Setup()).resolved()
+    tasks = [Task(c, s, episodes, setup=setup) for c in conditions for s in seeds]
     return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
 
 
@@ -294,6 +323,56 @@ def episodes_to_criterion(
     return None
 
 
+def paired_against(
+    summary: dict[str, Any], reference: str, horizon: int | None = None
+) -> dict[str, dict[str, float]]:
+    """Each condition's success minus `reference`'s, paired by seed.
+
+    Over the first `horizon` episodes (None: all): the mean difference, its 95% bootstrap
+    interval and the sign-flip p, per condition.
+    """
+    ref = summary.get(reference, {})
+    if not ref.get("seeds"):
+        return {}
+    ref_by_seed = dict(zip(ref["seed_ids"], ref["success_by_seed"], strict=True))
+    out = {}
+    for name, s in summary.items():
+        if name == reference or not s.get("seeds"):
+            continue
+        mine = dict(zip(s["seed_ids"], s["success_by_seed"], strict=True))
+        seeds = [x for x in mine if x in ref_by_seed]
+        if len(seeds) < 2:
+            continue
+        a = [float(np.mean(mine[x][:horizon])) for x in seeds]
+        b = [float(np.mean(ref_by_seed[x][:horizon])) for x in seeds]
+        d = paired_difference(a, b)
+        out[name] = {**d.diff.as_dict(), "p": d.p}
+    return out
+
+
+def _ticks_by_origin(results: Sequence[TaskResult]) -> dict[str, int]:
+    """Ticks summed over seeds by what made their behaviour run, most first."""
+    total: dict[str, int] = {}
+    for r in results:
+        for origin, n in r.ticks_by_origin.items():
+            total[origin] = total.get(origin, 0) + n
+    return dict(sorted(total.items(), key=lambda kv: (-kv[1], kv[0])))
+
+
+def _camera_met(results: Sequence[TaskResult]) -> dict[str, dict[str, float]]:
+    """Per camera stimulus: mean ticks active and encounters per seed, seeds that met it."""
+    names = sorted({n for r in results for n in r.camera_met})
+    out = {}
+    for n in names:
+        met = [r.camera_met.get(n, (0, 0)) for r in results]
+        out[n] = {
+            "ticks_per_seed": float(np.mean([t for t, _ in met])),
+            "encounters_per_seed": float(np.mean([e for _, e in met])),
+            "seeds": sum(1 for _, e in met if e > 0),
+        }
+    return out
+
+
 def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[str, Any]:
     """Per condition, over seeds: the figures of the experiment's summary."""
     out: dict[str, Any] = {}
@@ -335,6 +414,7 @@ def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[
             "success_last10": mean_ci(success[:, -last:].mean(axis=1).tolist()),
             "success_curve": success.mean(axis=0).tolist(),
             "success_by_seed": success.astype(int).tolist(),
+            "seed_ids": [r.task.seed for r in rs],
             "success_curve_ci95": [
                 mean_ci(success[:, i].astype(float).tolist())["ci95"] for i in range(n_ep)
             ],
@@ -353,5 +433,7 @@ def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[
             "learns_camera": get_condition(c).agent == "brain" and get_condition(c).learning,
             "camera_reliability": reliab,
             "ticks": sum(r.ticks for r in rs),
+            "ticks_by_origin": _ticks_by_origin(rs),
+            "camera_stimuli_met": _camera_met(rs),
         }
     return out

@@ -45,6 +45,10 @@ class RunSpec:
         network: the knowledge set or stored network the run starts from (None: the
             condition's own).
         params: learning parameters that override the condition's (eta, epsilon, ...).
+        world: the world preset it runs in (`core.worlds`; "" for the default).
+        sensors: the sensor definition its logical sensors use (`core.brain.catalog`;
+            "" for the default). A stored run keeps both resolved (see `core.setup.Setup`),
+            so a later change of the defaults never changes what an old run meant.
     """
 
     condition: str
@@ -54,6 +58,8 @@ class RunSpec:
     hz: float = 10.0
     network: str | None = None
     params: Mapping[str, Any] = field(default_factory=dict)
+    world: str = ""
+    sensors: str = ""
 
 
 @dataclass(frozen=True, slots=True)

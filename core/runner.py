@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Catalog
@@ -34,6 +34,9 @@ class RunSummary:
     episodes: tuple[EpisodeSummary, ...]
     ticks: int
     ltm: dict[tuple[int, int], float]
+    ticks_by_origin: dict[str, int] = field(default_factory=dict)
+    """Ticks by what made their behaviour run: an association's source (innate, designed,
+    dp, learned, kp, expert), explored, default or commanded."""
 
     @property
     def successes(self) -> int:
@@ -98,4 +101,11 @@ def run(
                     if on_episode is not None:
                         on_episode(summary)
                     break
-    return RunSummary(condition.name, seed, tuple(results), sim.tick_count, sim.brain.ltm.as_dict())
+    return RunSummary(
+        condition.name,
+        seed,
+        tuple(results),
+        sim.tick_count,
+        sim.brain.ltm.as_dict(),
+        dict(sim.ticks_by_origin),
+    )

@@ -15,9 +15,11 @@ from core.commands import InjectReward
 from core.conditions import Condition
 from core.errors import SimulationStateError
 from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied, RewardDue
+from core.setup import condition_network
 from core.sim.channels import Channel
 from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
 from core.trainer import ReinforcementProgram, load_trainer
+from core.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)
 
@@ -51,6 +53,11 @@ class Snapshot:
     progress_m: float
     outcome: Outcome | None = None
     cause: Cause | None = None
+    origin: str = "default"
+    """What made the behaviour run: its association's source, explored, default or
+    commanded (`core.brain.selection.ORIGINS`)."""
+    released_by: int = -1
+    """The stimulus the behaviour answers (-1: none)."""
 
     @property
     def done(self) -> bool:
@@ -90,11 +97,9 @@ class Simulation:
         self.condition = condition
         self.seed = seed
         self.catalog = catalog or load_catalog()
-        self.world = world or PymunkWorld(world_config)
+        self.world = world or PymunkWorld(world_config or load_world().config)
         if network is None:
-            network = BehaviourNetwork.from_specs(
-                self.catalog, self.catalog.knowledge_set(condition.network).associations
-            )
+            network = condition_network(self.catalog, condition)
         brain_rng = np.random.default_rng(np.random.SeedSequence([seed, 0, 3]))
         self.brain = Brain(
             self.catalog,
@@ -120,6 +125,13 @@ class Simulation:
         self._cause: Cause | None = None
         self._done = True
         self._snapshot: Snapshot | None = None
+        self.ticks_by_origin: dict[str, int] = {}
+        """Ticks run so far by what made their behaviour run (see `Snapshot.origin`)."""
+        self.stimulus_ticks = [0] * len(self.catalog.stimuli)
+        """Ticks each stimulus was active, by stimulus id."""
+        self.encounters = [0] * len(self.catalog.stimuli)
+        """Times each stimulus became active (an encounter), by stimulus id."""
+        self._was_active: frozenset[int] = frozenset()
 
     @property
     def snapshot(self) -> Snapshot:
@@ -139,6 +151,7 @@ class Simulation:
         self._cause = None
         self._done = False
         self._pending.clear()
+        self._was_active = frozenset()
         self._channels = frame.channels.tolist()
         self._snapshot = Snapshot(
             self.episode,
@@ -192,6 +205,13 @@ class Simulation:
         self._episode_tick += 1
         brain = self.brain
         active, command = brain.step(self.tick_count, self._channels, inputs.behaviour)
+        was = self._was_active
+        counts, met = self.stimulus_ticks, self.encounters
+        for s in active:
+            counts[s] += 1
+            if s not in was:
+                met[s] += 1
+        self._was_active = frozenset(active)
         if self.trainer is not None:
             judged = self.trainer.judge(brain.last)
             if judged is not None:
@@ -234,6 +254,8 @@ class Simulation:
             outcome = Outcome.FAILURE
             cause = cause or Cause.TIMEOUT
         decision = brain.last
+        by_origin = self.ticks_by_origin
+        by_origin[decision.origin] = by_origin.get(decision.origin, 0) + 1
         snap = Snapshot(
             self.episode,
             self.tick_count,
@@ -248,6 +270,8 @@ class Simulation:
             self._progress,
             outcome,
             cause,
+            decision.origin,
+            decision.stimulus,
         )
         self._snapshot = snap
         if outcome is not None:

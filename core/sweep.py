@@ -16,8 +16,17 @@ import numpy as np
 
 from core.conditions import get_condition
 from core.events import Cause, Outcome
-from core.experiment import Backend, Task, TaskResult, mean_ci, run_tasks, summarise
+from core.experiment import (
+    DEFAULT_SETUP,
+    Backend,
+    Task,
+    TaskResult,
+    mean_ci,
+    run_tasks,
+    summarise,
+)
 from core.params import ParameterError, ParamValue, applicable, get_parameter
+from core.setup import Setup
 
 Point = dict[str, ParamValue]
 Axes = tuple[tuple[str, tuple[ParamValue, ...]], ...]
@@ -61,6 +70,7 @@ class Sweep:
     conditions: tuple[str, ...]
     seeds: tuple[int, ...]
     episodes: int
+    setup: Setup = DEFAULT_SETUP
 
     def __post_init__(self) -> None:
         if self.episodes < 1:
@@ -100,7 +110,13 @@ class Sweep:
 
     def task(self, point: Mapping[str, ParamValue], condition: str, seed: int) -> Task:
         """The task a (point, condition, seed) runs: only the parameters it uses are set."""
-        return Task(condition, seed, self.episodes, applicable(get_condition(condition), point))
+        return Task(
+            condition,
+            seed,
+            self.episodes,
+            applicable(get_condition(condition), point),
+            self.setup,
+        )
 
     def tasks(self) -> list[Task]:
         """Every distinct task, in (condition, point, seed) order."""

@@ -1,4 +1,9 @@
-"""Compact episode traces: what the robot sensed and did each tick, for replay."""
+"""Compact episode traces: what the robot sensed and did each tick, for replay.
+
+Format SRT2 also keeps, per tick, what made the behaviour run (its association's source,
+exploration, the default or a command) and the stimulus it answered; SRT1 traces, stored
+before, read with those unknown (origin "", stimulus -1).
+"""
 
 from __future__ import annotations
 
@@ -8,24 +13,28 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from core.brain.selection import ORIGINS
+
 if TYPE_CHECKING:
     from core.simulation import Snapshot
 
-MAGIC = b"SRT1"
-_DTYPE = np.dtype(
-    [
-        ("tick", "<i4"),
-        ("x", "<f4"),
-        ("y", "<f4"),
-        ("heading", "<f4"),
-        ("behaviour", "<i2"),
-        ("how", "<i1"),
-        ("lamp", "<i1"),
-        ("stimuli", "<u8"),
-    ]
-)
+MAGIC = b"SRT2"
+_MAGIC_V1 = b"SRT1"
+_FIELDS_V1 = [
+    ("tick", "<i4"),
+    ("x", "<f4"),
+    ("y", "<f4"),
+    ("heading", "<f4"),
+    ("behaviour", "<i2"),
+    ("how", "<i1"),
+    ("lamp", "<i1"),
+    ("stimuli", "<u8"),
+]
+_DTYPE_V1 = np.dtype(_FIELDS_V1)
+_DTYPE = np.dtype([*_FIELDS_V1, ("origin", "<i1"), ("released_by", "<i1")])
 HOWS = ("released", "default", "explored", "continued", "commanded")
 _HOW_INDEX = {h: i for i, h in enumerate(HOWS)}
+_ORIGIN_INDEX = {o: i for i, o in enumerate(ORIGINS)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +49,10 @@ class TraceRow:
     how: str
     lamp: int
     stimuli: tuple[int, ...]
+    origin: str = ""
+    """What made the behaviour run (`core.brain.selection.ORIGINS`; "" in an SRT1 trace)."""
+    released_by: int = -1
+    """The stimulus the behaviour answered (-1: none, or unknown in an SRT1 trace)."""
 
 
 class TraceRecorder:
@@ -64,7 +77,7 @@ class TraceRecorder:
                 mask |= 1 << i
             rows.append(
                 (s.tick, s.x, s.y, s.heading_rad, s.behaviour, _HOW_INDEX[s.how.value],
-                 int(s.lamp), mask)
+                 int(s.lamp), mask, _ORIGIN_INDEX[s.origin], s.released_by)
             )  # fmt: skip
         arr = np.array(rows, dtype=_DTYPE)
         self._rows = []
@@ -72,10 +85,14 @@ class TraceRecorder:
 
 
 def unpack(blob: bytes) -> list[TraceRow]:
-    """The rows of a packed trace."""
-    if not blob.startswith(MAGIC):
+    """The rows of a packed trace (SRT2, or SRT1 as stored before)."""
+    if blob.startswith(MAGIC):
+        dtype, v2 = _DTYPE, True
+    elif blob.startswith(_MAGIC_V1):
+        dtype, v2 = _DTYPE_V1, False
+    else:
         raise ValueError("not an srlab trace")
-    arr = np.frombuffer(zlib.decompress(blob[len(MAGIC) :]), dtype=_DTYPE)
+    arr = np.frombuffer(zlib.decompress(blob[len(MAGIC) :]), dtype=dtype)
     rows = []
     for r in arr:
         mask = int(r["stimuli"])
@@ -89,6 +106,8 @@ def unpack(blob: bytes) -> list[TraceRow]:
                 HOWS[int(r["how"])],
                 int(r["lamp"]),
                 tuple(i for i in range(64) if mask >> i & 1),
+                ORIGINS[int(r["origin"])] if v2 else "",
+                int(r["released_by"]) if v2 else -1,
             )
         )
     return rows

@@ -39,8 +39,15 @@ class ReinforcementProgram:
 
 
 def load_trainer(catalog: Catalog, name: str, root: Path | None = None) -> ReinforcementProgram:
-    """Load the reinforcement program `name` from the data folder."""
-    path = (root or data_dir()) / "trainers" / f"{name}.toml"
+    """Load the reinforcement program `name` from the data folder.
+
+    A program written for one sensor definition has a variant for each other one,
+    ``<name>-<definition>.toml``; the catalogue's definition picks it.
+    """
+    folder = (root or data_dir()) / "trainers"
+    path = folder / f"{name}-{catalog.definition}.toml"
+    if not catalog.definition or not path.is_file():
+        path = folder / f"{name}.toml"
     if not path.is_file():
         raise UnknownNameError(f"unknown reinforcement program {name!r}")
     try:

@@ -17,20 +17,26 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from core.brain.catalog import Catalog, load_catalog
+from core.brain.catalog import Catalog, sensor_definitions
 from core.brain.selection import Strategy
 from core.conditions import CONDITIONS, get_condition
 from core.errors import CoreError
 from core.events import Outcome
 from core.runner import EpisodeSummary, RunSummary, run
+from core.setup import default_sensors
 from core.simulation import Snapshot
+from core.worlds import default_world, world_names
 from server.ray_backend import BackendError
 from server.sweep_cli import (
+    add_backend_arguments,
+    add_setup_arguments,
     add_sweep_parser,
     add_task_arguments,
     on_result_updater,
     open_backend,
     progress_display,
+    setup_of,
+    setup_params,
     sweep_command,
 )
 
@@ -94,6 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write every tick (pose, stimuli, behaviour) as JSON lines to FILE",
     )
     sim.add_argument("--quiet", action="store_true", help="no progress bar (it goes to stderr)")
+    add_setup_arguments(sim)
 
     exp = sub.add_parser(
         "experiment",
@@ -110,6 +117,38 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_task_arguments(exp, _positive_int, _seed, Path("results"))
     add_sweep_parser(sub, _positive_int, _seed)
+
+    check = sub.add_parser(
+        "world-check",
+        help="does a world preset pose the paper's problem? (properties of the world alone)",
+        description="With the signal's responses given and no learning anywhere: (a) no "
+        "obstacle knowledge succeeds <= 20%%, (b) the sonar reflexes alone 40-80%%, (c) the "
+        "expert's camera responses >= 95%%; and (d) innate knowledge alone <= 10%% (Table "
+        "II). Prints each with its 95%% bootstrap interval over seeds.",
+    )
+    check.add_argument(
+        "--world",
+        action="append",
+        metavar="NAME",
+        help="a world preset; repeat for several (default: every preset)",
+    )
+    check.add_argument(
+        "--sensors",
+        default="",
+        help="sensor definition for (c) (default: the default one; 'all' for each)",
+    )
+    check.add_argument("--seeds", type=_positive_int, default=20, help="seeds (default 20)")
+    check.add_argument("--seed-base", type=_seed, default=0, help="first seed (default 0)")
+    check.add_argument(
+        "--episodes", type=_positive_int, default=50, help="episodes per seed (default 50)"
+    )
+    check.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1)
+    add_backend_arguments(check)
+    check.add_argument("--json", action="store_true", help="print one JSON object")
+    check.add_argument(
+        "--out", type=Path, help="also write world-check.json and world-check.md to this folder"
+    )
+    check.add_argument("--quiet", action="store_true", help="no progress display")
 
     sweep = sub.add_parser(
         "qlambda-sweep",
@@ -155,6 +194,14 @@ def build_parser() -> argparse.ArgumentParser:
     runp.add_argument("--mode", choices=["fast", "realtime"], default="fast")
     runp.add_argument("--hz", type=_rate, default=10.0, help="realtime tick rate (default 10)")
     runp.add_argument("--network", help="start from this knowledge set instead")
+    runp.add_argument(
+        "--world", choices=world_names(), help=f"world preset (default {default_world()})"
+    )
+    runp.add_argument(
+        "--sensors",
+        choices=list(sensor_definitions()),
+        help=f"sensor definition (default {default_sensors()})",
+    )
     runp.add_argument("--eta", type=_unit, help="Eq. (1)'s learning rate")
     runp.add_argument("--epsilon", type=_unit, help="exploration rate")
     runp.add_argument("--resume", type=_positive_int, metavar="RUN", help="resume a stored run")
@@ -196,6 +243,8 @@ class _TraceWriter:
             "stimuli": [self._stimuli[i] for i in s.stimuli],
             "behaviour": self._behaviours[s.behaviour] if s.behaviour >= 0 else None,
             "how": s.how.value,
+            "released_by": self._stimuli[s.released_by] if s.released_by >= 0 else None,
+            "source": s.origin,
             "lamp": s.lamp.name.lower(),
             "progress_m": round(s.progress_m, 3),
         }
@@ -215,12 +264,21 @@ def summary_dict(result: RunSummary) -> dict[str, Any]:
         "success_rate": result.success_rate,
         "failures": result.failures(),
         "ticks": result.ticks,
+        "ticks_by_source": dict(
+            sorted(result.ticks_by_origin.items(), key=lambda kv: (-kv[1], kv[0]))
+        ),
     }
 
 
 def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
-    condition = get_condition(args.condition)
-    catalog = load_catalog()
+    setup = setup_of(args)
+    condition = setup.condition(get_condition(args.condition))
+    if condition.agent != "brain":
+        raise ValueError(
+            f"condition {condition.name!r} is not the paper's architecture: run it with "
+            "`srlab experiment --conditions " + condition.name + "`"
+        )
+    catalog = setup.catalog()
     brain_config = None
     if args.strategy is not None:
         from dataclasses import replace
@@ -258,6 +316,7 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
                 condition,
                 args.seed,
                 args.episodes,
+                world_config=setup.world_config(),
                 catalog=catalog,
                 brain_config=brain_config,
                 on_episode=on_episode,
@@ -269,10 +328,14 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
             trace_file.close()
 
     if args.json:
-        stdout.write(json.dumps(summary_dict(result)) + "\n")
+        stdout.write(json.dumps({**summary_dict(result), **setup_params(setup)}) + "\n")
         return 0
     console = Console(file=stdout)
-    table = Table(title=f"srlab simulate: {condition.name}, seed {args.seed}", show_header=False)
+    title = (
+        f"srlab simulate: {condition.name}, seed {args.seed}, world {setup.world_name}, "
+        f"sensors {setup.sensors_name}, signal {setup.signal}"
+    )
+    table = Table(title=title, show_header=False)
     table.add_column("what")
     table.add_column("value", justify="right")
     table.add_row("episodes", str(len(result.episodes)))
@@ -281,6 +344,8 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
     for cause, count in result.failures().items():
         table.add_row(f"  {cause.replace('_', ' ')}", str(count))
     table.add_row("ticks", f"{result.ticks:,}")
+    for origin, n in sorted(result.ticks_by_origin.items(), key=lambda kv: -kv[1]):
+        table.add_row(f"  run by {origin}", f"{n:,} ({n / max(result.ticks, 1):.1%})")
     table.add_row("ticks/s", f"{result.ticks / elapsed:,.0f}" if elapsed > 0 else "-")
     console.print(table)
     if args.trace is not None:
@@ -294,7 +359,8 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
 
     conditions = parse_conditions(args.conditions)
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
-    catalog = load_catalog()
+    setup = setup_of(args)
+    catalog = setup.catalog()
     err = Console(file=stderr, stderr=True)
     with open_backend(args, err) as (backend, where):
         total = len(conditions) * len(seeds)
@@ -308,6 +374,7 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
                 args.jobs,
                 on_result_updater(progress, bar),
                 backend,
+                setup,
             )
         elapsed = time.perf_counter() - started
     summary = summarise(results, conditions)
@@ -317,6 +384,7 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         "seeds": len(seeds),
         "seed_base": args.seed_base,
         "episodes": args.episodes,
+        **setup_params(setup),
         "jobs": args.jobs,
         "backend": args.backend,
         "address": args.address,
@@ -326,7 +394,10 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
     }
     paths = write_report(args.out, results, summary, catalog, params)
     console = Console(file=stdout)
-    table = Table(title=f"srlab experiment: {len(seeds)} seeds x {args.episodes} episodes")
+    table = Table(
+        title=f"srlab experiment: {len(seeds)} seeds x {args.episodes} episodes, world "
+        f"{setup.world_name}, sensors {setup.sensors_name}, signal {setup.signal}"
+    )
     for col in ("condition", "success", "last 10", "to criterion", "collisions/ep", "viol./ep"):
         table.add_column(col, justify="right" if col != "condition" else "left")
     for name, s in summary.items():
@@ -352,6 +423,87 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         first = (r.error or "").splitlines()[0]
         err.print(f"[red]task {r.task.condition} seed {r.task.seed} failed:[/] {first}")
     return 1 if failed else 0
+
+
+def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    from core.brain.catalog import sensor_definitions
+    from core.stats import pct
+    from core.worldcheck import PROPERTIES, world_check
+    from core.worlds import load_world, world_names
+
+    worlds = list(dict.fromkeys(args.world or world_names()))
+    for w in worlds:
+        load_world(w)  # an unknown name is an error naming the known ones
+    definitions = list(sensor_definitions())
+    if args.sensors == "all":
+        sensors = definitions
+    elif args.sensors and args.sensors not in definitions:
+        raise ValueError(
+            f"unknown sensor definition {args.sensors!r} (known: {', '.join(definitions)}, all)"
+        )
+    else:
+        sensors = [args.sensors or definitions[0]]
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    err = Console(file=stderr, stderr=True)
+    report: dict[str, Any] = {"seeds": len(seeds), "seed_base": args.seed_base,
+                              "episodes": args.episodes, "checks": []}  # fmt: skip
+    console = Console(file=stdout)
+    all_hold = True
+    with open_backend(args, err) as (backend, where):
+        for w in worlds:
+            for d in sensors:
+                total = len(PROPERTIES) * len(seeds)
+                progress, bar = progress_display(err, f"world-check {w} ({d})", total, args.quiet)
+                with progress:
+                    results = world_check(
+                        w, d, seeds, args.episodes, backend, on_result_updater(progress, bar)
+                    )
+                preset = load_world(w)
+                holds = all(r.holds for r in results)
+                all_hold &= holds
+                report["checks"].append({
+                    "world": w, "sensors": d, "holds": holds, "reasons": preset.reasons,
+                    "properties": [
+                        {"key": r.prop.key, "label": r.prop.label, "condition": r.prop.condition,
+                         "signal": "given" if r.prop.signal_given else "learned",
+                         "bounds": [r.prop.low, r.prop.high], "success": r.success.as_dict(),
+                         "holds": r.holds, "failures_per_episode": r.failures}
+                        for r in results
+                    ],
+                })  # fmt: skip
+                if args.json:
+                    continue
+                table = Table(
+                    title=f"world {w} (sensors {d}): {len(seeds)} seeds x {args.episodes} "
+                    f"episodes, on {where}"
+                )
+                for col in ("", "property", "condition", "success [95% CI]", "bounds", ""):
+                    table.add_column(col)
+                for r in results:
+                    table.add_row(
+                        f"({r.prop.key})",
+                        r.prop.label,
+                        r.prop.condition + (" + signal" if r.prop.signal_given else ""),
+                        pct(r.success),
+                        f"{r.prop.low:.0%}-{r.prop.high:.0%}",
+                        "holds" if r.holds else "[red]does not hold[/]",
+                    )
+                console.print(table)
+    if args.json:
+        from server.report import clean_json
+
+        stdout.write(json.dumps(clean_json(report)) + "\n")
+    if args.out is not None:
+        from server.report import clean_json, world_check_markdown
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        report["command"] = "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else ""
+        report = clean_json(report)
+        (args.out / "world-check.json").write_text(json.dumps(report, indent=2) + "\n")
+        (args.out / "world-check.md").write_text(world_check_markdown(report))
+        if not args.json:
+            console.print(f"wrote {args.out / 'world-check.json'} and world-check.md")
+    return 0 if all_hold else 1
 
 
 def _floats(text: str, name: str) -> list[float]:
@@ -414,6 +566,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _experiment(args, sys.stdout, sys.stderr)
         if args.command == "sweep":
             return sweep_command(args, sys.stdout, sys.stderr)
+        if args.command == "world-check":
+            return _world_check(args, sys.stdout, sys.stderr)
         if args.command == "qlambda-sweep":
             return _qlambda_sweep(args, sys.stdout, sys.stderr)
         if args.command == "db":

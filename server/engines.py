@@ -12,6 +12,7 @@ from core.brain.network import Association
 from core.engine import Engine
 from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
+from core.setup import Setup
 
 log = logging.getLogger("srlab.engines")
 
@@ -28,6 +29,8 @@ class EngineManager:
     def __init__(self, store: RunStore, catalog: Catalog, max_runs: int) -> None:
         self.store = store
         self.catalog = catalog
+        """The shipped catalogue under the default sensor definition (names only: each
+        run's engine loads its own definition's, see `core.setup.Setup`)."""
         self.max_runs = max_runs
         self._engines: dict[int, Engine] = {}
         self._tasks: dict[int, asyncio.Task[RunStatus]] = {}
@@ -45,10 +48,14 @@ class EngineManager:
         return sum(1 for t in self._tasks.values() if not t.done())
 
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> Engine:
-        """A new stored run (status created); `network` overrides the condition's."""
+        """A new stored run (status created); `network` overrides the condition's.
+
+        It runs in the spec's world preset and sensor definition (an unknown name raises
+        `UnknownNameError`).
+        """
         assoc = None
         if network is not None:
-            cat = self.catalog
+            cat = Setup(spec.world, spec.sensors).catalog()
             assoc = tuple(
                 Association(
                     cat.stimulus(p.stimulus).id,
@@ -59,7 +66,7 @@ class EngineManager:
                 )
                 for p in network
             )
-        engine = Engine.create(spec, self.store, catalog=self.catalog, network=assoc)
+        engine = Engine.create(spec, self.store, network=assoc)
         self._engines[engine.run_id] = engine
         return engine
 
@@ -71,7 +78,7 @@ class EngineManager:
             raise RunStateError(f"run {run_id} is {engine.status.value}")
         if task is not None:
             self._settle_status(self._engines[run_id])
-        engine = Engine.restore(run_id, self.store, catalog=self.catalog)
+        engine = Engine.restore(run_id, self.store)  # in its stored world and definition
         self._engines[run_id] = engine
         return engine
 

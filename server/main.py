@@ -18,7 +18,6 @@ from fastapi.responses import JSONResponse
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from core.brain.catalog import load_catalog
 from core.errors import (
     CatalogError,
     CoreError,
@@ -29,6 +28,7 @@ from core.errors import (
     UnknownRunError,
 )
 from core.ports import RunStatus
+from core.setup import Setup
 from server.api import api_router
 from server.api.deps import AppState
 from server.config import Settings
@@ -132,7 +132,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         engine = make_engine(settings.database_url)
         sessions = make_sessionmaker(engine)
         store = SqlAlchemyRunStore(sessions)
-        catalog = load_catalog()
+        catalog = Setup().catalog()  # the default definition's, shared with its runs
         manager = EngineManager(store, catalog, settings.max_runs)
         # Load the sensing kernel's machine code now, not in the first run's first tick.
         from starlette.concurrency import run_in_threadpool

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from core.brain.catalog import Catalog
-from core.experiment import CAMERA_SENSOR, TaskResult, t_quantile_975
+from core.experiment import CAMERA_SENSOR, TaskResult, paired_against, t_quantile_975
 
 # The paper's Table II and the non-zero cells of its Table III (reliability of LTM after
 # 50 episodic trials), keyed by our stimulus and behaviour names.
@@ -147,9 +147,65 @@ def plot_reliability(path: Path, summary: dict[str, Any], catalog: Catalog) -> N
     axes[0][0].set_yticks(range(len(behaviours)), behaviours, fontsize=7)
     if learned:
         fig.colorbar(im, ax=axes[0].tolist(), shrink=0.6, label="reliability (mean over seeds)")
-    fig.suptitle("Reliability of camera obstacle S-R pairs (robot lane _ obstacle side)")
+    meaning = "where in the view" if catalog.definition == "paper" else "obstacle side"
+    fig.suptitle(f"Reliability of camera obstacle S-R pairs (robot lane _ {meaning})")
     fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
+
+
+def _paired_lines(summary: dict[str, Any]) -> list[str]:
+    """The paired-by-seed comparison with kp, when kp ran."""
+    reference = "kp"
+    if not summary.get(reference, {}).get("seeds"):
+        return []
+    horizons = [("1-10", 10), ("all episodes", None)]
+    diffs = {label: paired_against(summary, reference, h) for label, h in horizons}
+    names = [n for n in summary if n in diffs["all episodes"]]
+    if not names:
+        return []
+    lines = [
+        "## Paired by seed, against kp",
+        "",
+        "Each condition's success minus kp's, seed by seed (every condition meets the same "
+        "obstacles and lamp cycles on a seed): the mean difference in points, its 95% "
+        "bootstrap interval, and the sign-flip test's two-sided p of no difference. "
+        "`sonar` is kp with propagation off, so kp's row against it is what propagation adds.",
+        "",
+        "| condition - kp | " + " | ".join(f"episodes {label}" for label, _ in horizons) + " |",
+        "|---|" + "---|" * len(horizons),
+    ]
+    for n in names:
+        cells = []
+        for label, _ in horizons:
+            d = diffs[label].get(n)
+            cells.append(
+                "-"
+                if d is None
+                else f"{100 * d['mean']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}],"
+                f" p {d['p']:.3f}"
+            )
+        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
+def _origin_table(summary: dict[str, Any]) -> list[str]:
+    """Rows of the what-ran table: each condition's ticks by origin, as shares."""
+    origins: list[str] = []
+    for s in summary.values():
+        for o in s.get("ticks_by_origin", {}):
+            if o not in origins:
+                origins.append(o)
+    if not origins:
+        return ["(no condition ran the paper's architecture)"]
+    rows = ["| condition | " + " | ".join(origins) + " |", "|---|" + "---|" * len(origins)]
+    for name, s in summary.items():
+        counts = s.get("ticks_by_origin") or {}
+        total = sum(counts.values())
+        if not total:
+            continue
+        cells = [f"{counts.get(o, 0) / total:.1%}" if counts.get(o) else "-" for o in origins]
+        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+    return rows
 
 
 def summary_markdown(
@@ -166,6 +222,14 @@ def summary_markdown(
         "",
         f"{params['seeds']} seeds x {params['episodes']} episodes per condition; "
         f"{params['ticks']:,} ticks in {params['elapsed_s']:.1f} s.",
+        "",
+        f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
+        f"signal {params.get('signal', 'learned')}"
+        + (
+            " (its correct responses given to every condition, so success measures the obstacle)."
+            if params.get("signal") == "given"
+            else " (learned as each condition learns)."
+        ),
         "",
         "## Results",
         "",
@@ -191,11 +255,22 @@ def summary_markdown(
         "last 10 episodes is at least 80%. The ± figures are 95% confidence intervals over "
         "seeds (Student's t).",
         "",
+        *_paired_lines(summary),
+        "## What ran",
+        "",
+        "Share of all ticks by what made the behaviour run: the source of the association "
+        "that released it (innate, designed, dp, learned, kp, expert), exploration, the "
+        "keep-moving default, or an external learner's command. A learned or propagated "
+        "pair that never runs has taught the robot nothing.",
+        "",
+        *_origin_table(summary),
+        "",
         "## Reliability of the camera obstacle S-R pairs (Table III)",
         "",
         "Mean reliability over seeds (± 95% CI) of every camera obstacle pair that reached "
         "0.01 in some condition: LTM for delayed, DP and RP, RLTM for KP; DP's programmed "
-        "pairs count as 1, as in the paper. Stimulus names are robot lane _ obstacle side.",
+        "pairs count as 1, as in the paper. Stimulus names are robot lane _ "
+        + ("the third of the view." if params.get("sensors") == "paper" else "obstacle side."),
         "",
     ]
     learned = [n for n, s in summary.items() if s.get("seeds") and s.get("learns_camera")]
@@ -252,14 +327,36 @@ def summary_markdown(
             top = max(mine, default=(0.0, ""))
             cells.append(f"{top[1]} {top[0]:.2f}" if top[0] >= 0.005 else "-")
         lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
-    lines += [
-        "",
-        "The paper's stimuli are \"position x vision\"; srlab's are robot lane x the "
-        "obstacle's side of the corridor, active only while the obstacle is in the robot's "
-        "path, so in srlab a pair like M-R (obstacle in the path, right of the centre line) "
-        "needs a turn where the paper's robot could go straight. Compare the shape (which "
-        "condition learns which response, how reliably) rather than cell by cell.",
-    ]
+    if params.get("sensors") == "paper":
+        note = (
+            "These are the paper's own stimuli (Fig. 10: robot lane x the third of the "
+            "camera's view the obstacle appears in), so the table compares cell by cell."
+        )
+    else:
+        note = (
+            'The paper\'s stimuli are "position x vision" (`--sensors paper`); these are '
+            "srlab's path stimuli, robot lane x the obstacle's side of the corridor, active "
+            "only while the obstacle is in the robot's path, so a pair like M-R (obstacle in "
+            "the path, right of the centre line) needs a turn where the paper's robot could "
+            "go straight. Compare the shape (which condition learns which response, how "
+            "reliably) rather than cell by cell."
+        )
+    lines += ["", note]
+    met = [(n, s["camera_stimuli_met"]) for n, s in summary.items() if s.get("camera_stimuli_met")]
+    if met:
+        lines += [
+            "",
+            "## Camera obstacle stimuli met",
+            "",
+            "Encounters per seed (times the stimulus became active) over the whole run, mean "
+            "over seeds; a pair can only be learned for a stimulus the robot meets.",
+            "",
+            "| stimulus | " + " | ".join(n for n, _ in met) + " |",
+            "|---|" + "---|" * len(met),
+        ]
+        for stim in _camera_names(catalog):
+            cells = [f"{m[stim]['encounters_per_seed']:.1f}" if stim in m else "0" for _, m in met]
+            lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
     if failed:
         lines += ["", "## Failed tasks", ""]
         for r in failed:
@@ -282,14 +379,18 @@ def write_report(
     doc = {
         "params": params,
         "conditions": {
-            n: {k: v for k, v in s.items() if k not in ("success_curve_ci95", "success_by_seed")}
+            n: {
+                k: v
+                for k, v in s.items()
+                if k not in ("success_curve_ci95", "success_by_seed", "seed_ids")
+            }
             for n, s in summary.items()
         },
         "failed": [
             {"condition": r.task.condition, "seed": r.task.seed, "error": r.error} for r in failed
         ],
     }
-    paths[0].write_text(json.dumps(_clean(doc), indent=2, allow_nan=False) + "\n")
+    paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
     paths[1].write_text(summary_markdown(summary, catalog, params, failed))
     write_runs(paths[2], results)
     curves = out / "learning_curves.png"
@@ -299,12 +400,46 @@ def write_report(
     return [*paths, curves, reliability]
 
 
-def _clean(value: Any) -> Any:
+def clean_json(value: Any) -> Any:
     """JSON has no NaN: undefined figures (a CI over one seed) become null."""
     if isinstance(value, float) and math.isnan(value):
         return None
     if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
+        return {k: clean_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
+        return [clean_json(v) for v in value]
     return value
+
+
+def world_check_markdown(report: dict[str, Any]) -> str:
+    """`srlab world-check --out`'s tables: each property's success with its interval."""
+    lines = [
+        "# srlab world-check",
+        "",
+        f"`{report.get('command', 'srlab world-check')}`",
+        "",
+        f"{report['seeds']} seeds (from {report['seed_base']}) x {report['episodes']} episodes "
+        "per property, no learning anywhere; success is the mean over seeds with its 95% "
+        "bootstrap interval.",
+    ]
+    for check in report["checks"]:
+        lines += [
+            "",
+            f"## World `{check['world']}`, camera stimuli `{check['sensors']}`: "
+            + ("every property holds" if check["holds"] else "not every property holds"),
+            "",
+            check["reasons"].replace("\n", " "),
+            "",
+            "| | property | condition | success [95% CI] | bounds | holds |",
+            "|---|---|---|---|---|---|",
+        ]
+        for p in check["properties"]:
+            s = p["success"]
+            ci = "" if s["low"] != s["low"] else f" [{100 * s['low']:.0f}, {100 * s['high']:.0f}]"
+            lines.append(
+                f"| ({p['key']}) | {p['label']} | {p['condition']}"
+                f"{' + signal' if p['signal'] == 'given' else ''} | {100 * s['mean']:.0f}%{ci} | "
+                f"{100 * p['bounds'][0]:.0f}-{100 * p['bounds'][1]:.0f}% | "
+                f"{'yes' if p['holds'] else '**no**'} |"
+            )
+    return "\n".join(lines) + "\n"

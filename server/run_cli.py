@@ -69,6 +69,9 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 hz=args.hz,
                 network=args.network,
                 params=params,
+                # The parser may not offer these yet: the defaults then.
+                world=getattr(args, "world", None) or "",
+                sensors=getattr(args, "sensors", None) or "",
             )
             engine = Engine.create(spec, store)
         return asyncio.run(_run(engine, args.quiet, stdout, stderr))
@@ -84,7 +87,10 @@ async def _run(engine: Engine, quiet: bool, stdout: IO[str], stderr: IO[str]) ->
     err = Console(file=stderr, stderr=True)
     spec = engine.spec
     sub = engine.subscribe(maxsize=1024)
-    what = f"run {engine.run_id}: {spec.condition}, seed {spec.seed}, {spec.mode.value}"
+    what = (
+        f"run {engine.run_id}: {spec.condition}, seed {spec.seed}, world {spec.world or '-'},"
+        f" sensors {spec.sensors or '-'}, {spec.mode.value}"
+    )
     if spec.mode is Mode.REALTIME:
         what += f" at {spec.hz:g} Hz"
 
@@ -142,7 +148,11 @@ def runs(args: argparse.Namespace, stdout: IO[str]) -> int:
         stdout.write(json.dumps({"runs": [_run_dict(r) for r in stored]}) + "\n")
         return 0
     table = Table(title=f"runs in {_safe(args.url or database_url())}")
-    for col in ("id", "condition", "seed", "mode", "status", "episodes", "successes", "ticks"):
+    columns = (
+        "id", "condition", "seed", "world", "sensors", "mode", "status", "episodes",
+        "successes", "ticks",
+    )  # fmt: skip
+    for col in columns:
         table.add_column(col, justify="right" if col in ("id", "seed", "ticks") else "left")
     for r in stored:
         planned = f"/{r.spec.episodes}" if r.spec.episodes else ""
@@ -150,13 +160,20 @@ def runs(args: argparse.Namespace, stdout: IO[str]) -> int:
             str(r.id),
             r.spec.condition,
             str(r.spec.seed),
+            r.spec.world or "-",  # "-": stored before runs kept it (the default then)
+            r.spec.sensors or "-",
             r.spec.mode.value,
             r.status.value,
             f"{r.totals.episodes}{planned}",
             str(r.totals.successes),
             f"{r.totals.ticks:,}",
         )
-    Console(file=stdout).print(table)
+    console = Console(file=stdout)
+    wide = console.measure(table, options=console.options.update_width(1000)).maximum
+    if not console.is_terminal and wide > console.width:
+        # A pipe or a file has no width of its own: whole names rather than Rich's 80 columns.
+        console = Console(file=stdout, width=wide)
+    console.print(table)
     return 0
 
 
@@ -165,6 +182,8 @@ def _run_dict(r: StoredRun) -> dict[str, Any]:
         "id": r.id,
         "condition": r.spec.condition,
         "seed": r.spec.seed,
+        "world": r.spec.world,
+        "sensors": r.spec.sensors,
         "mode": r.spec.mode.value,
         "hz": r.spec.hz,
         "episodes_planned": r.spec.episodes,

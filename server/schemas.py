@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue
+from pydantic import BaseModel, ConfigDict, Field, JsonValue, field_validator
 
-from core.brain.catalog import Source, load_catalog
+from core.brain.catalog import Source, load_catalog, sensor_definitions
 from core.conditions import CONDITIONS
+from core.worlds import world_names
 
-EngineCondition = Literal["innate", "delayed", "dp", "rp", "kp", "expert"]
+EngineCondition = Literal[
+    "innate", "delayed", "dp", "rp", "kp", "sonar", "expert", "reflexes", "unaware"
+]
 assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
     n for n, c in CONDITIONS.items() if c.agent == "brain"
 }
@@ -61,12 +65,50 @@ class SensorPublic(BaseModel):
     priority: int
     weight: float
     stimuli: list[str]
+    definition: str = Field(
+        description="the sensor definition its rules are written for, when it has several "
+        "(see GET /api/sensor-definitions); '' when it has one set of rules"
+    )
+
+
+class SensorDefinitionPublic(BaseModel):
+    """A sensor definition: one meaning of the logical sensors' rules (same stimuli)."""
+
+    name: str
+    description: str
+    default: bool = Field(description="the definition a run uses when it names none")
+
+
+class WorldPublic(BaseModel):
+    """A world preset: `WorldConfig`'s defaults with some settings changed, and why."""
+
+    name: str
+    description: str
+    reasons: str = Field(description="why it differs from the defaults, in physical terms")
+    overrides: dict[str, JsonValue] = Field(
+        description="the settings that differ from the defaults, nested as the world's "
+        "configuration is (robot, track, track.obstacle, track.signal)"
+    )
+    default: bool = Field(description="the world a run uses when it names none")
+
+
+WORLD_NAMES: list[JsonValue] = list(world_names())
+"""The world presets the service knows, listed in /openapi.json."""
+SENSOR_DEFINITIONS: list[JsonValue] = list(sensor_definitions())
+"""The sensor definitions the service knows, listed in /openapi.json."""
 
 
 class LearningParams(Strict):
     eta: float | None = Field(None, ge=0.0, le=1.0, description="Eq. (1)'s learning rate")
     epsilon: float | None = Field(None, ge=0.0, le=1.0, description="exploration rate")
     synthesize: bool = Field(False, description="KP keeps new behaviours instead of snapping")
+
+
+def _one_of(value: str | None, known: Sequence[JsonValue], what: str) -> str | None:
+    """`value` if it is one of `known` (or empty), else a ValueError listing them."""
+    if value and value not in known:
+        raise ValueError(f"unknown {what} {value!r} (known: {', '.join(map(str, known))})")
+    return value
 
 
 class RunCreate(Strict):
@@ -81,6 +123,29 @@ class RunCreate(Strict):
         description="a stored network to start from (default: the condition's)",
     )
     params: LearningParams = Field(default_factory=LearningParams)
+    world: str | None = Field(
+        None,
+        max_length=100,
+        description="a world preset of GET /api/worlds (default: the default one)",
+        json_schema_extra={"enum": [*WORLD_NAMES, None]},
+    )
+    sensors: str | None = Field(
+        None,
+        max_length=100,
+        description="a sensor definition of GET /api/sensor-definitions (default: the default one)",
+        json_schema_extra={"enum": [*SENSOR_DEFINITIONS, None]},
+    )
+
+    # Checked here, not by the enum alone, so that the 422 lists the known names.
+    @field_validator("world")
+    @classmethod
+    def _known_world(cls, value: str | None) -> str | None:
+        return _one_of(value, WORLD_NAMES, "world")
+
+    @field_validator("sensors")
+    @classmethod
+    def _known_sensors(cls, value: str | None) -> str | None:
+        return _one_of(value, SENSOR_DEFINITIONS, "sensor definition")
 
 
 class LiveState(BaseModel):
@@ -92,6 +157,10 @@ class LiveState(BaseModel):
     lateness_max_ms: float | None
     overruns: int = Field(description="tick periods skipped because a tick ran late")
     reward_ack_p99_ms: float | None
+    ticks_by_origin: dict[str, int] = Field(
+        description="ticks run so far by what made their behaviour run: an association's "
+        "source (innate, designed, dp, learned, kp, expert), explored, default or commanded"
+    )
 
 
 class RunPublic(BaseModel):
@@ -103,6 +172,8 @@ class RunPublic(BaseModel):
     hz: float
     network: str | None
     params: dict[str, float | bool]
+    world: str = Field(description="its world preset ('' if stored before runs kept it)")
+    sensors: str = Field(description="its sensor definition ('' if stored before runs kept it)")
     status: str
     error: str | None
     episodes_done: int
@@ -189,6 +260,11 @@ class TraceRowPublic(BaseModel):
     heading_rad: float
     behaviour: str | None
     how: str
+    origin: str = Field(
+        description="what made the behaviour run: an association's source, explored, "
+        "default or commanded ('' in a trace stored before traces kept it)"
+    )
+    released_by: str | None = Field(description="the stimulus the behaviour answered")
     lamp: int
     stimuli: list[str]
 

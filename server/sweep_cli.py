@@ -26,7 +26,43 @@ from rich.table import Table
 from core.conditions import CONDITIONS
 from core.experiment import Backend, LocalBackend, TaskResult
 from core.params import PARAMETERS
+from core.setup import Setup
 from core.sweep import point_label
+
+
+def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
+    """--world, --sensors and (unless `signal` is False) --signal: where a condition runs."""
+    from core.brain.catalog import sensor_definitions
+    from core.setup import SIGNAL_MODES
+    from core.worlds import default_world, world_names
+
+    parser.add_argument(
+        "--world",
+        choices=world_names(),
+        default="",
+        help=f"world preset (default {default_world()}; see `srlab world-check`)",
+    )
+    definitions = list(sensor_definitions())
+    parser.add_argument(
+        "--sensors",
+        choices=definitions,
+        default="",
+        help=f"camera obstacle stimuli: {', '.join(definitions)} (default {definitions[0]}: "
+        "the paper's Fig. 10)",
+    )
+    if signal:
+        parser.add_argument(
+            "--signal",
+            choices=SIGNAL_MODES,
+            default="learned",
+            help="learned: as the condition has it (default); given: the signal's correct "
+            "responses added, so success measures the obstacle alone",
+        )
+
+
+def setup_of(args: argparse.Namespace) -> Setup:
+    """The setup the --world, --sensors and --signal arguments name, defaults named."""
+    return Setup(args.world, args.sensors, getattr(args, "signal", "learned")).resolved()
 
 
 def add_task_arguments(
@@ -35,7 +71,7 @@ def add_task_arguments(
     seed: Callable[[str], Any],
     out: Path,
 ) -> None:
-    """What `experiment` and `sweep` share: seeds, episodes, jobs, the backend, --out."""
+    """What `experiment` and `sweep` share: seeds, episodes, jobs, backend, setup, --out."""
     parser.add_argument("--seeds", type=positive_int, default=20, help="seeds (default 20)")
     parser.add_argument("--seed-base", type=seed, default=0, help="first seed (default 0)")
     parser.add_argument(
@@ -48,6 +84,7 @@ def add_task_arguments(
         help="local processes, or CPUs of a private Ray instance",
     )
     add_backend_arguments(parser)
+    add_setup_arguments(parser)
     parser.add_argument("--out", type=Path, default=out, help="output folder")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -158,6 +195,11 @@ def add_sweep_parser(
     add_task_arguments(sweep, positive_int, seed, Path("results/sweep"))
 
 
+def setup_params(setup: Setup) -> dict[str, str]:
+    """The setup as a report's parameters."""
+    return {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
+
+
 def command_line() -> str:
     """The command as typed, for the report."""
     return "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "srlab"
@@ -174,6 +216,7 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
         tuple(parse_conditions(args.conditions)),
         tuple(range(args.seed_base, args.seed_base + args.seeds)),
         args.episodes,
+        setup_of(args),
     )
     check_backend_arguments(args)
     tasks = plan.tasks()
@@ -192,6 +235,7 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
         "seed_base": args.seed_base,
         "episodes": plan.episodes,
         "points": len(plan.points()),
+        **setup_params(plan.setup),
         "tasks": len(tasks),
         "backend": args.backend,
         "address": args.address,

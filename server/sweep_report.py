@@ -16,7 +16,7 @@ import numpy as np
 from core.experiment import TaskResult
 from core.params import Params, ParamValue
 from core.sweep import Sweep, format_value, point_label
-from server.report import ROLLING, _clean, _fmt
+from server.report import ROLLING, _fmt, clean_json
 
 
 def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
@@ -291,7 +291,7 @@ def write_sweep_report(
             for r in failed
         ],
     }
-    paths[0].write_text(json.dumps(_clean(doc), indent=2, allow_nan=False) + "\n")
+    paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
     paths[1].write_text(sweep_markdown(sweep, summary, params, failed))
     write_sweep_runs(paths[2], results)
     curves = out / "learning_curves.png"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -39,3 +40,23 @@ async def client_for(
             transport=transport, base_url="http://127.0.0.1", headers=headers or {}
         ) as client:
             yield client, app
+
+
+async def create(client: httpx.AsyncClient, **body: Any) -> dict[str, Any]:
+    """POST /api/runs with `body`, which must create the run (201); returns it."""
+    r = await client.post("/api/runs", json=body)
+    assert r.status_code == 201, r.text
+    out: dict[str, Any] = r.json()
+    return out
+
+
+async def until(
+    client: httpx.AsyncClient, run_id: int, status: str, timeout: float = 30
+) -> dict[str, Any]:
+    """Poll a run until it has `status` (within `timeout` seconds); returns it."""
+    async with asyncio.timeout(timeout):
+        while True:
+            run: dict[str, Any] = (await client.get(f"/api/runs/{run_id}")).json()
+            if run["status"] == status:
+                return run
+            await asyncio.sleep(0.02)

@@ -34,6 +34,30 @@ def detector(catalog: Catalog) -> StimulusDetector:
     return compile_detector(catalog)
 
 
+@pytest.fixture(scope="session")
+def path_catalog() -> Catalog:
+    """srlab's catalogue under its path-based camera obstacle definition."""
+    return load_catalog(sensors="path")
+
+
+@pytest.fixture(scope="session")
+def path_detector(path_catalog: Catalog) -> StimulusDetector:
+    """The path-definition catalogue's logical sensors compiled into one function."""
+    return compile_detector(path_catalog)
+
+
+@pytest.fixture(scope="session")
+def paper_catalog() -> Catalog:
+    """srlab's catalogue under the paper's Fig. 10 camera obstacle definition."""
+    return load_catalog(sensors="paper")
+
+
+@pytest.fixture(scope="session")
+def paper_detector(paper_catalog: Catalog) -> StimulusDetector:
+    """The paper-definition catalogue's logical sensors compiled into one function."""
+    return compile_detector(paper_catalog)
+
+
 POSTGRES_URL_VARIABLE = "SRLAB_TEST_POSTGRES_URL"
 
 

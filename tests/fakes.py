@@ -62,6 +62,7 @@ NEUTRAL: Mapping[Channel, float] = {
     Channel.FRONT_TO_STOPLINE_M: UNSEEN,
     Channel.OBSTACLE_OFFSET_M: UNSEEN,
     Channel.HEADING_RAD: 0.0,
+    Channel.OBSTACLE_IMAGE_X: UNSEEN,
 }
 """Channels of a robot on the corridor's centre line of leg 0 with nothing in sight."""
 

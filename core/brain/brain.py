@@ -12,7 +12,7 @@ from core.brain.motor import Motor
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
 from core.brain.propagation import KnowledgePropagation, KpConfig, Propagated
-from core.brain.selection import Decision, How, SelectionConfig, Selector
+from core.brain.selection import COMMANDED, Decision, How, SelectionConfig, Selector
 from core.brain.sensors import compile_detector
 from core.events import AssociationDemoted, AssociationPromoted
 from core.sim.robot import RobotConfig
@@ -84,6 +84,8 @@ class Brain:
         learnable = frozenset(
             s.id for s in catalog.stimuli if s.sensor in config.learning.learnable_sensors
         )
+        self.learnable = learnable
+        """The stimuli whose responses are explored and may be learned into the network."""
         self.selector = Selector(
             catalog, network, self.perception, config.selection, learnable, rng
         )
@@ -150,17 +152,23 @@ class Brain:
         motor = self.motor
         last = self._last
         if command >= 0 and not motor.busy:
-            decision = Decision(command, self.selector.focus(active), 0.0, How.COMMANDED)
+            decision = Decision(command, self.selector.focus(active), 0.0, How.COMMANDED, COMMANDED)
             self._start(decision, channels)
         elif motor.busy:
             top = max((self._priority[s] for s in active), default=-1)
             decision = last
             if top > self._running_priority:
                 d = self.selector.select(active, last.behaviour)
-                if d.stimulus >= 0 and self._priority[d.stimulus] > self._running_priority:
+                if (
+                    d.how is not How.DEFAULT  # keeping moving never interrupts a response
+                    and d.stimulus >= 0
+                    and self._priority[d.stimulus] > self._running_priority
+                ):
                     decision = d
             if decision is last:
-                decision = Decision(last.behaviour, last.stimulus, last.value, How.CONTINUED)
+                decision = Decision(
+                    last.behaviour, last.stimulus, last.value, How.CONTINUED, last.origin
+                )
             else:
                 self._start(decision, channels)
         else:
@@ -194,8 +202,11 @@ class Brain:
         if value < 0.0 and credits and credits[0].d_k == 1:
             self.selector.retry(credits[0].stimulus)
         threshold = self.config.learning.insert_threshold
+        learnable = self.learnable
         changes: list[AssociationPromoted | AssociationDemoted] = []
         for s, b in dict.fromkeys((c.stimulus, c.behaviour) for c in credits):
+            if s not in learnable:
+                continue  # LTM keeps its reliability; only learnable stimuli are promoted
             v = self.ltm.reliability(s, b)
             old = self.network.get(s, b)
             if v >= threshold:

@@ -59,11 +59,24 @@ class Behaviour:
 
 @dataclass(frozen=True, slots=True)
 class RuleCondition:
-    """One condition of a stimulus rule: channel op value."""
+    """One condition of a stimulus rule: ``channel op value``, or ``channel op other``.
+
+    `other` >= 0 compares against another channel instead of the constant (so a designer
+    can write "the left sonar reads farther than the right" as data); `value` is then 0.
+    """
 
     channel: int
     op: str
     value: float
+    other: int = -1
+
+    def as_data(self) -> list[str | float]:
+        """The condition as a data file spells it."""
+        return [
+            CHANNELS[self.channel],
+            self.op,
+            CHANNELS[self.other] if self.other >= 0 else self.value,
+        ]
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,7 +104,11 @@ class Stimulus:
 
 @dataclass(frozen=True, slots=True)
 class LogicalSensorSpec:
-    """A logical sensor as declared in data: which physical sensors, processing, stimuli."""
+    """A logical sensor as declared in data: which physical sensors, processing, stimuli.
+
+    `definition` names the variant of its rules in use when the data file gives it several
+    (the camera obstacle sensor's ``paper`` and ``path``), else "".
+    """
 
     name: str
     physical: tuple[str, ...]
@@ -101,6 +118,7 @@ class LogicalSensorSpec:
     priority: int
     weight: float
     stimuli: tuple[str, ...]
+    definition: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,11 +134,16 @@ class AssociationSpec:
 
 @dataclass(frozen=True, slots=True)
 class KnowledgeSet:
-    """A named set of S-R associations: Table I's innate knowledge, DP sets, the expert."""
+    """A named set of S-R associations: Table I's innate knowledge, DP sets, the expert.
+
+    `sensors` names the sensor definition its camera responses are written for (None: it
+    holds none, or they mean the same under every definition).
+    """
 
     name: str
     description: str
     associations: tuple[AssociationSpec, ...]
+    sensors: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +154,8 @@ class Catalog:
     behaviours: tuple[Behaviour, ...]
     sensors: tuple[LogicalSensorSpec, ...]
     knowledge: Mapping[str, KnowledgeSet] = field(default_factory=dict)
+    definition: str = ""
+    """The sensor definition in use (see `SENSOR_DEFINITIONS`; "" for a hand-made one)."""
 
     def stimulus(self, name: str) -> Stimulus:
         """The stimulus called `name`."""
@@ -154,6 +179,15 @@ class Catalog:
             known = ", ".join(sorted(self.knowledge))
             raise UnknownNameError(f"unknown network {name!r} (known: {known})") from None
 
+    def network_name(self, name: str) -> str:
+        """The knowledge set that stands for `name` under this catalogue's definition.
+
+        A set written for one sensor definition has a variant for each other one, named
+        ``<name>-<definition>`` (``dp`` and ``dp-path``); without a variant, `name` itself.
+        """
+        variant = f"{name}-{self.definition}"
+        return variant if self.definition and variant in self.knowledge else name
+
     def stimuli_of_sensor(self, sensor: str) -> tuple[Stimulus, ...]:
         """The stimuli a logical sensor emits."""
         return tuple(s for s in self.stimuli if s.sensor == sensor)
@@ -172,7 +206,9 @@ class Catalog:
             behaviour.mode,
             behaviour.synthesized,
         )
-        return Catalog(self.stimuli, (*self.behaviours, b), self.sensors, self.knowledge)
+        return Catalog(
+            self.stimuli, (*self.behaviours, b), self.sensors, self.knowledge, self.definition
+        )
 
 
 def data_dir() -> Path:
@@ -239,19 +275,65 @@ def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
 
 def _parse_condition(raw: Any, where: str) -> RuleCondition:
     if not (isinstance(raw, list | tuple) and len(raw) == 3):
-        raise CatalogError(f"{where}: a condition is [channel, op, value], got {raw!r}")
+        raise CatalogError(
+            f"{where}: a condition is [channel, op, value] or [channel, op, channel], got {raw!r}"
+        )
     channel, op, value = raw
     if channel not in CHANNELS:
         raise CatalogError(f"{where}: unknown channel {channel!r}")
     if op not in OPS:
         raise CatalogError(f"{where}: unknown operator {op!r} (use one of {' '.join(OPS)})")
+    if isinstance(value, str):
+        if value not in CHANNELS:
+            raise CatalogError(f"{where}: unknown channel {value!r} to compare with")
+        if value == channel:
+            raise CatalogError(f"{where}: {channel!r} compared with itself")
+        return RuleCondition(CHANNELS.index(channel), op, 0.0, CHANNELS.index(value))
     return RuleCondition(CHANNELS.index(channel), op, _number(value, "value", where))
 
 
+def _definition_stimuli(
+    s: Mapping[str, Any], name: str, definition: str | None
+) -> tuple[list[Any], str]:
+    """A sensor's stimuli under `definition`, and that definition's name.
+
+    The name is "" for a sensor with a single set of rules.
+    """
+    variants = s.get("definitions")
+    if variants is None:
+        return list(_need(s, "stimuli", f"sensor {name!r}")), ""
+    if "stimuli" in s:
+        raise CatalogError(f"sensor {name!r}: give 'stimuli' or 'definitions', not both")
+    if not isinstance(variants, Mapping) or not variants:
+        raise CatalogError(f"sensor {name!r}: 'definitions' must name at least one")
+    names = {
+        d: [str(_need(st, "name", f"sensor {name!r} definition {d!r}")) for st in v["stimuli"]]
+        for d, v in variants.items()
+    }
+    first = next(iter(names.values()))
+    for d, n in names.items():
+        if n != first:
+            raise CatalogError(
+                f"sensor {name!r}: definition {d!r} must emit the same stimuli, in the "
+                "same order, as the others (only their rules differ)"
+            )
+    chosen = definition if definition is not None else next(iter(variants))
+    if chosen not in variants:
+        known = ", ".join(variants)
+        raise UnknownNameError(
+            f"unknown sensor definition {chosen!r} for {name!r} (known: {known})"
+        )
+    return list(variants[chosen]["stimuli"]), chosen
+
+
 def parse_sensors(
-    raw: Iterable[Mapping[str, Any]],
+    raw: Iterable[Mapping[str, Any]], definition: str | None = None
 ) -> tuple[tuple[LogicalSensorSpec, ...], tuple[Stimulus, ...]]:
-    """Logical sensors and the stimuli they declare, from their data-file form."""
+    """Logical sensors and the stimuli they declare, from their data-file form.
+
+    A sensor may give several `definitions` of its stimuli's rules (same names, other
+    meanings); `definition` picks one (None: each such sensor's first).
+    """
     sensors: list[LogicalSensorSpec] = []
     stimuli: list[Stimulus] = []
     for i, s in enumerate(raw):
@@ -269,7 +351,8 @@ def parse_sensors(
             raise CatalogError(f"sensor {name!r}: weight must be in [0, 1]")
         objective = str(_need(s, "objective", f"sensor {name!r}"))
         names: list[str] = []
-        for j, st in enumerate(_need(s, "stimuli", f"sensor {name!r}")):
+        declared, chosen = _definition_stimuli(s, name, definition)
+        for j, st in enumerate(declared):
             swhere = f"sensor {name!r} stimulus #{j}"
             sname = str(_need(st, "name", swhere))
             alternatives = list(st.get("any", []))
@@ -293,6 +376,7 @@ def parse_sensors(
                 priority=priority,
                 weight=weight,
                 stimuli=tuple(names),
+                definition=chosen,
             )
         )
     snames = [s.name for s in stimuli]
@@ -346,7 +430,13 @@ def parse_knowledge(
             merged[f"{st}\0{be}"] = AssociationSpec(
                 st, be, strength, source, bool(a.get("locked", False))
             )
-        ks = KnowledgeSet(name, str(spec.get("description", "")), tuple(merged.values()))
+        sensors = spec.get("sensors")
+        ks = KnowledgeSet(
+            name,
+            str(spec.get("description", "")),
+            tuple(merged.values()),
+            None if sensors is None else str(sensors),
+        )
         done[name] = ks
         return ks
 
@@ -355,14 +445,43 @@ def parse_knowledge(
     return done
 
 
-def load_catalog(path: Path | None = None) -> Catalog:
-    """Load the catalogue from a data folder (srlab's own by default)."""
+def sensor_definitions(path: Path | None = None) -> dict[str, str]:
+    """The sensor definitions a data folder offers, default first: name -> description."""
+    raw = _read((path or data_dir()) / "sensors.toml")
+    out: dict[str, str] = {}
+    for s in raw.get("sensor", []):
+        for name, v in (s.get("definitions") or {}).items():
+            out.setdefault(str(name), str(v.get("description", "")))
+    default = raw.get("default_definition")
+    if default is not None:
+        if default not in out:
+            raise CatalogError(f"default_definition {default!r} is not a definition")
+        out = {default: out[default], **out}
+    return out
+
+
+def load_catalog(path: Path | None = None, sensors: str | None = None) -> Catalog:
+    """Load the catalogue from a data folder (srlab's own by default).
+
+    `sensors` picks the sensor definition (see `sensor_definitions`); None takes the
+    folder's default.
+    """
     root = path or data_dir()
     behaviours = parse_behaviours(_read(root / "behaviours.toml").get("behaviour", []))
-    sensors, stimuli = parse_sensors(_read(root / "sensors.toml").get("sensor", []))
+    raw_sensors = _read(root / "sensors.toml")
+    definitions = sensor_definitions(root)
+    if sensors is None and definitions:
+        sensors = next(iter(definitions))
+    elif sensors is not None and sensors not in definitions:
+        known = ", ".join(definitions) or "none"
+        raise UnknownNameError(f"unknown sensor definition {sensors!r} (known: {known})")
+    sensor_specs, stimuli = parse_sensors(raw_sensors.get("sensor", []), sensors)
     raw_sets: dict[str, dict[str, Any]] = {}
     for f in sorted((root / "networks").glob("*.toml")):
         spec = _read(f)
         raw_sets[str(spec.get("name", f.stem))] = spec
     knowledge = parse_knowledge(raw_sets, stimuli, behaviours)
-    return Catalog(stimuli, behaviours, sensors, knowledge)
+    for ks in knowledge.values():
+        if ks.sensors is not None and ks.sensors not in definitions:
+            raise CatalogError(f"network {ks.name!r}: unknown sensor definition {ks.sensors!r}")
+    return Catalog(stimuli, behaviours, sensor_specs, knowledge, sensors or "")

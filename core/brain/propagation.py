@@ -79,27 +79,40 @@ def steer_angle(b: Behaviour, dt_s: float) -> float:
 
 
 def resultant_direction(behaviours: Iterable[Behaviour], dt_s: float) -> float:
-    """Direction of the vector sum of the behaviours' displacements, radians (+ = left)."""
+    """The direction of the vector sum of the behaviours' headings, radians (+ = left).
+
+    Each behaviour is a unit vector pointing where it drives (`steer_angle`: the heading
+    its motor steers to, off the corridor's direction), so the sum is compared like with
+    like against each primitive's own heading: one source gives itself back, n copies of
+    one turn give that turn, and mirrored sources give mirrored results. (Summing the
+    displacements instead, and matching them against headings, halved every turn: the
+    chord of a 30 degree arc points at 15 degrees.) Opposite turns cancel to straight on.
+    """
     sx = sy = 0.0
     for b in behaviours:
-        dx, dy, _ = b.motion_vector(dt_s)
-        sx += dx
-        sy += dy
-    if sx == 0.0 and sy == 0.0:
+        a = steer_angle(b, dt_s)
+        sx += math.cos(a)
+        sy += math.sin(a)
+    if abs(sx) < 1e-12 and abs(sy) < 1e-12:
         return 0.0
     return math.atan2(sy, sx)
 
 
-def nearest_primitive(catalog: Catalog, angle_rad: float, dt_s: float) -> Behaviour:
-    """The forward or turn primitive whose heading is nearest `angle_rad` (smaller on ties)."""
+def nearest_primitive(
+    catalog: Catalog, angle_rad: float, dt_s: float, speed_mps: float = 0.45
+) -> Behaviour:
+    """The forward or turn primitive whose heading is nearest `angle_rad`.
+
+    Ties (the five forward speeds all head straight on) go to the speed nearest
+    `speed_mps`, then to the smaller turn.
+    """
     best: Behaviour | None = None
     best_key = (math.inf, math.inf, math.inf)
     for b in catalog.behaviours:
         if b.family not in ("forward", "turn") or b.synthesized:
             continue
         a = steer_angle(b, dt_s)
-        # Among forward speeds prefer the default cruise (goforward3, 0.45 m/s).
-        key = (round(abs(a - angle_rad), 9), abs(a), abs(b.speed_mps - 0.45))
+        key = (round(abs(a - angle_rad), 9), round(abs(b.speed_mps - speed_mps), 9), abs(a))
         if key < best_key:
             best, best_key = b, key
     assert best is not None, "the catalogue has no forward or turn primitive"
@@ -176,13 +189,13 @@ class KnowledgePropagation:
         catalog = self.catalog
         parts = [catalog.behaviours[b] for b in behaviours]
         angle = resultant_direction(parts, self._dt)
-        nearest = nearest_primitive(catalog, angle, self._dt)
+        speed = sum(b.speed_mps for b in parts) / len(parts)
+        nearest = nearest_primitive(catalog, angle, self._dt, speed)
         if not self.config.synthesize:
             return nearest, False
         tolerance = math.radians(self.config.snap_tolerance_deg)
         if abs(steer_angle(nearest, self._dt) - angle) <= tolerance:
             return nearest, False
-        speed = sum(b.speed_mps for b in parts) / len(parts)
         new = synthesized_behaviour(angle, speed, self._dt)
         for b in catalog.behaviours:
             if b.name == new.name:

@@ -8,7 +8,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from core.brain.catalog import Catalog
+from core.brain.catalog import SOURCES, Catalog
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
 
@@ -39,14 +39,24 @@ class How(StrEnum):
 
 _RETRY = -2
 
+EXPLORED, DEFAULT, COMMANDED = "explored", "default", "commanded"
+ORIGINS: tuple[str, ...] = (*SOURCES, EXPLORED, DEFAULT, COMMANDED)
+"""What can make a behaviour run: an association's source (innate, dp, learned, kp, expert,
+designed), exploration, the keep-moving default, or an external learner's command."""
+
 DEFAULT_DESIRES: Mapping[str, float] = {
     "avoid_collision": 1.0,
     "avoid_wall": 1.0,
     "avoid_obstacle": 1.0,
     "obey_signal": 1.0,
-    "follow_track": 0.8,
+    "follow_track": 0.4,
     "keep_moving": 0.3,
 }
+"""Internal desire per objective. The urgent objectives (collision, wall, obstacle, signal)
+are at 1. Following the track is a background desire below the insertion threshold (0.5):
+any response to an urgent stimulus confident enough to have joined the behaviour network
+outbids the position layer, whose stimuli (Left, Middle, Right) are active on every tick.
+Keeping moving, the default behaviour's desire, is below everything released."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,12 +93,18 @@ class SelectionConfig:
 
 @dataclass(frozen=True, slots=True)
 class Decision:
-    """The behaviour chosen for a tick and the stimulus credited with it (-1: none)."""
+    """The behaviour chosen for a tick and the stimulus credited with it (-1: none).
+
+    `origin` says what made it run: the releasing association's source, ``explored``,
+    ``default`` or ``commanded`` (see `ORIGINS`); a continued primitive keeps its origin.
+    A default decision's stimulus is the open learnable stimulus it answers (or -1).
+    """
 
     behaviour: int
     stimulus: int
     value: float
     how: How
+    origin: str = DEFAULT
 
 
 class Selector:
@@ -192,8 +208,26 @@ class Selector:
                     best_b = incumbent
         if best_b >= 0:
             v, s = values[best_b]
-            return Decision(best_b, s, v, How.RELEASED)
-        return Decision(self._default, self.focus(active), self._default_value, How.DEFAULT)
+            association = self.network.get(s, best_b)
+            assert association is not None
+            return Decision(best_b, s, v, How.RELEASED, association.source)
+        return Decision(self._default, self.open_default(active), self._default_value, How.DEFAULT)
+
+    def open_default(self, active: list[int]) -> int:
+        """The stimulus a default decision answers: the most salient learnable one, or -1.
+
+        Nothing was released, so whatever runs is the robot's response to the new stimuli
+        it perceives: the paper's "arbitrary behavior to respond to a new stimulus", recorded
+        in STM. Stimuli that are not learnable (the position layer, active on every tick) are
+        never credited with the keep-moving default, which no releaser of theirs chose.
+        """
+        prio = self._priority
+        learnable = self._learnable
+        target = -1
+        for s in active:
+            if s in learnable and (target < 0 or prio[s] > prio[target]):
+                target = s
+        return target
 
     def open_stimulus(self, active: list[int], learnable: frozenset[int]) -> int:
         """The most salient active stimulus of `learnable` that nothing answers, or -1.
@@ -269,4 +303,4 @@ class Selector:
             trials[target] = tried
         if tried < 0:
             return decision
-        return Decision(tried, target, 0.0, How.EXPLORED)
+        return Decision(tried, target, 0.0, How.EXPLORED, EXPLORED)

@@ -10,7 +10,10 @@ StimulusDetector = Callable[[Sequence[float]], list[int]]
 
 
 def _condition_source(c: RuleCondition) -> str:
-    # Every piece is validated data: an int index, an operator from a closed set, a float.
+    # Every piece is validated data: an int index, an operator from a closed set, a float
+    # or another int index.
+    if c.other >= 0:
+        return f"c[{int(c.channel)}] {c.op} c[{int(c.other)}]"
     return f"c[{int(c.channel)}] {c.op} {float(c.value)!r}"
 
 

@@ -33,7 +33,8 @@ G_CORNER_TRIGGER = 18
 G_HALF_LENGTH = 19
 G_CORRIDOR = 20
 G_TRACK_HOLD = 21
-G_SIZE = 22
+G_OBSTACLE_ECHO = 22
+G_SIZE = 23
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -146,7 +147,11 @@ def sense(
         walls = min(ray_exit(ox, oy, dx, dy, outer), ray_entry(ox, oy, dx, dy, inner))
         seen = walls
         if has_obstacle:
-            seen = min(seen, ray_entry(ox, oy, dx, dy, obstacle))
+            hit = ray_entry(ox, oy, dx, dy, obstacle)
+            # The obstacle's echo is heard only within its echo range; beyond it the
+            # sonar reads what lies behind (see ObstacleConfig.echo_range_m).
+            if hit <= g[G_OBSTACLE_ECHO]:
+                seen = min(seen, hit)
         walls = min(walls, rng)
         reading = min(max(min(seen, rng) + noise[i], 0.0), rng)
         out[i] = reading
@@ -199,12 +204,14 @@ def sense(
     out[21] = UNSEEN
     out[22] = UNSEEN
     out[29] = UNSEEN
+    out[31] = UNSEEN
     if has_obstacle:
         ocx = 0.5 * (obstacle[0] + obstacle[2])
         ocy = 0.5 * (obstacle[1] + obstacle[3])
-        ok, _, _, _ = _sees(cx, cy, c, s, ocx, ocy, g)
+        ok, _, fwd, lat = _sees(cx, cy, c, s, ocx, ocy, g)
         if ok:
             out[20] = 1.0
+            out[31] = math.atan2(lat, fwd) / g[G_FOV_HALF]
             track[0] = 1.0
             track[1] = ocx
             track[2] = ocy
@@ -242,4 +249,4 @@ def sense(
 
 def empty_channels() -> np.ndarray[Any, np.dtype[np.float64]]:
     """A channel vector to fill."""
-    return np.zeros(31, dtype=np.float64)
+    return np.zeros(32, dtype=np.float64)

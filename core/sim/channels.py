@@ -60,6 +60,10 @@ class Channel(IntEnum):
     """Camera + odometry: the obstacle's offset from the corridor's centre line, + = left."""
     HEADING_RAD = 30
     """Odometry: the robot's heading in the map frame."""
+    OBSTACLE_IMAGE_X = 31
+    """Camera: where the obstacle's centre appears across the image, from -1 (right edge)
+    to +1 (left edge): its bearing off the camera's axis over half the field of view;
+    99 while it is not in view."""
 
 
 CHANNELS: tuple[str, ...] = tuple(c.name.lower() for c in Channel)

@@ -45,6 +45,10 @@ class ObstacleConfig:
         start_clearance_m: keep-out distance ahead of the start pose.
         stopline_clearance_m: keep-out distance either side of the stop line.
         enabled: False removes the obstacle (useful for tests and for teaching).
+        echo_range_m: how far away the sonars hear the obstacle's echo. A large, hard,
+            flat box echoes like a wall, heard as far as the sonars reach; a small, soft or
+            rounded one returns a weak echo that the sonars register only when near, and
+            beyond this range they read whatever lies behind it.
     """
 
     size_m: float = 0.25
@@ -53,6 +57,7 @@ class ObstacleConfig:
     start_clearance_m: float = 1.5
     stopline_clearance_m: float = 0.6
     enabled: bool = True
+    echo_range_m: float = 3.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -227,6 +227,7 @@ class PymunkWorld:
         g[k.G_HALF_LENGTH] = robot.length_m / 2
         g[k.G_CORRIDOR] = self.config.track.corridor_width_m
         g[k.G_TRACK_HOLD] = robot.camera_track_ticks
+        g[k.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
         self._track = np.zeros(4)
         self._g = g
         self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
@@ -284,6 +285,37 @@ class PymunkWorld:
         self._lamp, self._phase_left = layout.signal_phases[0]
         self._command = MotorCommand(0.0, 0.0)
         self._tick = 0
+        self._hit = None
+        frame = self._sense(violation=False)
+        self._front_to_line = float(frame.channels[28])
+        return frame
+
+    def place(
+        self, x: float, y: float, heading_rad: float, obstacle: tuple[float, float] | None
+    ) -> SensorFrame:
+        """Put the robot at a pose and the obstacle at a centre (None: no obstacle).
+
+        For constructed situations (the placement probe, tests): call after `reset`, which
+        still decides the lamp's cycle and the noise. The robot stands still; the camera's
+        tracking of the obstacle starts afresh.
+        """
+        self._body.position = (x, y)
+        self._body.angle = heading_rad
+        self._body.velocity = (0.0, 0.0)
+        self._body.angular_velocity = 0.0
+        self._space.reindex_shapes_for_body(self._body)
+        if obstacle is None:
+            self._has_obstacle = False
+            self._obstacle_body.position = (-100.0, -100.0)
+        else:
+            self._has_obstacle = True
+            ox, oy = obstacle
+            half = self.config.track.obstacle.size_m / 2
+            self._obstacle_box[:] = (ox - half, oy - half, ox + half, oy + half)
+            self._obstacle_body.position = (ox, oy)
+        self._space.reindex_shapes_for_body(self._obstacle_body)
+        self._track[:] = 0.0
+        self._command = MotorCommand(0.0, 0.0)
         self._hit = None
         frame = self._sense(violation=False)
         self._front_to_line = float(frame.channels[28])

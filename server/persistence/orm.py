@@ -198,6 +198,10 @@ class RunRow(Base):
     hz: Mapped[float]
     network: Mapped[str | None] = mapped_column(NAME)
     params: Mapped[dict[str, Any]]
+    world: Mapped[str] = mapped_column(NAME, server_default=text("''"))
+    """The world preset's name ('' for a run stored before runs kept it: the default)."""
+    sensors: Mapped[str] = mapped_column(NAME, server_default=text("''"))
+    """The sensor definition's name ('' for a run stored before runs kept it: the default)."""
     status: Mapped[str] = mapped_column(String(20), index=True)
     error: Mapped[str | None] = mapped_column(Text)
     created_at: Mapped[datetime] = _created()

@@ -18,7 +18,6 @@ from sqlalchemy.orm import Session
 
 from core.brain.catalog import Catalog, KnowledgeSet, load_catalog
 from core.errors import StorageError
-from core.sim.channels import CHANNELS
 from server.persistence.orm import (
     AssociationRow,
     BehaviourRow,
@@ -114,7 +113,7 @@ def _seed(session: Session, catalog: Catalog) -> SeedReport:
             "objective": st.objective,
             "level": st.level,
             "priority": st.priority,
-            "rule": [[[CHANNELS[c.channel], c.op, c.value] for c in alt] for alt in st.rule],
+            "rule": [[c.as_data() for c in alt] for alt in st.rule],
         }
         count.sync(session, srow or StimulusRow(), srow is not None, values)
     behaviours = {

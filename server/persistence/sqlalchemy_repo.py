@@ -272,6 +272,8 @@ class SqlAlchemyRunStore:
                 hz=spec.hz,
                 network=spec.network,
                 params=params,
+                world=spec.world,
+                sensors=spec.sensors,
                 status=RunStatus.CREATED.value,
             )
             s.add(row)
@@ -485,6 +487,8 @@ class SqlAlchemyRunStore:
                 hz=run.hz,
                 network=run.network,
                 params=dict(run.params),
+                world=run.world,
+                sensors=run.sensors,
             ),
             status=RunStatus(run.status),
             totals=RunTotals(run.episodes_done, run.successes, run.ticks),

@@ -10,6 +10,7 @@ import viser
 
 from core.brain.catalog import Catalog
 from core.sim.world import WorldConfig
+from core.worlds import load_world
 from server.engines import EngineManager
 from server.persistence import SqlAlchemyRunStore
 from server.ratelimit import RateLimiter
@@ -62,18 +63,19 @@ class Viewer:
     ) -> Viewer:
         """Listen on `host`:`port` and show the runs of `manager` and `store`.
 
+        Each run is drawn in its own world preset; `world` replaces them all (tests).
         A busy port is an error here (viser itself would silently take the next one, and
         the editor's link would point at someone else's server).
         """
-        world = world or WorldConfig()
         inbox = Inbox()
         controller = Controller(
             inbox, manager, store, catalog, limiter, writable=writable, world=world
         )
+        first = world or load_world().config  # until a run is shown
         server = await asyncio.to_thread(_listen, host, port)
         try:
             renderer = await asyncio.to_thread(
-                Renderer, server, static_scene(world), world, controller.post
+                Renderer, server, static_scene(first), first, controller.post, fixed=world
             )
         except BaseException:
             await asyncio.to_thread(server.stop)

@@ -87,6 +87,10 @@ def tick_view(engine: Engine, snap: Snapshot) -> TickView:
         kp=kp,
         successes=totals.successes,
         episodes_done=totals.episodes,
+        origin=snap.origin,
+        released_by=(
+            cat.stimuli[snap.released_by].name if 0 <= snap.released_by < len(cat.stimuli) else None
+        ),
     )
 
 
@@ -100,7 +104,7 @@ class Controller:
         catalog: the shipped catalogue (names of stimuli and behaviours).
         limiter: the service's reward rate limiter (the panel is one more client).
         writable: the panel may reward and change rates (the service is on loopback).
-        world: the world the runs use.
+        world: the world every replay is drawn in (None: each run's own preset).
     """
 
     def __init__(
@@ -119,7 +123,7 @@ class Controller:
         self.store = store
         self.catalog = catalog
         self.limiter = limiter
-        self.world = world or WorldConfig()
+        self.world = world
         self.state = ViewState(writable=writable)
         self._commands: asyncio.Queue[ViewerCommand] = asyncio.Queue()
         try:  # built on the service's loop: commands posted before `run` starts wait
@@ -128,8 +132,8 @@ class Controller:
             self._loop = None
         self._follow: asyncio.Task[None] | None = None
         self._signature: tuple[tuple[int, str], ...] | None = None
-        self._stored: dict[int, tuple[str, str, int, str, float]] = {}
-        """Per stored run: condition, mode, seed, status, hz (from the last refresh)."""
+        self._stored: dict[int, tuple[str, str, int, str, float, str]] = {}
+        """Per stored run: condition, mode, seed, status, hz, world (from the last refresh)."""
         self._background: set[asyncio.Task[None]] = set()
         self._chosen = False
         """A user chose the run (the dropdown, a link): stop following the newest one."""
@@ -231,7 +235,14 @@ class Controller:
         self._signature = signature
         stored = await asyncio.to_thread(self.store.list_runs)
         self._stored = {
-            r.id: (r.spec.condition, r.spec.mode.value, r.spec.seed, r.status.value, r.spec.hz)
+            r.id: (
+                r.spec.condition,
+                r.spec.mode.value,
+                r.spec.seed,
+                r.status.value,
+                r.spec.hz,
+                r.spec.world,
+            )
             for r in stored
         }
         runs = []
@@ -267,12 +278,14 @@ class Controller:
                 spec.mode is Mode.REALTIME,
                 engine.hz,
                 engine.status in ACTIVE,
+                spec.world,
             )
         stored = self._stored.get(run_id)
         if stored is None:
             return None
-        condition, mode, seed, status, hz = stored
-        return LiveInfo(run_id, condition, seed, status, mode == Mode.REALTIME.value, hz, False)
+        condition, mode, seed, status, hz, world = stored
+        realtime = mode == Mode.REALTIME.value
+        return LiveInfo(run_id, condition, seed, status, realtime, hz, False, world)
 
     async def _select(self, run_id: int) -> None:
         st = self.state
@@ -336,7 +349,7 @@ class Controller:
         if self.state.run_id != run_id:
             return  # another run was selected meanwhile
         speed = self.state.clock.speed if self.state.clock is not None else 1.0
-        clock = ReplayClock(replay.ticks, self.world.dt_s, speed=speed).play(time.monotonic())
+        clock = ReplayClock(replay.ticks, replay.world.dt_s, speed=speed).play(time.monotonic())
         self._publish(
             mode="replay", replay=replay, clock=clock, version=self.state.version + 1, notice=""
         )

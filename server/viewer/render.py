@@ -22,7 +22,7 @@ import viser
 
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, WorldConfig, episode_layout
-from server.viewer.replay import SPEEDS
+from server.viewer.replay import SPEEDS, run_world
 from server.viewer.scene import (
     BULBS,
     CAMERA_HEIGHT_M,
@@ -34,6 +34,7 @@ from server.viewer.scene import (
     Trail,
     decision_markdown,
     scene_frame,
+    static_scene,
     yaw_quaternion,
 )
 from server.viewer.state import (
@@ -134,11 +135,15 @@ def _assign(handle: Any, value: object) -> None:
 class Renderer:
     """Builds the scene and the panel on a viser server and draws frames on it.
 
+    The scene is of the shown run's world (its preset): when another run or a replay of
+    another world is shown, the track, the obstacle and the robot are built again.
+
     Args:
         server: the viser server (already listening).
         scene: the world's fixed parts.
         world: the world's configuration (the episodes' layouts are drawn from it).
         post: hands a panel command to the service's event loop (thread-safe).
+        fixed: draw every run in this world instead of its own (None: each run's).
     """
 
     def __init__(
@@ -147,12 +152,15 @@ class Renderer:
         scene: StaticScene,
         world: WorldConfig,
         post: Callable[[ViewerCommand], None],
+        *,
+        fixed: WorldConfig | None = None,
     ) -> None:
         self.server = server
         self.static = scene
         self.world = world
         self.geometry = TrackGeometry.build(world.track)
         self.post = post
+        self.fixed = fixed
         self.frames = 0
         """Frames drawn (for tests and the bench)."""
         self.dropped = 0
@@ -415,6 +423,28 @@ class Renderer:
 
     # --- drawing --------------------------------------------------------------------
 
+    def world_of(self, state: ViewState) -> WorldConfig:
+        """The world `state` shows: the replay's, else the selected run's, else the last."""
+        if self.fixed is not None:
+            return self.fixed
+        if state.mode == "replay" and state.replay is not None:
+            return state.replay.world
+        if state.live is not None:
+            return run_world(state.live.world)
+        return self.world
+
+    def use_world(self, world: WorldConfig) -> None:
+        """Show `world`: build the scene again if it is not the one shown."""
+        if world is self.world or world == self.world:
+            return
+        self.world = world
+        self.static = static_scene(world)
+        self.geometry = TrackGeometry.build(world.track)
+        self._layouts.clear()
+        with self.server.atomic():
+            self._build_scene()  # the same node names: each replaces the one before
+        self._cache = _Cache({})  # the new nodes have none of the values sent before
+
     def layout(self, seed: int, episode: int) -> EpisodeLayout:
         """The obstacle and lamp cycle of an episode (cached)."""
         key = (seed, episode)
@@ -438,6 +468,7 @@ class Renderer:
             self._trail.clear()
             self._replay_trail = None
             self.last_view = None
+        self.use_world(self.world_of(state))
         view: TickView | None = None
         layout: EpisodeLayout | None = None
         trail: Trail
@@ -579,8 +610,10 @@ class Renderer:
         if state.run_id is None or live is None:
             return "**srlab**: no run selected. Create one in the editor or with `srlab run`."
         mode = f"realtime {live.hz:g} Hz" if live.realtime else "fast"
+        world = f", world {live.world}" if live.world else ""
         text = (
-            f"**Run {live.run_id}**: {live.condition}, seed {live.seed}, {mode}, **{live.status}**"
+            f"**Run {live.run_id}**: {live.condition}, seed {live.seed}{world}, {mode}, "
+            f"**{live.status}**"
         )
         if not live.ticking and state.mode == "live":
             text += ". Not running now: **Replay** shows its stored episodes."

@@ -2,19 +2,36 @@
 
 from __future__ import annotations
 
+import logging
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from core.brain.catalog import Catalog
+from core.errors import UnknownNameError
 from core.ports import NetworkPair
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig, episode_layout
 from core.trace import TraceRow, unpack
+from core.worlds import load_world
 from server.persistence import SqlAlchemyRunStore
 from server.viewer.scene import TickView
 
+log = logging.getLogger("srlab.viewer")
+
 SPEEDS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 """Playback speeds the panel offers, as multiples of the recorded time."""
+
+
+def run_world(name: str) -> WorldConfig:
+    """The world of a run's preset (`name` "" for the default: a run stored before runs kept it).
+
+    A preset since removed from the data shows as the default world.
+    """
+    try:
+        return load_world(name or None).config
+    except UnknownNameError:
+        log.warning("the world preset %r is gone: the 3D view draws the default world", name)
+        return load_world().config
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +113,8 @@ class Replay:
     cause: str | None
     views: tuple[TickView, ...]
     layout: EpisodeLayout
+    world: WorldConfig = field(default_factory=WorldConfig)
+    """The world the run ran in (its preset)."""
 
     @property
     def ticks(self) -> int:
@@ -140,6 +159,8 @@ def replay_views(
                 behaviour=b,
                 how=r.how,
                 kp=kp,
+                origin=r.origin,
+                released_by=(stimuli[r.released_by] if 0 <= r.released_by < len(stimuli) else None),
             )
         )
     return tuple(views)
@@ -160,7 +181,8 @@ def load_replay(
     """A stored episode of a run (blocking: call it from a worker thread).
 
     The obstacle's place comes from the run's seed and the episode's number, as the world
-    drew it; KP-made associations are those of the run's network as stored now.
+    drew it: the run's world preset, unless `world` is given. KP-made associations are
+    those of the run's network as stored now.
 
     Raises:
         UnknownRunError: no such run.
@@ -175,14 +197,22 @@ def load_replay(
     rows = unpack(record.trace)
     if not rows:
         raise LookupError(f"episode {episode} of run {run_id} has an empty trace")
-    world = world or WorldConfig()
+    world = world or run_world(run.spec.world)
     layout = episode_layout(world, TrackGeometry.build(world.track), run.spec.seed, episode)
     stimuli = [s.name for s in catalog.stimuli]
     behaviours = [b.name for b in catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
     views = replay_views(
         run_id, episode, rows, stimuli, behaviours, kp_pairs(store.network(run_id))
     )
-    return Replay(run_id, episode, record.outcome, record.cause, views, layout)
+    return Replay(run_id, episode, record.outcome, record.cause, views, layout, world)
 
 
-__all__ = ["SPEEDS", "Replay", "ReplayClock", "kp_pairs", "load_replay", "replay_views"]
+__all__ = [
+    "SPEEDS",
+    "Replay",
+    "ReplayClock",
+    "kp_pairs",
+    "load_replay",
+    "replay_views",
+    "run_world",
+]

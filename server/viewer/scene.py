@@ -299,6 +299,11 @@ class TickView:
     """The behaviour was released by an association knowledge propagation made."""
     successes: int | None = None
     episodes_done: int | None = None
+    origin: str = ""
+    """What made the behaviour run: an association's source, explored, default or
+    commanded ("" when unknown: a trace stored before traces kept it)."""
+    released_by: str | None = None
+    """The stimulus the behaviour answered."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -387,6 +392,22 @@ def trail_of(views: Sequence[TickView], min_step_m: float = TRAIL_MIN_STEP_M) ->
 Mode = Literal["live", "replay"]
 
 
+def why(view: TickView) -> str:
+    """How a tick's behaviour came to run, e.g. ``released by `Corner` (designed)``.
+
+    The stimulus it answered, and in brackets what made it run when that is not its
+    `how` already: the releasing association's source (a continued primitive keeps it).
+    """
+    parts = [] if view.how == "released" and view.released_by else [view.how]
+    if view.released_by:
+        verb = "released by" if view.how in ("released", "continued") else "answering"
+        parts.append(f"{verb} `{view.released_by}`")
+    text = ", ".join(parts)
+    if view.origin and view.origin != view.how:
+        text += f" ({view.origin})"
+    return text
+
+
 def decision_markdown(view: TickView | None, mode: Mode, heading: str) -> str:
     """The panel's account of a tick: stimuli, the selected behaviour and how, counters."""
     lines = [heading]
@@ -399,7 +420,7 @@ def decision_markdown(view: TickView | None, mode: Mode, heading: str) -> str:
         lines.append(f"Successes so far: **{view.successes}** of {view.episodes_done} episodes")
     behaviour = f"`{view.behaviour}`" if view.behaviour else "none"
     kp = " - **KP-made**" if view.kp else ""
-    lines.append(f"Behaviour: {behaviour} ({view.how}){kp}")
+    lines.append(f"Behaviour: {behaviour} ({why(view)}){kp}")
     stimuli = ", ".join(f"`{s}`" for s in view.stimuli) if view.stimuli else "none"
     lines.append(f"Stimuli: {stimuli}")
     lines.append(f"Lamp: {view.lamp.name.lower() if view.lamp else 'not seen'}")
@@ -421,5 +442,6 @@ __all__ = [
     "sonar_ranges",
     "static_scene",
     "trail_of",
+    "why",
     "yaw_quaternion",
 ]

@@ -38,6 +38,8 @@ class LiveInfo:
     hz: float
     ticking: bool
     """An engine of this process runs it (running or paused)."""
+    world: str = ""
+    """Its world preset ("" for the default: a run stored before runs kept it)."""
 
 
 @dataclass(frozen=True, slots=True)

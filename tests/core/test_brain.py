@@ -168,3 +168,99 @@ def test_stm_capacity_bounds_what_a_reward_credits(catalog: Catalog) -> None:
     run(b, 1, [RED] * 10)
     outcome = b.reward(11, 1.0)
     assert [c.tick for c in outcome.credits] == [10, 9, 8, 7]
+
+
+# --- learned knowledge acts: the contract of selection with learned and KP pairs ----------
+
+CAMERA_MM = {
+    Channel.OBSTACLE_VISIBLE: 1.0,
+    Channel.OBSTACLE_DISTANCE_M: 1.2,
+    Channel.OBSTACLE_IMAGE_X: 0.0,
+    Channel.OBSTACLE_OFFSET_M: 0.0,
+    Channel.OBSTACLE_LATERAL_M: 0.0,
+}
+SONAR_FRONT = {
+    Channel.SONAR_2: 0.25,
+    Channel.SONAR_2_RESIDUAL: 1.0,
+    Channel.SONAR_3: 0.25,
+    Channel.SONAR_3_RESIDUAL: 1.0,
+}
+LEFT_WALL = {Channel.SONAR_0: 0.05, Channel.SONAR_0_RESIDUAL: 0.0}
+
+
+def kp_brain(catalog: Catalog, *, eta: float = 0.3) -> Brain:
+    """The kp condition's brain with its real desires (lane keeping, sonar, KP on)."""
+    from core.brain.propagation import KpConfig
+
+    net = BehaviourNetwork.from_specs(catalog, catalog.knowledge_set("kp").associations)
+    config = BrainConfig(
+        learning=LearningConfig(enabled=True, eta=eta),
+        kp=KpConfig(enabled=True, eta=eta),
+    )
+    return Brain(catalog, net, config, RobotConfig(), np.random.default_rng(0))
+
+
+def test_a_promoted_camera_pair_outbids_the_designed_position_layer(catalog: Catalog) -> None:
+    """Middle -> goforward3 is designed and active on every tick: a learned response just over
+    the insertion threshold still wins when its camera stimulus is active."""
+    b = kp_brain(catalog)
+    mm, turn = catalog.stimulus("Obstacle_M_M").id, catalog.behaviour("rightturn30").id
+    b.network.learn(mm, turn, 0.5, "kp")
+    b.step(1, channel_list(CAMERA_MM))
+    assert (b.last.behaviour, b.last.stimulus, b.last.how) == (turn, mm, How.RELEASED)
+    assert b.last.origin == "kp"
+    # Without the camera stimulus the position layer cruises, as designed.
+    b.reset_episode()
+    b.step(2, channel_list())
+    assert (b.last.behaviour, b.last.origin) == (catalog.behaviour("goforward3").id, "designed")
+
+
+@pytest.mark.parametrize(
+    ("reflex", "behaviour"), [(COLLISION, "back"), (LEFT_WALL, "leftwallavoid")]
+)
+def test_a_promoted_camera_pair_loses_to_a_collision_or_wall_reflex(
+    catalog: Catalog, reflex: Mapping[Channel, float], behaviour: str
+) -> None:
+    b = kp_brain(catalog)
+    mm, turn = catalog.stimulus("Obstacle_M_M").id, catalog.behaviour("rightturn30").id
+    b.network.learn(mm, turn, 0.9, "kp")
+    b.step(1, channel_list({**CAMERA_MM, **reflex}))
+    assert b.last.behaviour == catalog.behaviour(behaviour).id
+    assert b.last.origin == "innate"
+
+
+def test_a_kp_pair_promoted_by_rewards_runs_when_its_stimulus_comes_back(
+    catalog: Catalog,
+) -> None:
+    """Camera M-M seen, then the sonar's front reflex fires: two rewards propagate it to the
+    camera stimulus (d_k = 1 in RLTM), and the next sighting runs the propagated pair."""
+    b = kp_brain(catalog, eta=0.3)
+    mm = catalog.stimulus("Obstacle_M_M").id
+    reflex = catalog.behaviour("rightturn45").id
+    tick = 1
+    for _ in range(2):
+        b.reset_episode()
+        b.step(tick, channel_list(CAMERA_MM))
+        b.step(tick + 1, channel_list(SONAR_FRONT))
+        assert (b.last.behaviour, b.last.origin) == (reflex, "designed")
+        tick += 10
+        outcome = b.reward(tick, 1.0)
+        tick += 1
+    assert [(p.stimulus, p.behaviour) for p in outcome.propagated] == [(mm, reflex)]
+    association = b.network.get(mm, reflex)
+    assert association is not None and association.source == "kp"
+    b.reset_episode()
+    b.step(tick, channel_list(CAMERA_MM))
+    assert (b.last.behaviour, b.last.stimulus, b.last.origin) == (reflex, mm, "kp")
+
+
+def test_only_learnable_stimuli_are_promoted(catalog: Catalog) -> None:
+    """A non-learnable stimulus's released pair is credited in LTM, never promoted."""
+    b = brain(catalog, eta=1.0, threshold=0.5)  # the innate network: Corner -> leftturn90
+    corner = catalog.stimulus("Corner").id
+    go = catalog.behaviour("goforward3").id
+    b.stm.push((1, corner, go))  # as if Corner had released goforward3
+    outcome = b.reward(2, 1.0)
+    assert b.ltm.reliability(corner, go) == 1.0
+    assert outcome.changes == ()
+    assert b.network.get(corner, go) is None

@@ -82,7 +82,7 @@ def test_fast_mode_gives_the_same_ltm_as_the_headless_loop(condition: str) -> No
 
 def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 1, hz=500.0), store, catalog=CATALOG)
+    engine = Engine.create(realtime("kp", 1, hz=500.0), store, catalog=CATALOG)
     sub = engine.subscribe(maxsize=10_000)
     acks = []
 

@@ -31,6 +31,7 @@ from core.experiment import (
 )
 from core.runner import RunSummary
 from core.runner import run as real_run
+from core.setup import Setup
 
 
 @pytest.fixture(scope="module")
@@ -50,11 +51,13 @@ def test_results_are_the_same_whatever_the_number_of_jobs(serial: list[TaskResul
 
 
 def test_results_come_in_condition_then_seed_order(serial: list[TaskResult]) -> None:
+    setup = Setup().resolved()  # the defaults, named, so results say where they ran
+    assert setup.world and setup.sensors
     assert [r.task for r in serial] == [
-        Task("kp", 0, 4),
-        Task("kp", 1, 4),
-        Task("rp", 0, 4),
-        Task("rp", 1, 4),
+        Task("kp", 0, 4, setup=setup),
+        Task("kp", 1, 4, setup=setup),
+        Task("rp", 0, 4, setup=setup),
+        Task("rp", 1, 4, setup=setup),
     ]
     for r in serial:
         assert [e.episode for e in r.episodes] == [0, 1, 2, 3]
@@ -89,7 +92,7 @@ def test_a_failing_task_is_returned_with_its_error_and_the_others_survive(
     monkeypatch.setattr(core.experiment, "run", run)
     results = run_experiment(["kp", "rp"], [0, 1], 2, jobs=1)
     failed = [r for r in results if not r.ok]
-    assert [r.task for r in failed] == [Task("rp", 1, 2)]
+    assert [(r.task.condition, r.task.seed) for r in failed] == [("rp", 1)]
     error = failed[0].error
     assert error is not None
     assert error.startswith("RuntimeError: the robot fell off the table")

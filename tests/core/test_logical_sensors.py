@@ -79,7 +79,7 @@ SIDES = {"L": 0.06, "M": 0.0, "R": -0.06}
 @pytest.mark.parametrize("lane", list(LANES))
 @pytest.mark.parametrize("side", list(SIDES))
 def test_camera_obstacle_in_the_path_gives_lane_by_side(
-    catalog: Catalog, detector: StimulusDetector, lane: str, side: str
+    path_catalog: Catalog, path_detector: StimulusDetector, lane: str, side: str
 ) -> None:
     robot, obstacle = LANES[lane], SIDES[side]
     seen = {
@@ -90,7 +90,7 @@ def test_camera_obstacle_in_the_path_gives_lane_by_side(
         C.OBSTACLE_LATERAL_M: obstacle - robot,
     }
     position = {"L": "Left", "M": "Middle", "R": "Right"}[lane]
-    assert names(catalog, detector, seen) == {position, f"Obstacle_{lane}_{side}"}
+    assert names(path_catalog, path_detector, seen) == {position, f"Obstacle_{lane}_{side}"}
 
 
 @pytest.mark.parametrize(
@@ -104,7 +104,7 @@ def test_camera_obstacle_in_the_path_gives_lane_by_side(
     ],
 )
 def test_camera_obstacle_far_or_out_of_the_path_gives_nothing(
-    catalog: Catalog, detector: StimulusDetector, change: Mapping[Channel, float]
+    path_catalog: Catalog, path_detector: StimulusDetector, change: Mapping[Channel, float]
 ) -> None:
     seen = {
         C.OBSTACLE_DISTANCE_M: 1.0,
@@ -112,7 +112,105 @@ def test_camera_obstacle_far_or_out_of_the_path_gives_nothing(
         C.OBSTACLE_LATERAL_M: 0.0,
         **change,
     }
+    assert names(path_catalog, path_detector, seen) == {"Middle"}
+
+
+VIEWS = {"L": 0.5, "M": 0.0, "R": -0.5}
+
+
+@pytest.mark.parametrize("lane", list(LANES))
+@pytest.mark.parametrize("view", list(VIEWS))
+def test_paper_camera_obstacle_is_lane_by_third_of_the_view(
+    paper_catalog: Catalog, paper_detector: StimulusDetector, lane: str, view: str
+) -> None:
+    """Fig. 10: the robot's lane x where the obstacle appears in the camera's view, whether
+    or not it is in the robot's path."""
+    catalog, detector = paper_catalog, paper_detector
+    assert catalog.definition == "paper"
+    seen = {
+        C.LATERAL_OFFSET_M: LANES[lane],
+        C.OBSTACLE_VISIBLE: 1.0,
+        C.OBSTACLE_DISTANCE_M: 1.2,
+        C.OBSTACLE_IMAGE_X: VIEWS[view],
+        C.OBSTACLE_OFFSET_M: 0.3,
+        C.OBSTACLE_LATERAL_M: 0.5,  # not in the path: the paper's stimuli do not ask
+    }
+    position = {"L": "Left", "M": "Middle", "R": "Right"}[lane]
+    assert names(catalog, detector, seen) == {position, f"Obstacle_{lane}_{view}"}
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {C.OBSTACLE_VISIBLE: 0.0, C.OBSTACLE_IMAGE_X: 99.0},  # tracked, but out of view
+        {C.OBSTACLE_DISTANCE_M: 1.6},
+    ],
+)
+def test_paper_camera_obstacle_out_of_view_or_far_gives_nothing(
+    paper_catalog: Catalog, paper_detector: StimulusDetector, change: Mapping[Channel, float]
+) -> None:
+    catalog, detector = paper_catalog, paper_detector
+    seen = {
+        C.OBSTACLE_VISIBLE: 1.0,
+        C.OBSTACLE_DISTANCE_M: 1.0,
+        C.OBSTACLE_IMAGE_X: 0.0,
+        C.OBSTACLE_OFFSET_M: 0.0,
+        C.OBSTACLE_LATERAL_M: 0.0,
+        **change,
+    }
     assert names(catalog, detector, seen) == {"Middle"}
+
+
+@pytest.mark.parametrize("lane", list(LANES))
+@pytest.mark.parametrize("view", list(VIEWS))
+def test_each_paper_camera_stimulus_fires_in_a_constructed_pose(
+    paper_catalog: Catalog, paper_detector: StimulusDetector, lane: str, view: str
+) -> None:
+    """Robot and obstacle placed in the pymunk world: the camera kernel's image position
+    and the position sensor's lane give the stimulus the placement means."""
+    world = PymunkWorld(QUIET_WITH_OBSTACLE)
+    world.reset(seed=0, episode=0)
+    geo = world.geometry
+    lateral = {"L": 0.3, "M": 0.0, "R": -0.3}[lane]
+    along = 2.0
+    x, y = geo.point_on_leg(0, along, lateral)
+    # The obstacle 1.2 m ahead, at the image position's bearing: centre of the view, or
+    # 15 degrees to a side (the view is 50 degrees wide, so its outer thirds start at 8.3).
+    bearing = math.radians({"L": 15.0, "M": 0.0, "R": -15.0}[view])
+    distance = 1.2 - world.config.robot.camera_offset_m
+    camera = (x + world.config.robot.camera_offset_m, y)
+    obstacle = (camera[0] + distance * math.cos(bearing), camera[1] + distance * math.sin(bearing))
+    frame = world.place(x, y, 0.0, obstacle)
+    fired = {paper_catalog.stimuli[i].name for i in paper_detector(frame.channels.tolist())}
+    assert f"Obstacle_{lane}_{view}" in fired
+    assert frame.channels[C.OBSTACLE_IMAGE_X] == pytest.approx(
+        {"L": 0.6, "M": 0.0, "R": -0.6}[view], abs=1e-9
+    )
+
+
+def test_a_rule_may_compare_two_channels() -> None:
+    """["sonar_0", ">", "sonar_5"]: "the left side is freer", written as data."""
+    from core.brain.catalog import parse_sensors
+    from core.brain.sensors import compile_detector as compile_rules
+
+    spec = {
+        "name": "freer_side",
+        "objective": "avoid_wall",
+        "stimuli": [
+            {"name": "LeftFreer", "when": [["sonar_0", ">", "sonar_5"]]},
+            {"name": "RightFreer", "when": [["sonar_5", ">=", "sonar_0"], ["sonar_5", ">", 0.5]]},
+        ],
+    }
+    sensors, stimuli = parse_sensors([spec])
+    cat = Catalog(stimuli, (), sensors)
+    detect = compile_rules(cat)
+    left = channel_list({C.SONAR_0: 1.0, C.SONAR_5: 0.4})
+    right = channel_list({C.SONAR_0: 0.4, C.SONAR_5: 1.0})
+    equal = channel_list({C.SONAR_0: 0.4, C.SONAR_5: 0.4})
+    assert [stimuli[i].name for i in detect(left)] == ["LeftFreer"]
+    assert [stimuli[i].name for i in detect(right)] == ["RightFreer"]
+    assert detect(equal) == []
+    assert stimuli[0].rule[0][0].as_data() == ["sonar_0", ">", "sonar_5"]
 
 
 @pytest.mark.parametrize(
@@ -192,6 +290,7 @@ QUIET = WorldConfig(
     track=TrackConfig(obstacle=ObstacleConfig(enabled=False)),
     robot=RobotConfig(sonar_noise_m=0.0),
 )
+QUIET_WITH_OBSTACLE = WorldConfig(robot=RobotConfig(sonar_noise_m=0.0))
 
 
 def test_world_start_pose_gives_middle_only(catalog: Catalog, detector: StimulusDetector) -> None:
@@ -236,8 +335,9 @@ def test_world_driving_into_the_corner_gives_corner(
 
 
 def test_world_obstacle_ahead_gives_a_camera_obstacle_stimulus(
-    catalog: Catalog, detector: StimulusDetector
+    path_catalog: Catalog, path_detector: StimulusDetector
 ) -> None:
+    catalog, detector = path_catalog, path_detector
     # Find an episode whose obstacle sits on leg 0 near the centre line, then drive at it.
     world = PymunkWorld(WorldConfig(robot=RobotConfig(sonar_noise_m=0.0)))
     for episode in range(200):

@@ -119,3 +119,28 @@ def test_memory_stays_bounded_over_many_episodes() -> None:
         assert len(brain.ltm) <= n_pairs
         assert len(brain.network) <= n_pairs
     assert longest == capacity  # the bound was reached, and held
+
+
+def test_kp_and_its_ablation_are_identical_until_a_kp_pair_is_promoted_then_differ() -> None:
+    """The ablation, in a real run: `sonar` is `kp` without propagation. Propagation draws
+    nothing random, so the two robots live the same episodes until the first KP pair joins
+    the network; from then on the KP pair runs, and the runs part."""
+    kp_sim = Simulation(get_condition("kp"), 0)
+    ablation = Simulation(get_condition("sonar"), 0)
+    promoted_after: int | None = None
+    parted_at: int | None = None
+    for episode in range(60):
+        a = run(get_condition("kp"), 0, 1, simulation=kp_sim).episodes[0]
+        b = run(get_condition("sonar"), 0, 1, simulation=ablation).episodes[0]
+        if promoted_after is None:
+            assert (a.outcome, a.cause, a.ticks) == (b.outcome, b.cause, b.ticks), episode
+            if any(x.source == "kp" for x in kp_sim.brain.network):
+                promoted_after = episode
+        elif parted_at is None and (a.outcome, a.cause, a.ticks) != (b.outcome, b.cause, b.ticks):
+            parted_at = episode
+        if parted_at is not None:
+            break
+    assert promoted_after is not None, "no KP pair was promoted in 60 episodes"
+    assert parted_at is not None, "a promoted KP pair never changed what the robot did"
+    assert kp_sim.ticks_by_origin.get("kp", 0) > 0
+    assert "kp" not in ablation.ticks_by_origin

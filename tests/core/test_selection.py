@@ -64,10 +64,29 @@ def test_nothing_active_runs_the_default(catalog: Catalog, n: Names) -> None:
     assert sel.select([], -1) == Decision(n.b("goforward3"), -1, FLAT["keep_moving"], How.DEFAULT)
 
 
-def test_default_is_credited_to_the_most_salient_stimulus(catalog: Catalog, n: Names) -> None:
-    sel = selector(catalog)
+def test_default_answers_the_most_salient_learnable_stimulus(catalog: Catalog, n: Names) -> None:
+    sel = selector(catalog, learnable=["Red", "Obstacle_M_M"])
     d = sel.select([n.s("Middle"), n.s("Red")], -1)
     assert (d.behaviour, d.stimulus, d.how) == (n.b("goforward3"), n.s("Red"), How.DEFAULT)
+    assert d.origin == "default"
+
+
+def test_default_is_never_credited_to_a_stimulus_that_is_not_learnable(
+    catalog: Catalog, n: Names
+) -> None:
+    """The keep-moving default is nobody's response: the position layer is never credited
+    with it (Middle -> goforward3 would otherwise be rewarded on every successful lap)."""
+    sel = selector(catalog, learnable=["Red"])
+    d = sel.select([n.s("Middle")], -1)
+    assert (d.behaviour, d.stimulus, d.how) == (n.b("goforward3"), -1, How.DEFAULT)
+    d = sel.select([n.s("Middle"), n.s("Obstacle_M_M")], -1)
+    assert d.stimulus == -1
+
+
+def test_a_released_decision_names_its_association_source(catalog: Catalog, n: Names) -> None:
+    network = [Association(n.s("Red"), n.b("stop"), 0.7, "kp")]
+    d = selector(catalog, network).select([n.s("Red")], -1)
+    assert (d.behaviour, d.how, d.origin) == (n.b("stop"), How.RELEASED, "kp")
 
 
 def test_competition_respects_the_threshold(catalog: Catalog, n: Names) -> None:

@@ -100,7 +100,7 @@ def test_first_failure_is_kept_when_episodes_go_on() -> None:
 def test_delayed_condition_rewards_a_success_and_credits_the_episode() -> None:
     geometry = ScriptedWorld().geometry
     world = ScriptedWorld(lap_steps(geometry, STEP_M))
-    sim = Simulation(get_condition("delayed"), seed=0, world=world)
+    sim = Simulation(get_condition("kp"), seed=0, world=world)
     sim.reset()
     results = play(sim)
     n = len(results)
@@ -109,18 +109,38 @@ def test_delayed_condition_rewards_a_success_and_credits_the_episode() -> None:
     (reward,) = rewards(events)
     assert (reward.value, reward.source, reward.note) == (1.0, "task", "lap completed")
     assert (reward.tick, reward.episode) == (n + 1, 0)
-    # Every tick of the episode is credited, newest first, d_k = 1 .. n.
+    # Every tick released the designed Middle -> goforward3: each is credited, newest
+    # first, d_k = 1 .. n; a designed pair's reliability grows, the network stays as is.
     assert [c.d_k for c in reward.credits] == list(range(1, n + 1))
     assert [c.tick for c in reward.credits] == list(range(n, 0, -1))
     middle = sim.catalog.stimulus("Middle").id
     go = sim.catalog.behaviour("goforward3").id
     assert {(c.stimulus, c.behaviour) for c in reward.credits} == {(middle, go)}
     assert sim.brain.ltm.reliability(middle, go) > 0.0
+    association = sim.brain.network.get(middle, go)
+    assert association is not None and association.source == "designed"
+
+
+def test_the_default_behaviour_is_not_credited_as_the_position_stimulus_response() -> None:
+    """With nothing released, keeping moving is no S-R pair: a successful lap of the
+    innate robot credits nothing, and `Middle -> goforward3` is never promoted."""
+    geometry = ScriptedWorld().geometry
+    world = ScriptedWorld(lap_steps(geometry, STEP_M))
+    sim = Simulation(get_condition("delayed"), seed=0, world=world)
+    sim.reset()
+    results = play(sim)
+    assert all(r.snapshot.origin == "default" for r in results)
+    assert all(r.snapshot.released_by == -1 for r in results)
+    (reward,) = rewards(results[-1].events)
+    assert reward.credits == ()
+    middle = sim.catalog.stimulus("Middle").id
+    assert all(s != middle for (s, _), _ in sim.brain.ltm.items())
+    assert sim.ticks_by_origin == {"default": len(results)}
 
 
 def test_rewards_between_ticks_credit_the_records_so_far() -> None:
     world = ScriptedWorld()
-    sim = Simulation(get_condition("delayed"), seed=0, world=world)
+    sim = Simulation(get_condition("kp"), seed=0, world=world)
     sim.reset()
     for _ in range(4):
         sim.tick()

@@ -12,9 +12,17 @@ from alembic.config import Config
 from alembic.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from conftest import fresh_postgres_database
-from sqlalchemy import inspect
+from sqlalchemy import inspect, text
 
-from server.persistence import Base, alembic_config, downgrade, make_engine, upgrade
+from server.persistence import (
+    Base,
+    SqlAlchemyRunStore,
+    alembic_config,
+    downgrade,
+    make_engine,
+    make_sessionmaker,
+    upgrade,
+)
 from server.persistence.migrate import ROOT
 
 TABLES = {
@@ -116,3 +124,30 @@ def test_upgrade_head_on_postgres_matches_the_models_and_round_trips(postgres_ur
 
         upgrade(url)
         assert drift(url) == []
+
+
+def test_runs_stored_before_0002_read_with_the_defaults_unnamed(sqlite_url: str) -> None:
+    command.upgrade(alembic_config(sqlite_url), "0001")
+    engine = make_engine(sqlite_url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO runs (condition, seed, mode, hz, params, status) "
+                    "VALUES ('kp', 3, 'fast', 10.0, '{}', 'stopped')"
+                )
+            )
+    finally:
+        engine.dispose()
+
+    upgrade(sqlite_url, seed=False)
+
+    engine = make_engine(sqlite_url)
+    try:
+        [run] = SqlAlchemyRunStore(make_sessionmaker(engine)).list_runs()
+    finally:
+        engine.dispose()
+    assert (run.spec.condition, run.spec.world, run.spec.sensors) == ("kp", "", "")
+    assert drift(sqlite_url) == []
+    downgrade(sqlite_url, "0001")
+    assert drift(sqlite_url) != []  # the two columns are gone again

@@ -36,6 +36,8 @@ SPEC = RunSpec(
     hz=12.5,
     network="dp",
     params={"eta": 0.2, "epsilon": 0.05},
+    world="echo40",
+    sensors="path",
 )
 SLOWER = BehaviourSpec("kp_slow_left", "synthesized", 0.05, 20.0, 3, "constant")
 

@@ -54,7 +54,8 @@ def test_summaries_list_the_seeded_networks(
 ) -> None:
     summaries = {s.name: s for s in repo.summaries()}
 
-    assert set(summaries) == {"innate", "dp", "kp", "expert"}
+    assert set(summaries) == set(catalog.knowledge)
+    assert {"innate", "dp", "kp", "expert", "dp-paper", "expert-paper"} <= set(summaries)
     for name, s in summaries.items():
         assert s.builtin and s.version == 1
         assert s.association_count == len(catalog.knowledge_set(name).associations)

@@ -7,8 +7,8 @@ It runs tests/reliability and the schemathesis test with pytest at the sizes bel
 environment variable already set wins), with PostgreSQL from ``SRLAB_TEST_POSTGRES_URL``
 (`make reliability` starts one; without it those checks are skipped). It prints a table
 with one row per check: what was tried, what was measured, whether it held (the test
-passed). The table also goes to docs/reliability.md. After a full run it replaces the
-table in README.md's Reliability section as well. The exit status is pytest's.
+passed). The table also goes to docs/reliability.md, replacing the one between its
+markers and leaving the page's text around it. The exit status is pytest's.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ FULL = {
 }
 """The full sizes; the tests' own defaults are CI's."""
 TESTS = ["tests/reliability", "tests/server/test_schemathesis.py"]
-README_START = "<!-- reliability-table:start -->"
-README_END = "<!-- reliability-table:end -->"
+TABLE_START = "<!-- reliability-table:start -->"
+TABLE_END = "<!-- reliability-table:end -->"
 
 
 @dataclass
@@ -124,7 +124,6 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="CI's sizes, not the full ones")
     parser.add_argument("--out", type=Path, default=ROOT / "docs" / "reliability.md")
-    parser.add_argument("--no-readme", action="store_true", help="leave README.md alone")
     parser.add_argument("pytest_args", nargs="*", help="more pytest arguments (after --)")
     args = parser.parse_args(argv)
     sizes = {} if args.quick else FULL
@@ -160,17 +159,18 @@ def main(argv: list[str] | None = None) -> int:
         f"{os.cpu_count()} cores; load average {load.stop()}; sizes: {sizes_used or 'CI'}."
     )
     body = table(rows, outcomes)
-    text = f"# Reliability\n\n{header}\n\n{body}\n"
+    sys.stdout.write(f"\n{header}\n\n{body}\n")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    sys.stdout.write(f"\n{header}\n\n{body}\n\nwritten to {args.out}\n")
-    readme = ROOT / "README.md"
-    if not args.quick and not args.no_readme and README_START in readme.read_text():
-        before, rest = readme.read_text().split(README_START, 1)
-        _, after = rest.split(README_END, 1)
-        block = f"{README_START}\n{header}\n\n{body}\n{README_END}"
-        readme.write_text(before + block + after)
-        sys.stdout.write("and to README.md's Reliability section\n")
+    old = args.out.read_text() if args.out.exists() else ""
+    block = f"{TABLE_START}\n{header}\n\n{body}\n{TABLE_END}"
+    if TABLE_START in old and TABLE_END in old:
+        # Replace the table only: the page's account of the suite around it stays.
+        before, rest = old.split(TABLE_START, 1)
+        _, after = rest.split(TABLE_END, 1)
+        args.out.write_text(before + block + after)
+    else:
+        args.out.write_text(f"# Reliability\n\n{block}\n")
+    sys.stdout.write(f"\nwritten to {args.out}\n")
     return int(status)
 
 

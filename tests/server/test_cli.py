@@ -196,3 +196,65 @@ def test_module_entry_point_runs_a_json_simulation() -> None:
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["episodes"] == 1
     assert "Traceback" not in done.stderr
+
+
+def test_simulate_counts_ticks_by_source_and_names_its_setup(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    trace = tmp_path / "t.jsonl"
+    argv = ["simulate", "--condition", "kp", "--episodes", "2", "--seed", "1", "--json"]
+    argv += ["--world", "classic", "--sensors", "paper", "--signal", "given", "--quiet"]
+    assert main([*argv, "--trace", str(trace)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["world"], summary["sensors"], summary["signal"]) == (
+        "classic",
+        "paper",
+        "given",
+    )
+    by_source = summary["ticks_by_source"]
+    assert sum(by_source.values()) == summary["ticks"]
+    assert by_source["designed"] > 0  # lane keeping and the sonar reflexes of kp's design
+    rows = [json.loads(line) for line in trace.read_text().splitlines()]
+    assert len(rows) == summary["ticks"] + 2  # each episode's first snapshot too
+    ran = [r for r in rows if r["how"] == "released"]
+    assert ran and all(r["released_by"] is not None and r["source"] for r in ran)
+    assert {r["source"] for r in ran} <= {"innate", "designed", "expert", "kp"}
+
+
+def test_simulate_refuses_a_condition_the_architecture_does_not_run(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    err = fail(["simulate", "--condition", "qlambda", "--episodes", "1"], capsys)
+    assert "srlab experiment --conditions qlambda" in err
+
+
+def test_world_check_prints_each_property_and_writes_its_report(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    argv = ["world-check", "--world", "classic", "--sensors", "path", "--seeds", "2"]
+    argv += ["--episodes", "3", "--jobs", "1", "--quiet", "--json", "--out", str(tmp_path)]
+    code = main(argv)
+    report = json.loads(capsys.readouterr().out)
+    (check,) = report["checks"]
+    assert check["world"] == "classic" and check["sensors"] == "path"
+    assert [p["key"] for p in check["properties"]] == ["a", "b", "c", "d"]
+    assert code == (0 if check["holds"] else 1)
+    for p in check["properties"]:
+        assert p["holds"] == (p["bounds"][0] <= p["success"]["mean"] <= p["bounds"][1])
+    md = (tmp_path / "world-check.md").read_text()
+    assert "| (b) | the sonar reflexes alone pass only in part | reflexes + signal |" in md
+    assert json.loads((tmp_path / "world-check.json").read_text())["checks"] == report["checks"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["world-check", "--world", "moon"], "unknown world 'moon'"),
+        (["world-check", "--sensors", "sonar"], "unknown sensor definition 'sonar'"),
+        (["simulate", "--condition", "kp", "--world", "moon"], "invalid choice: 'moon'"),
+    ],
+)
+def test_setup_names_are_checked_with_a_clear_error(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert message in fail(argv, capsys)

@@ -44,7 +44,7 @@ def test_edit_a_network_run_it_fast_to_completion_and_read_the_results(
 
 
 def test_a_realtime_run_rewarded_over_http_shows_it_in_ltm(api: httpx.Client) -> None:
-    r = api.post("/api/runs", json={"condition": "delayed", "mode": "realtime", "hz": 50})
+    r = api.post("/api/runs", json={"condition": "kp", "mode": "realtime", "hz": 50})
     run_id = r.json()["id"]
     api.post(f"/api/runs/{run_id}/start")
     wait_status(api, run_id, "running")

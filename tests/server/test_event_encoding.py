@@ -38,3 +38,19 @@ def test_a_tick_event_carries_the_competition_only_with_a_selector(catalog: Cata
     assert "competition" not in plain[1]
     assert rich[0] == "tick" and len(rich[1]["competition"]["values"]) <= COMPETITORS
     assert rich[1]["stimuli"] == [catalog.stimuli[i].name for i in snapshot.stimuli]
+
+
+def test_a_tick_event_says_what_made_its_behaviour_run(catalog: Catalog) -> None:
+    sim = Simulation(get_condition("expert"), seed=3, catalog=catalog)
+    sim.reset()
+    snapshots = [sim.tick().snapshot for _ in range(60)]
+    encoded = [encode(TickPublished(1, s), catalog) for s in snapshots]
+    for snap, e in zip(snapshots, encoded, strict=True):
+        assert e is not None
+        data = e[1]
+        assert data["origin"] == snap.origin
+        expected = catalog.stimuli[snap.released_by].name if snap.released_by >= 0 else None
+        assert data["released_by"] == expected
+    released = [e[1] for e in encoded if e is not None and e[1]["how"] == "released"]
+    assert released and all(d["released_by"] in d["stimuli"] for d in released)
+    assert {d["origin"] for d in released} <= {"innate", "designed", "expert", "dp"}

@@ -12,6 +12,7 @@ import httpx
 import pytest
 from apphelpers import client_for
 
+from core.brain.catalog import load_catalog
 from server.config import Settings
 
 pytestmark = pytest.mark.anyio
@@ -45,7 +46,9 @@ async def test_list_networks_shows_the_builtin_ones(client: httpx.AsyncClient) -
     r = await client.get(A)
     assert r.status_code == 200
     body = r.json()
-    assert body["count"] == 4 == len(body["data"])
+    shipped = load_catalog().knowledge  # innate, position, kp, signal, dp, expert, variants
+    assert body["count"] == len(shipped) == len(body["data"])
+    assert {n["name"] for n in body["data"]} == set(shipped)
     innate = next(n for n in body["data"] if n["name"] == "innate")
     assert innate["builtin"] is True and innate["version"] == 1
     assert innate["association_count"] == 4

@@ -13,7 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from server.cli import main
+from core.brain.catalog import sensor_definitions
+from core.setup import default_sensors
+from core.worlds import default_world, world_names
+from server import run_cli
+from server.cli import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -63,6 +67,24 @@ def test_run_fast_stores_the_run_and_runs_lists_it(
     assert main(["runs"]) == 0
     table = capsys.readouterr().out
     assert "finished" in table and "kp" in table
+
+
+def test_run_in_a_world_and_sensor_definition_and_runs_shows_them(
+    db_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    other = next(n for n in world_names() if n != default_world())
+    sensors = next(d for d in sensor_definitions() if d != default_sensors())
+    args = build_parser().parse_args(["run", "--condition", "kp", "--episodes", "1", "--quiet"])
+    # As `--world` and `--sensors` set them (the parser reads the names from core's lists).
+    args.world, args.sensors = other, sensors
+    assert run_cli.run(args, sys.stdout, sys.stderr) == 0
+    assert main(["run", "--condition", "kp", "--episodes", "1", "--quiet"]) == 0
+    first, second = runs_json(capsys)
+    assert (first["world"], first["sensors"]) == (other, sensors)
+    assert (second["world"], second["sensors"]) == (default_world(), default_sensors())
+    assert main(["runs"]) == 0
+    table = capsys.readouterr().out
+    assert other in table and sensors in table and default_world() in table
 
 
 def test_run_with_learning_parameters(db_url: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -19,10 +19,13 @@ from apphelpers import client_for, settings_for
 from fastapi import FastAPI
 from liveserver import free_port
 
+from core.brain.selection import ORIGINS
 from core.ports import RunStatus
+from core.worlds import default_world, load_world, world_names
 from server.main import create_app
 from server.viewer import Viewer
 from server.viewer.render import REWARD_NOTE
+from server.viewer.scene import static_scene, why
 from server.viewer.state import (
     ChangeRate,
     ClientsChanged,
@@ -149,7 +152,7 @@ async def test_panel_rewards_are_stored_and_credited_like_rewards_over_http(
     settings = settings_for(tmp_path, viser=True, viser_port=free_port())
     async with client_for(settings) as (client, app):
         viewer = viewer_of(app)
-        run_id = await start_run(client, condition="delayed", mode="realtime", hz=50, seed=1)
+        run_id = await start_run(client, condition="kp", mode="realtime", hz=50, seed=1)
         viewer.controller.post(ClientsChanged(1))
         viewer.controller.post(SelectRun(run_id))
         await until(lambda: viewer.controller.state.live is not None, what="the run selected")
@@ -248,3 +251,35 @@ async def test_replay_from_the_panel_draws_the_stored_poses(tmp_path: Path) -> N
             assert r.drawn.behaviour == row["behaviour"]
             assert list(r.drawn.stimuli) == row["stimuli"]
             assert tuple(r._robot.position)[:2] == pytest.approx((row["x"], row["y"]))
+
+
+async def test_each_run_is_drawn_in_its_own_world_live_and_replayed(tmp_path: Path) -> None:
+    other = next(n for n in world_names() if n != default_world())
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port())
+    async with client_for(settings) as (client, app):
+        viewer = viewer_of(app)
+        c, r = viewer.controller, viewer.renderer
+        stored = await start_run(client, condition="kp", episodes=1, seed=2, world=other)
+        await until(
+            lambda: app.state.srlab.engines.get(stored).status is RunStatus.FINISHED,
+            what="the run in the other world to finish",
+        )
+        await asyncio.sleep(0.2)  # its episode is committed a moment later
+        live = await start_run(client, condition="kp", mode="realtime", hz=50, seed=3)
+        c.post(ClientsChanged(1))
+        await until(lambda: r.drawn is not None and r.drawn.run_id == live, what="live ticks")
+        assert r.world == load_world(default_world()).config
+        assert r.drawn is not None and r.drawn.origin in ORIGINS
+        assert f"({why(r.drawn)})" in r._decision.content
+
+        c.post(SelectRun(stored))
+        c.post(SetMode("replay"))
+        await until(lambda: c.state.replay is not None, what="a replay")
+        preset = load_world(other).config
+        assert c.state.replay is not None and c.state.replay.world == preset
+        await until(lambda: r.world == preset, what="the other world drawn")
+        assert r.static == static_scene(preset)
+        await until(lambda: f"world {other}" in r._header.content, what="the run's world named")
+        await until(lambda: r.drawn is not None and r.drawn.run_id == stored, what="a replay")
+        assert r.drawn is not None and r.drawn.origin in ORIGINS
+        await client.post(f"/api/runs/{live}/stop")

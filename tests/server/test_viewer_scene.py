@@ -28,6 +28,7 @@ from server.viewer.scene import (
     sonar_ranges,
     static_scene,
     trail_of,
+    why,
     yaw_quaternion,
 )
 
@@ -168,6 +169,25 @@ def test_the_panel_names_stimuli_behaviour_episode_tick_and_successes() -> None:
     assert "Replay" not in text
     assert "Replay" in decision_markdown(v, "replay", "")
     assert "No tick" in decision_markdown(None, "live", "")
+
+
+@pytest.mark.parametrize(
+    ("how", "origin", "released_by", "text"),
+    [
+        ("released", "kp", "Obstacle_M_M", "released by `Obstacle_M_M` (kp)"),
+        ("continued", "designed", "Corner", "continued, released by `Corner` (designed)"),
+        ("default", "default", "Obstacle_L_M", "default, answering `Obstacle_L_M`"),
+        ("default", "default", None, "default"),
+        ("explored", "explored", None, "explored"),
+        ("released", "", None, "released"),  # a trace stored before traces kept origins
+    ],
+)
+def test_the_panel_says_what_made_the_behaviour_run(
+    how: str, origin: str, released_by: str | None, text: str
+) -> None:
+    v = view(behaviour="leftturn30", how=how, origin=origin, released_by=released_by)
+    assert why(v) == text
+    assert f"Behaviour: `leftturn30` ({text})" in decision_markdown(v, "live", "")
 
 
 def test_walls_stand_just_outside_the_corridor_they_bound() -> None:

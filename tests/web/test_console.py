@@ -210,3 +210,41 @@ def test_new_associations_appear_in_the_feed_as_they_pass_the_threshold(
     # In the heatmap the promoted pair is outlined as part of the run's network.
     s, b = next(iter(sorted(learned)))
     expect(page.locator(cell(page, s, b, "#heatmap"))).to_have_class(re.compile(r"\bin-net\b"))
+
+
+def test_the_live_state_says_what_made_the_behaviour_run_and_tallies_the_origins(
+    page: Page, server: LiveServer
+) -> None:
+    worlds = server.client.get("/api/worlds").json()
+    other = next(w["name"] for w in worlds if not w["default"])
+    definitions = server.client.get("/api/sensor-definitions").json()
+    sensors = next(d["name"] for d in definitions if not d["default"])
+    open_view(page, server, "console")
+    page.click("#new-run > summary")
+    form = page.locator("#new-run-form")
+    form.locator("select[name=condition]").select_option("kp")
+    form.locator("select[name=mode]").select_option("realtime")
+    form.locator("input[name=hz]").fill("20")
+    form.locator("select[name=world]").select_option(other)
+    form.locator("select[name=sensors]").select_option(sensors)
+    form.locator("button[type=submit]").click()
+    expect(page.locator("#run-status")).to_have_text("running")
+    run = server.client.get("/api/runs").json()["data"][-1]
+    assert (run["world"], run["sensors"]) == (other, sensors)
+    try:
+        expect(page.locator("#run-select")).to_contain_text(f"{other}/{sensors}")
+        # "leftturn30 · released by Obstacle_M_M (kp)": the stimulus and the source.
+        how = page.locator("#st-behaviour .how")
+        expect(how).to_have_text(
+            re.compile(r"^· released by \w+ \((innate|designed|dp|learned|kp|expert)\)"),
+            timeout=30_000,
+        )
+        # The run's ticks by origin, from its live state: "designed 70% · default 20% ...".
+        origins = page.locator("#st-origins")
+        expect(origins).to_have_text(re.compile(r"^Ticks by origin: [a-z]+ (<1|\d+)%"))
+        counts = server.client.get(f"/api/runs/{run['id']}").json()["live"]["ticks_by_origin"]
+        most = max(counts, key=counts.get)
+        expect(origins).to_contain_text(most)
+    finally:
+        server.client.post(f"/api/runs/{run['id']}/stop")
+    wait_status(server.client, run["id"], "stopped")

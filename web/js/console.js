@@ -57,6 +57,7 @@ export async function show(id, health) {
     const list = await attempt(() => get("/networks"));
     if (list) fillNetworks(list.data);
   }
+  if ($("#new-run-form").world.options.length < 2) await fillSetup();
   await loadRuns();
   const wanted = id ? Number(id) : state.runs.length ? state.runs[state.runs.length - 1].id : null;
   await select(wanted);
@@ -84,9 +85,47 @@ function fillNetworks(networks) {
   select.value = networks.some((n) => n.name === chosen) ? chosen : "";
 }
 
+/** The world presets and sensor definitions a new run may name. */
+async function fillSetup() {
+  const [worlds, definitions] = await Promise.all([
+    attempt(() => get("/worlds")), attempt(() => get("/sensor-definitions"))]);
+  const form = $("#new-run-form");
+  const options = (items) => items.map((x) => el("option", {
+    value: x.name, text: x.default ? `${x.name} (default)` : x.name, title: x.description }));
+  if (worlds) form.world.replaceChildren(el("option", { value: "", text: "the default" }), ...options(worlds));
+  if (definitions) form.sensors.replaceChildren(el("option", { value: "", text: "the default" }), ...options(definitions));
+}
+
 function label(r) {
   const mode = r.mode === "realtime" ? `realtime ${r.hz} Hz` : "fast";
-  return `#${r.id} · ${r.condition}${r.network ? ` (${r.network})` : ""} · ${mode} · ${r.status} · ${r.successes}/${r.episodes_done} ok`;
+  const setup = r.world || r.sensors ? ` · ${r.world || "?"}/${r.sensors || "?"}` : "";
+  return `#${r.id} · ${r.condition}${r.network ? ` (${r.network})` : ""}${setup} · ${mode} · ${r.status} · ${r.successes}/${r.episodes_done} ok`;
+}
+
+/** How a tick's behaviour came to run: "released by Corner (designed)", "default". */
+function why(t) {
+  const parts = t.how === "released" && t.released_by ? [] : [t.how];
+  if (t.released_by) {
+    const verb = t.how === "released" || t.how === "continued" ? "released by" : "answering";
+    parts.push(`${verb} ${t.released_by}`);
+  }
+  let text = parts.join(", ");
+  if (t.origin && t.origin !== t.how) text += ` (${t.origin})`;
+  return text;
+}
+
+/** A run's ticks by origin, most first: "designed 70% · kp 12% · default 10%". */
+function origins(counts) {
+  const total = Object.values(counts || {}).reduce((a, b) => a + b, 0);
+  if (!total) return "";
+  return Object.entries(counts)
+    .filter(([, n]) => n > 0)
+    .sort((a, b) => b[1] - a[1])
+    .map(([origin, n]) => {
+      const pct = (100 * n) / total;
+      return `${origin} ${pct < 1 ? "<1" : Math.round(pct)}%`;
+    })
+    .join(" · ");
 }
 
 async function loadRuns() {
@@ -159,6 +198,8 @@ function showRun(run) {
     link.setAttribute("aria-disabled", "true");
     link.title = state.viserPort ? "Pick a run first" : "The 3D view is not running on this service";
   }
+  const tally = run && run.live ? origins(run.live.ticks_by_origin) : "";
+  $("#st-origins").textContent = tally ? `Ticks by origin: ${tally}` : "";
   $("#st-success").textContent = run ? run.successes : "—";
   $("#st-failure").textContent = run ? run.episodes_done - run.successes : "—";
   if (!state.tick) {
@@ -243,7 +284,8 @@ function onTick(t) {
   const made = t.behaviour && !state.known.has(t.behaviour);
   const b = $("#st-behaviour");
   b.className = `behaviour${made ? " kp-made" : ""}`;
-  b.replaceChildren(t.behaviour || "—", el("span", { class: "how", text: made ? `${t.how} · KP-made` : t.how }));
+  const how = `· ${why(t)}`;
+  b.replaceChildren(t.behaviour || "—", el("span", { class: "how", text: made ? `${how} · KP-made` : how }));
   drawCompetition(t.competition, t.behaviour);
 }
 
@@ -443,6 +485,8 @@ async function onCreate(event) {
     seed: number(form.seed) ?? 0,
     episodes: number(form.episodes) ?? null,
     network: form.network.value || null,
+    world: form.world.value || null,
+    sensors: form.sensors.value || null,
     params,
   };
   const run = await attempt(() => post("/runs", body), "Creating the run");

@@ -1,11 +1,22 @@
-"""What the robot knows by name: stimuli, behaviours, logical sensors."""
+"""What the robot knows by name: stimuli, behaviours, logical sensors; and the worlds."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from typing import Any
 
+from fastapi import APIRouter
+from pydantic import JsonValue
+
+from core.brain.catalog import sensor_definitions
+from core.worlds import default_world, load_world, world_names
 from server.api.deps import StateDep
-from server.schemas import BehaviourPublic, SensorPublic, StimulusPublic
+from server.schemas import (
+    BehaviourPublic,
+    SensorDefinitionPublic,
+    SensorPublic,
+    StimulusPublic,
+    WorldPublic,
+)
 
 router = APIRouter(tags=["catalog"])
 
@@ -41,7 +52,7 @@ def list_behaviours(state: StateDep) -> list[BehaviourPublic]:
 
 @router.get("/sensors")
 def list_sensors(state: StateDep) -> list[SensorPublic]:
-    """Every logical sensor as declared in data."""
+    """Every logical sensor as declared in data, under the default sensor definition."""
     return [
         SensorPublic(
             name=s.name,
@@ -52,6 +63,54 @@ def list_sensors(state: StateDep) -> list[SensorPublic]:
             priority=s.priority,
             weight=s.weight,
             stimuli=list(s.stimuli),
+            definition=s.definition,
         )
         for s in state.catalog.sensors
     ]
+
+
+@router.get("/sensor-definitions")
+def list_sensor_definitions() -> list[SensorDefinitionPublic]:
+    """The sensor definitions a run may name (`sensors`), the default first.
+
+    A definition is one meaning of the rules of the sensors that have several: the same
+    stimuli, other conditions for them.
+    """
+    definitions = sensor_definitions()
+    default = next(iter(definitions), None)
+    return [
+        SensorDefinitionPublic(name=name, description=text, default=name == default)
+        for name, text in definitions.items()
+    ]
+
+
+def _json(value: Any) -> JsonValue:
+    """A data file's value as JSON (TOML's tables and arrays are dicts and lists)."""
+    if isinstance(value, dict):
+        return {str(k): _json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json(v) for v in value]
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    return str(value)
+
+
+@router.get("/worlds")
+def list_worlds() -> list[WorldPublic]:
+    """The world presets a run may name (`world`), the default first."""
+    default = default_world()
+    out = []
+    for name in world_names():
+        preset = load_world(name)
+        overrides = _json(dict(preset.overrides))
+        assert isinstance(overrides, dict)
+        out.append(
+            WorldPublic(
+                name=preset.name,
+                description=preset.description,
+                reasons=preset.reasons,
+                overrides=overrides,
+                default=name == default,
+            )
+        )
+    return out

@@ -54,7 +54,9 @@ def encode(
 ) -> tuple[str, dict[str, Any]] | None:
     """An engine event as an SSE event name and JSON payload (None: not streamed).
 
-    With `selector`, tick events carry the competition among released behaviours.
+    With `selector`, tick events carry the competition among released behaviours. A tick
+    says what made its behaviour run (`origin`: the releasing association's source,
+    explored, default or commanded) and the stimulus it answered (`released_by`, or null).
     """
     s = [x.name for x in catalog.stimuli]
 
@@ -72,7 +74,9 @@ def encode(
             "episode": snap.episode, "tick": snap.tick, "episode_tick": snap.episode_tick,
             "x": snap.x, "y": snap.y, "heading_rad": snap.heading_rad,
             "stimuli": [s[i] for i in snap.stimuli], "behaviour": b(snap.behaviour),
-            "how": snap.how.value, "lamp": snap.lamp.name.lower(), "progress_m": snap.progress_m,
+            "how": snap.how.value, "origin": snap.origin,
+            "released_by": s[snap.released_by] if 0 <= snap.released_by < len(s) else None,
+            "lamp": snap.lamp.name.lower(), "progress_m": snap.progress_m,
         }  # fmt: skip
     if isinstance(event, RewardApplied):
         return "reward", {
@@ -126,8 +130,7 @@ async def stream_events(
     if engine is None:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
     sub = engine.subscribe(maxsize=512, tick_hz=tick_hz)
-    catalog = engine.sim.brain.catalog
-    selector = engine.sim.brain.selector
+    brain = engine.sim.brain
 
     async def events() -> AsyncIterator[bytes]:
         try:
@@ -144,7 +147,8 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
-                encoded = encode(event, catalog, selector)
+                # The brain's catalogue of now: it grows when KP synthesises a behaviour.
+                encoded = encode(event, brain.catalog, brain.selector)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()

@@ -49,6 +49,7 @@ def _live_state(engine: Engine) -> LiveState:
         lateness_max_ms=_ms(max(stats.lateness_s, default=math.nan)),
         overruns=stats.overruns,
         reward_ack_p99_ms=_ms(pct(stats.reward_ack_s, 99)),
+        ticks_by_origin=dict(engine.sim.ticks_by_origin),
     )
 
 
@@ -70,6 +71,8 @@ def _public(
         hz=spec.hz,
         network=spec.network,
         params=params,
+        world=spec.world,
+        sensors=spec.sensors,
         status=status_value,
         error=error,
         episodes_done=totals.episodes,
@@ -107,7 +110,11 @@ async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
 async def create_run(
     body: RunCreate, store: StoreDep, engines: EnginesDep, networks: NetworksDep
 ) -> RunPublic:
-    """Create a run (status created); start it with POST /api/runs/{id}/start."""
+    """Create a run (status created); start it with POST /api/runs/{id}/start.
+
+    It runs in the world preset and sensor definition it names (GET /api/worlds, GET
+    /api/sensor-definitions), else the defaults; the run keeps their names.
+    """
     params = {k: v for k, v in body.params.model_dump().items() if v not in (None, False)}
     spec = RunSpec(
         condition=body.condition,
@@ -117,6 +124,8 @@ async def create_run(
         hz=body.hz,
         network=body.network,
         params=params,
+        world=body.world or "",
+        sensors=body.sensors or "",
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
     engine = await io(engines.create, spec, network)
@@ -245,7 +254,11 @@ def get_episode(
     store: StoreDep,
     state: StateDep,
 ) -> EpisodeDetail:
-    """One episode with its trace: pose, stimuli and behaviour every tick."""
+    """One episode with its trace: pose, stimuli and behaviour every tick.
+
+    Each row says what made the behaviour run (`origin`: the releasing association's
+    source, explored, default or commanded) and the stimulus it answered (`released_by`).
+    """
     found = next((e for e in store.episodes(run_id) if e.episode == episode), None)
     if found is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no episode {episode}")
@@ -257,8 +270,9 @@ def get_episode(
         TraceRowPublic(
             tick=r.tick, x=r.x, y=r.y, heading_rad=r.heading_rad,
             behaviour=names[r.behaviour] if 0 <= r.behaviour < len(names) else None,
-            how=r.how, lamp=r.lamp,
-            stimuli=[stimuli[i] for i in r.stimuli if i < len(stimuli)],
+            how=r.how, origin=r.origin,
+            released_by=stimuli[r.released_by] if 0 <= r.released_by < len(stimuli) else None,
+            lamp=r.lamp, stimuli=[stimuli[i] for i in r.stimuli if i < len(stimuli)],
         )
         for r in (unpack(found.trace) if found.trace else [])
     ]  # fmt: skip

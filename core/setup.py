@@ -1,0 +1,119 @@
+"""What a run is set in besides its condition: the world, the sensor definition, the signal.
+
+`Setup` names them; it turns a condition's knowledge-set names into the behaviour network
+the robot starts from under that setup, and the world preset into a `WorldConfig`. Every
+way of running a condition (headless, an experiment, the engine, the Gymnasium
+environment) builds its simulation through here, so they agree.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cache
+from typing import Literal
+
+from core.brain.catalog import AssociationSpec, Catalog, load_catalog, sensor_definitions
+from core.brain.network import BehaviourNetwork
+from core.conditions import Condition
+from core.errors import UnknownNameError
+from core.sim.world import WorldConfig
+from core.worlds import default_world, load_world
+
+SignalMode = Literal["learned", "given"]
+SIGNAL_MODES: tuple[SignalMode, ...] = ("learned", "given")
+SIGNAL_SET = "signal"
+"""The knowledge set of the signal's correct responses (`--signal given`)."""
+SIGNAL_SENSOR = "signal"
+
+
+def default_sensors() -> str:
+    """The sensor definition used when none is named."""
+    return next(iter(sensor_definitions()))
+
+
+@cache
+def shared_catalog(sensors: str) -> Catalog:
+    """The shipped catalogue under a sensor definition, loaded once per process.
+
+    Never modify it: a brain that synthesises behaviours works on its own copy.
+    """
+    return load_catalog(sensors=sensors)
+
+
+@dataclass(frozen=True, slots=True)
+class Setup:
+    """The world, the sensor definition and the signal mode a condition runs in.
+
+    Attributes:
+        world: a world preset's name ("" for the default).
+        sensors: a sensor definition's name ("" for the default).
+        signal: ``learned``, as the condition has it, or ``given``: the signal's correct
+            responses added (locked) and the signal taken out of what is learned, so that
+            success measures the obstacle alone.
+    """
+
+    world: str = ""
+    sensors: str = ""
+    signal: SignalMode = "learned"
+
+    def __post_init__(self) -> None:
+        if self.signal not in SIGNAL_MODES:
+            raise UnknownNameError(
+                f"unknown signal mode {self.signal!r} (known: {', '.join(SIGNAL_MODES)})"
+            )
+        load_world(self.world or None)  # an unknown name fails here, with the known ones
+        if self.sensors and self.sensors not in sensor_definitions():
+            known = ", ".join(sensor_definitions())
+            raise UnknownNameError(f"unknown sensor definition {self.sensors!r} (known: {known})")
+
+    @property
+    def world_name(self) -> str:
+        """The world preset's name, the default's when none was given."""
+        return self.world or default_world()
+
+    @property
+    def sensors_name(self) -> str:
+        """The sensor definition's name, the default's when none was given."""
+        return self.sensors or default_sensors()
+
+    def resolved(self) -> Setup:
+        """The same setup with every default named."""
+        return replace(self, world=self.world_name, sensors=self.sensors_name)
+
+    def catalog(self) -> Catalog:
+        """The shipped catalogue under this setup's sensor definition (shared, read-only)."""
+        return shared_catalog(self.sensors_name)
+
+    def world_config(self) -> WorldConfig:
+        """The world preset's configuration."""
+        return load_world(self.world_name).config
+
+    def condition(self, condition: Condition) -> Condition:
+        """`condition` as it runs in this setup."""
+        if self.signal == "given":
+            return replace(
+                condition,
+                extra_networks=(*condition.extra_networks, SIGNAL_SET),
+                learnable_sensors=tuple(
+                    s for s in condition.learnable_sensors if s != SIGNAL_SENSOR
+                ),
+            )
+        return condition
+
+
+def network_specs(catalog: Catalog, condition: Condition) -> tuple[AssociationSpec, ...]:
+    """The associations a condition's robot starts with, under the catalogue's definition.
+
+    Its knowledge set (the variant written for the catalogue's sensor definition, if there
+    is one), then the extra sets it names; a later set's pair replaces an earlier one's.
+    """
+    merged: dict[tuple[str, str], AssociationSpec] = {}
+    for name in (condition.network, *condition.extra_networks):
+        for a in catalog.knowledge_set(catalog.network_name(name)).associations:
+            merged[(a.stimulus, a.behaviour)] = a
+    return tuple(merged.values())
+
+
+def condition_network(catalog: Catalog, condition: Condition) -> BehaviourNetwork:
+    """The behaviour network a condition's robot starts with (see `network_specs`)."""
+    return BehaviourNetwork.from_specs(catalog, network_specs(catalog, condition))

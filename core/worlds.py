@@ -1,0 +1,138 @@
+"""World presets: named worlds as data (`core/data/worlds.toml`), every dimension a parameter.
+
+A preset is a set of overrides of `WorldConfig`'s defaults, nested as the dataclasses are
+(``[world.robot]``, ``[world.track.obstacle]`` ...), with the physical reasons for them
+written beside them. `srlab world-check --world NAME` measures whether a preset poses the
+paper's problem, on properties of the world alone (no learning).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+from core.brain.catalog import data_dir
+from core.errors import CatalogError, UnknownNameError
+from core.sim.world import WorldConfig
+
+
+@dataclass(frozen=True, slots=True)
+class WorldPreset:
+    """A named world.
+
+    Attributes:
+        name: its name on the command line and in the runs API.
+        description: one line for people.
+        reasons: why it differs from the defaults, in physical terms.
+        config: the world itself.
+        overrides: the settings that differ from `WorldConfig()`, as the data file gives them.
+    """
+
+    name: str
+    description: str
+    reasons: str
+    config: WorldConfig
+    overrides: Mapping[str, Any]
+
+
+def _apply(base: Any, overrides: Mapping[str, Any], where: str) -> Any:
+    """`base` (a dataclass) with `overrides` set, recursing into nested dataclasses."""
+    fields = {f.name: f for f in dataclasses.fields(base)}
+    changes: dict[str, Any] = {}
+    for key, value in overrides.items():
+        if key not in fields:
+            known = ", ".join(fields)
+            raise CatalogError(f"{where}: unknown setting {key!r} (known: {known})")
+        current = getattr(base, key)
+        if dataclasses.is_dataclass(current):
+            if not isinstance(value, Mapping):
+                raise CatalogError(f"{where}.{key}: a table of settings is needed")
+            changes[key] = _apply(current, value, f"{where}.{key}")
+            continue
+        changes[key] = _value(current, value, f"{where}.{key}")
+    try:
+        return dataclasses.replace(base, **changes)
+    except (TypeError, ValueError) as e:
+        raise CatalogError(f"{where}: {e}") from e
+
+
+def _value(current: Any, value: Any, where: str) -> Any:
+    """`value` in the type of the default it replaces."""
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise CatalogError(f"{where} must be true or false, got {value!r}")
+        return value
+    if isinstance(current, int | float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CatalogError(f"{where} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise CatalogError(f"{where} must be finite, got {value!r}")
+        if isinstance(current, int) and value != int(value):
+            raise CatalogError(f"{where} must be a whole number, got {value!r}")
+        return type(current)(value)
+    if isinstance(current, tuple):
+        if not isinstance(value, list):
+            raise CatalogError(f"{where} must be a list, got {value!r}")
+        if current and all(isinstance(x, int | float) for x in current):
+            return tuple(_value(float(current[0]), x, where) for x in value)
+        return tuple(value)
+    return value
+
+
+@cache
+def _raw() -> dict[str, dict[str, Any]]:
+    path = data_dir() / "worlds.toml"
+    try:
+        with path.open("rb") as f:
+            raw = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise CatalogError(f"{path}: {e}") from e
+    out: dict[str, dict[str, Any]] = {}
+    for i, w in enumerate(raw.get("world", [])):
+        name = w.get("name")
+        if not isinstance(name, str) or not name:
+            raise CatalogError(f"{path}: world #{i} needs a name")
+        if name in out:
+            raise CatalogError(f"{path}: world {name!r} is defined twice")
+        out[name] = w
+    if raw.get("default") not in out:
+        raise CatalogError(f"{path}: 'default' must name one of the worlds")
+    out[""] = {"name": raw["default"]}
+    return out
+
+
+def world_names() -> tuple[str, ...]:
+    """The presets' names, the default first."""
+    raw = _raw()
+    default = raw[""]["name"]
+    return (default, *(n for n in raw if n and n != default))
+
+
+def default_world() -> str:
+    """The preset a run uses when none is named."""
+    return str(_raw()[""]["name"])
+
+
+@cache
+def load_world(name: str | None = None) -> WorldPreset:
+    """The preset called `name` (None: the default)."""
+    raw = _raw()
+    name = name or default_world()
+    spec = raw.get(name) if name else None
+    if spec is None:
+        known = ", ".join(world_names())
+        raise UnknownNameError(f"unknown world {name!r} (known: {known})")
+    overrides = {k: v for k, v in spec.items() if k not in ("name", "description", "reasons")}
+    config = _apply(WorldConfig(), overrides, f"world {name!r}")
+    return WorldPreset(
+        name,
+        str(spec.get("description", "")),
+        str(spec.get("reasons", "")).strip(),
+        config,
+        overrides,
+    )
