@@ -62,8 +62,9 @@ class TaskResult:
     error: str | None = None
     ticks_by_origin: dict[str, int] = field(default_factory=dict)
     """Ticks by what made their behaviour run (see `core.runner.RunSummary`)."""
-    camera_met: dict[str, tuple[int, int]] = field(default_factory=dict)
-    """Per camera obstacle stimulus met: (ticks it was active, encounters)."""
+    camera_met: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)
+    """Per camera obstacle stimulus met: (ticks it was active, encounters, episodes it was
+    met in, successes among those episodes)."""
 
     @property
     def ok(self) -> bool:
@@ -125,7 +126,18 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
             world_config=setup.world_config(),
             brain_config=brain_config,
         )
-        summary = run(condition, task.seed, task.episodes, simulation=sim)
+        camera = [st.id for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
+        met_in = dict.fromkeys(camera, 0)
+        won_in = dict.fromkeys(camera, 0)
+
+        def tally(e: EpisodeSummary) -> None:
+            won = e.outcome is Outcome.SUCCESS
+            for s in camera:
+                if s in sim.met_this_episode:
+                    met_in[s] += 1
+                    won_in[s] += won
+
+        summary = run(condition, task.seed, task.episodes, simulation=sim, on_episode=tally)
         names = [b.name for b in sim.brain.catalog.behaviours]
         rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
         designed = (
@@ -142,9 +154,14 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
             _camera_memory(catalog, designed, names),
             ticks_by_origin=summary.ticks_by_origin,
             camera_met={
-                st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id])
-                for st in catalog.stimuli
-                if st.sensor == CAMERA_SENSOR and sim.encounters[st.id]
+                catalog.stimuli[s].name: (
+                    sim.stimulus_ticks[s],
+                    sim.encounters[s],
+                    met_in[s],
+                    won_in[s],
+                )
+                for s in camera
+                if sim.encounters[s]
             },
         )
     except Exception as e:  # a failed task is reported with its seed, never lost silently
@@ -360,15 +377,22 @@ def _ticks_by_origin(results: Sequence[TaskResult]) -> dict[str, int]:
 
 
 def _camera_met(results: Sequence[TaskResult]) -> dict[str, dict[str, float]]:
-    """Per camera stimulus: mean ticks active and encounters per seed, seeds that met it."""
+    """What each camera stimulus met: its ticks and encounters per seed, and more.
+
+    Also the seeds that met it, the episodes it was met in (all seeds together) and the
+    success rate of those episodes.
+    """
     names = sorted({n for r in results for n in r.camera_met})
     out = {}
     for n in names:
-        met = [r.camera_met.get(n, (0, 0)) for r in results]
+        met = [r.camera_met.get(n, (0, 0, 0, 0)) for r in results]
+        episodes = sum(m[2] for m in met)
         out[n] = {
-            "ticks_per_seed": float(np.mean([t for t, _ in met])),
-            "encounters_per_seed": float(np.mean([e for _, e in met])),
-            "seeds": sum(1 for _, e in met if e > 0),
+            "ticks_per_seed": float(np.mean([m[0] for m in met])),
+            "encounters_per_seed": float(np.mean([m[1] for m in met])),
+            "seeds": sum(1 for m in met if m[1] > 0),
+            "episodes": episodes,
+            "success_when_met": sum(m[3] for m in met) / episodes if episodes else math.nan,
         }
     return out
 

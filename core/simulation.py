@@ -132,6 +132,8 @@ class Simulation:
         self.encounters = [0] * len(self.catalog.stimuli)
         """Times each stimulus became active (an encounter), by stimulus id."""
         self._was_active: frozenset[int] = frozenset()
+        self.met_this_episode: set[int] = set()
+        """The stimuli active at some tick of the current episode."""
 
     @property
     def snapshot(self) -> Snapshot:
@@ -152,6 +154,7 @@ class Simulation:
         self._done = False
         self._pending.clear()
         self._was_active = frozenset()
+        self.met_this_episode = set()
         self._channels = frame.channels.tolist()
         self._snapshot = Snapshot(
             self.episode,
@@ -211,6 +214,7 @@ class Simulation:
             counts[s] += 1
             if s not in was:
                 met[s] += 1
+                self.met_this_episode.add(s)
         self._was_active = frozenset(active)
         if self.trainer is not None:
             judged = self.trainer.judge(brain.last)

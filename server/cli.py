@@ -39,6 +39,7 @@ from server.sweep_cli import (
     setup_params,
     sweep_command,
 )
+from server.tables import print_table
 
 
 def _number(
@@ -330,7 +331,6 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
     if args.json:
         stdout.write(json.dumps({**summary_dict(result), **setup_params(setup)}) + "\n")
         return 0
-    console = Console(file=stdout)
     title = (
         f"srlab simulate: {condition.name}, seed {args.seed}, world {setup.world_name}, "
         f"sensors {setup.sensors_name}, signal {setup.signal}"
@@ -347,7 +347,7 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
     for origin, n in sorted(result.ticks_by_origin.items(), key=lambda kv: -kv[1]):
         table.add_row(f"  run by {origin}", f"{n:,} ({n / max(result.ticks, 1):.1%})")
     table.add_row("ticks/s", f"{result.ticks / elapsed:,.0f}" if elapsed > 0 else "-")
-    console.print(table)
+    console = print_table(stdout, table)
     if args.trace is not None:
         console.print(f"trace written to {args.trace}")
     return 0
@@ -393,7 +393,6 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         "ticks": sum(r.ticks for r in results),
     }
     paths = write_report(args.out, results, summary, catalog, params)
-    console = Console(file=stdout)
     table = Table(
         title=f"srlab experiment: {len(seeds)} seeds x {args.episodes} episodes, world "
         f"{setup.world_name}, sensors {setup.sensors_name}, signal {setup.signal}"
@@ -413,7 +412,7 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
             f"{s['collisions_per_episode']['mean']:.2f}",
             f"{s['violations_per_episode']['mean']:.2f}",
         )
-    console.print(table)
+    console = print_table(stdout, table)
     ticks = params["ticks"]
     console.print(f"{ticks:,} ticks in {elapsed:.1f} s on {where} ({ticks / elapsed:,.0f} ticks/s)")
     for p in paths:
@@ -488,7 +487,7 @@ def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> 
                         f"{r.prop.low:.0%}-{r.prop.high:.0%}",
                         "holds" if r.holds else "[red]does not hold[/]",
                     )
-                console.print(table)
+                print_table(stdout, table)
     if args.json:
         from server.report import clean_json
 

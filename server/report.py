@@ -158,7 +158,7 @@ def _paired_lines(summary: dict[str, Any]) -> list[str]:
     reference = "kp"
     if not summary.get(reference, {}).get("seeds"):
         return []
-    horizons = [("1-10", 10), ("all episodes", None)]
+    horizons = [("episodes 1-10", 10), ("all episodes", None)]
     diffs = {label: paired_against(summary, reference, h) for label, h in horizons}
     names = [n for n in summary if n in diffs["all episodes"]]
     if not names:
@@ -171,7 +171,7 @@ def _paired_lines(summary: dict[str, Any]) -> list[str]:
         "bootstrap interval, and the sign-flip test's two-sided p of no difference. "
         "`sonar` is kp with propagation off, so kp's row against it is what propagation adds.",
         "",
-        "| condition - kp | " + " | ".join(f"episodes {label}" for label, _ in horizons) + " |",
+        "| condition - kp | " + " | ".join(label for label, _ in horizons) + " |",
         "|---|" + "---|" * len(horizons),
     ]
     for n in names:
@@ -349,13 +349,20 @@ def summary_markdown(
             "## Camera obstacle stimuli met",
             "",
             "Encounters per seed (times the stimulus became active) over the whole run, mean "
-            "over seeds; a pair can only be learned for a stimulus the robot meets.",
+            "over seeds, and in brackets the success rate of the episodes it was met in, all "
+            "seeds together: a pair can only be learned for a stimulus the robot meets, and "
+            "from a delayed reward only where the lap succeeds.",
             "",
             "| stimulus | " + " | ".join(n for n, _ in met) + " |",
             "|---|" + "---|" * len(met),
         ]
         for stim in _camera_names(catalog):
-            cells = [f"{m[stim]['encounters_per_seed']:.1f}" if stim in m else "0" for _, m in met]
+            cells = [
+                f"{m[stim]['encounters_per_seed']:.1f} ({m[stim]['success_when_met']:.0%})"
+                if stim in m
+                else "0"
+                for _, m in met
+            ]
             lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
     if failed:
         lines += ["", "## Failed tasks", ""]
@@ -422,14 +429,18 @@ def world_check_markdown(report: dict[str, Any]) -> str:
         "per property, no learning anywhere; success is the mean over seeds with its 95% "
         "bootstrap interval.",
     ]
+    described: set[str] = set()
     for check in report["checks"]:
         lines += [
             "",
             f"## World `{check['world']}`, camera stimuli `{check['sensors']}`: "
             + ("every property holds" if check["holds"] else "not every property holds"),
             "",
-            check["reasons"].replace("\n", " "),
-            "",
+        ]
+        if check["world"] not in described:
+            described.add(check["world"])
+            lines += [check["reasons"].replace("\n", " "), ""]
+        lines += [
             "| | property | condition | success [95% CI] | bounds | holds |",
             "|---|---|---|---|---|---|",
         ]

@@ -18,6 +18,7 @@ from core.events import EpisodeEnded
 from core.ports import Mode, RunSpec, RunStatus, StoredRun
 from server.persistence import SqlAlchemyRunStore, database_url, make_engine, make_sessionmaker
 from server.persistence.migrate import downgrade, upgrade
+from server.tables import print_table
 
 
 def db(args: argparse.Namespace, stdout: IO[str]) -> int:
@@ -168,12 +169,7 @@ def runs(args: argparse.Namespace, stdout: IO[str]) -> int:
             str(r.totals.successes),
             f"{r.totals.ticks:,}",
         )
-    console = Console(file=stdout)
-    wide = console.measure(table, options=console.options.update_width(1000)).maximum
-    if not console.is_terminal and wide > console.width:
-        # A pipe or a file has no width of its own: whole names rather than Rich's 80 columns.
-        console = Console(file=stdout, width=wide)
-    console.print(table)
+    print_table(stdout, table)
     return 0
 
 

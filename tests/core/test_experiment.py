@@ -268,3 +268,20 @@ def test_parse_conditions_rejects_empty_input(text: str) -> None:
 def test_parse_conditions_rejects_unknown_names() -> None:
     with pytest.raises(UnknownNameError, match=r"'bogus'.*known: innate"):
         parse_conditions("kp,bogus")
+
+
+def test_paired_against_pairs_seeds_and_a_condition_against_itself_is_zero() -> None:
+    summary = {
+        "kp": {"seeds": 3, "seed_ids": [0, 1, 2], "success_by_seed": [[1, 0], [1, 1], [0, 0]]},
+        "same": {"seeds": 3, "seed_ids": [2, 0, 1], "success_by_seed": [[0, 0], [1, 0], [1, 1]]},
+        "better": {
+            "seeds": 3, "seed_ids": [0, 1, 2], "success_by_seed": [[1, 1], [1, 1], [1, 0]],
+        },
+    }  # fmt: skip
+    out = core.experiment.paired_against(summary, "kp")
+    assert out["same"]["mean"] == 0.0 and out["same"]["p"] == 1.0  # the same seeds, reordered
+    # better - kp per seed: +0.5, 0, +0.5.
+    assert out["better"]["mean"] == pytest.approx(1 / 3)
+    first = core.experiment.paired_against(summary, "kp", horizon=1)
+    assert first["better"]["mean"] == pytest.approx(1 / 3)  # 0, 0, +1 over episode 1
+    assert core.experiment.paired_against(summary, "nobody") == {}

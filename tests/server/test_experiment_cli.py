@@ -101,6 +101,23 @@ def test_experiment_summary_md(report: Path) -> None:
     assert "| innate |" in md
     assert "| kp |" in md
     assert "## Failed tasks" not in md
+    assert "World `soft-obstacle`, camera stimuli `path`, signal learned" in md
+    for section in ("## Paired by seed, against kp", "## What ran", "## Camera obstacle"):
+        assert section in md
+    met = md[md.index("## Camera obstacle") :]
+    assert "%)" in met  # encounters per seed (success rate of the episodes they were met in)
+
+
+def test_experiment_summary_counts_what_ran_and_what_was_met(report: Path) -> None:
+    doc = json.loads((report / "summary.json").read_text())
+    assert (doc["params"]["world"], doc["params"]["sensors"]) == ("soft-obstacle", "path")
+    innate, kp = doc["conditions"]["innate"], doc["conditions"]["kp"]
+    assert set(innate["ticks_by_origin"]) <= {"innate", "default"}
+    assert "designed" in kp["ticks_by_origin"]  # lane keeping runs on every tick it can
+    assert sum(kp["ticks_by_origin"].values()) == kp["ticks"]
+    for met in kp["camera_stimuli_met"].values():
+        assert met["episodes"] >= 1 and 0.0 <= met["success_when_met"] <= 1.0
+        assert met["encounters_per_seed"] > 0 and 1 <= met["seeds"] <= 2
 
 
 @pytest.mark.parametrize("name", ["learning_curves.png", "reliability.png"])
