@@ -5,6 +5,11 @@ keeps a prior knowledge set as its built-in behaviour (Table I by default); the 
 answers the stimuli of the learnable logical sensors that the prior leaves open, as the
 architecture's own exploration does. A step lasts from one such decision to the next (or
 to the episode's end), and the only reward is the delayed one of a successful lap.
+
+With ``defer=True`` the learner has one more action, "defer": let the built-in behaviour
+answer (what the robot would do without the learner), so that a learner starting from the
+prior's knowledge need not override it to find out what it is worth. ``render_mode=
+"rgb_array"`` gives a top-down frame of the track (`gymnasium.wrappers.RecordVideo` works).
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from core.brain.catalog import Catalog, load_catalog
 from core.brain.network import BehaviourNetwork
 from core.conditions import Condition
 from core.events import Cause, EpisodeEnded, Outcome
+from core.render import TopDown
 from core.runner import EpisodeSummary
 from core.sim.world import WorldConfig
 from core.simulation import NO_INPUTS, Simulation, TickInputs
@@ -41,7 +47,7 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
     learnable stimulus) are run inside `reset` and reported in ``info["skipped"]``.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}  # noqa: RUF012 - gymnasium's API
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 - gymnasium's API
 
     def __init__(
         self,
@@ -51,7 +57,13 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         world_config: WorldConfig | None = None,
         catalog: Catalog | None = None,
         extra_networks: tuple[str, ...] = (),
+        defer: bool = False,
+        render_mode: str | None = None,
     ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            modes = ", ".join(self.metadata["render_modes"])
+            raise ValueError(f"render_mode {render_mode!r} is not one of: {modes}")
+        self.render_mode = render_mode
         self.catalog = catalog or load_catalog()
         for name in extra_networks:
             self.catalog.knowledge_set(name)
@@ -69,9 +81,13 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         self.world_config = world_config
         self._learnable = frozenset(s.id for s in self.catalog.stimuli if s.sensor in learnable)
         self.observation_space = gym.spaces.MultiBinary(len(self.catalog.stimuli))
-        self.action_space = gym.spaces.Discrete(len(self.catalog.behaviours))
+        self.defer = defer
+        self.defer_action = len(self.catalog.behaviours) if defer else -1
+        """The "let the built-in behaviour answer" action (-1: there is none)."""
+        self.action_space = gym.spaces.Discrete(len(self.catalog.behaviours) + int(defer))
         self._sim: Simulation | None = None
         self._seed = 0
+        self._frame: TopDown | None = None
 
     def _new_simulation(self, seed: int) -> Simulation:
         condition = Condition(
@@ -102,12 +118,15 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         obs[self.simulation.upcoming_stimuli()] = 1
         return obs
 
-    def _learner_turn(self) -> bool:
+    def open_stimulus(self) -> int:
+        """The learnable stimulus the learner's next decision answers (-1: no decision)."""
         sim = self.simulation
         if sim.brain.motor.busy:
-            return False
-        active = sim.upcoming_stimuli()
-        return sim.brain.selector.open_stimulus(active, self._learnable) >= 0
+            return -1
+        return sim.brain.selector.open_stimulus(sim.upcoming_stimuli(), self._learnable)
+
+    def _learner_turn(self) -> bool:
+        return self.open_stimulus() >= 0
 
     def _advance(self, first: TickInputs) -> EpisodeEnded | None:
         """Tick until the learner's turn or the episode's end."""
@@ -145,23 +164,52 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
             if ended is None:
                 break
             skipped.append(_summary(ended))
-        return self._observe(), {"episode": sim.episode, "skipped": skipped}
+        info = {"episode_index": sim.episode, "skipped": skipped, "stimulus": self.open_stimulus()}
+        return self._observe(), info
 
-    def step(self, action: np.int64 | int) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
-        """Run `action` for the open stimulus, then the built-in behaviour until next time."""
-        if (
-            isinstance(action, bool)
-            or not isinstance(action, int | np.integer)
-            or not self.action_space.contains(np.int64(action))
-        ):
+    def step(
+        self, action: np.int64 | int | npt.NDArray[np.integer[Any]]
+    ) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
+        """Run `action` for the open stimulus, then the built-in behaviour until next time.
+
+        The action may be a Python or numpy integer, or a 0-d integer array (what
+        stable-baselines3's ``model.predict`` returns).
+        """
+        a = _action_index(action)
+        if a is None or not self.action_space.contains(np.int64(a)):
             raise ValueError(f"action {action!r} is not in {self.action_space}")
-        ended = self._advance(TickInputs(behaviour=int(action)))
+        behaviour = -1 if a == self.defer_action else a
+        ended = self._advance(TickInputs(behaviour=behaviour))
         obs = self._observe()
         if ended is None:
-            return obs, 0.0, False, False, {}
+            return obs, 0.0, False, False, {"stimulus": self.open_stimulus()}
         reward = self.success_reward if ended.outcome is Outcome.SUCCESS else 0.0
         truncated = ended.cause is Cause.TIMEOUT
         return obs, reward, not truncated, truncated, {"episode_summary": _summary(ended)}
+
+    def render(self) -> npt.NDArray[np.uint8] | None:
+        """A top-down RGB frame of the track, the robot, the obstacle and the lamp."""
+        if self.render_mode != "rgb_array":
+            return None
+        sim = self.simulation
+        if self._frame is None:
+            self._frame = TopDown(sim.world.geometry, sim.world.config)
+        snap = sim.snapshot
+        world = sim.world
+        return self._frame.draw(
+            (snap.x, snap.y, snap.heading_rad), world.layout.obstacle_center, snap.lamp
+        )
+
+
+def _action_index(action: object) -> int | None:
+    """An action as a Python int, or None when it is no integer at all."""
+    if isinstance(action, np.ndarray):
+        if action.shape != () or not np.issubdtype(action.dtype, np.integer):
+            return None
+        return int(action)
+    if isinstance(action, bool) or not isinstance(action, int | np.integer):
+        return None
+    return int(action)
 
 
 def _summary(e: EpisodeEnded) -> EpisodeSummary:

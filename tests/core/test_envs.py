@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -13,10 +16,11 @@ from core.runner import EpisodeSummary
 
 
 @pytest.mark.parametrize("prior", ["innate", "kp"])
-def test_check_env_passes(prior: str) -> None:
-    # The environment has no render modes, so there is nothing to render-check; without a
-    # spec Gymnasium would only warn that it cannot try them.
-    check_env(AmigoTrackEnv(prior=prior), skip_render_check=True)
+@pytest.mark.parametrize("defer", [False, True])
+def test_check_env_passes(prior: str, defer: bool) -> None:
+    env = gym.make(ENV_ID, prior=prior, defer=defer, render_mode="rgb_array")
+    check_env(env.unwrapped)
+    env.close()
 
 
 def test_check_env_passes_with_the_registered_spec() -> None:
@@ -32,7 +36,8 @@ def test_make_builds_the_environment_after_importing_core_envs() -> None:
     assert env.unwrapped.prior == "innate"
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    assert info["episode"] == 0
+    assert info["episode_index"] == 0
+    assert "episode" not in info  # RecordEpisodeStatistics' key
     env.close()
 
 
@@ -50,7 +55,7 @@ def test_reset_with_the_same_seed_gives_the_same_observation(seed: int) -> None:
     obs2, info2 = env.reset(seed=seed)
     np.testing.assert_array_equal(obs1, obs2)
     assert obs1.dtype == np.int8
-    assert info1["episode"] == info2["episode"]
+    assert info1["episode_index"] == info2["episode_index"]
     assert info1["skipped"] == info2["skipped"]
 
 
@@ -107,7 +112,8 @@ def test_reward_is_one_exactly_on_success() -> None:
         )
         assert env.observation_space.contains(obs)
         if not (terminated or truncated):
-            assert (reward, info) == (0.0, {})
+            assert reward == 0.0
+            assert set(info) == {"stimulus"} and info["stimulus"] >= 0
             continue
         endings.append((reward, terminated, truncated, info["episode_summary"]))
         obs, info = env.reset()
@@ -153,3 +159,107 @@ def test_the_learner_only_decides_for_stimuli_the_prior_leaves_open() -> None:
         obs, _, terminated, truncated, _ = env.step(int(env.action_space.sample()))
         if terminated or truncated:
             obs, _ = env.reset()
+
+
+@pytest.mark.parametrize(
+    "action", [np.int64(20), np.int32(3), np.array(20), np.array(0, dtype=np.uint8)]
+)
+def test_step_takes_numpy_integers_and_0d_arrays(action: object) -> None:
+    """stable-baselines3's `model.predict` returns `array(20)`."""
+    env = AmigoTrackEnv(prior="kp")
+    env.reset(seed=0)
+    env.step(action)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("action", [np.array([1]), np.array(2.0), 2.0, True, np.bool_(True), "3"])
+def test_step_refuses_what_is_not_one_integer(action: object) -> None:
+    env = AmigoTrackEnv(prior="kp")
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="not in"):
+        env.step(action)  # type: ignore[arg-type]
+
+
+def test_deferring_every_decision_is_the_built_in_behaviour_alone() -> None:
+    """The defer action lets the prior answer: always deferring lives exactly the episodes
+    of the condition without a learner."""
+    from core.conditions import Condition
+    from core.runner import run
+
+    env = AmigoTrackEnv(prior="kp", defer=True)
+    assert env.action_space == gym.spaces.Discrete(len(env.catalog.behaviours) + 1)
+    _, info = env.reset(seed=5)
+    episodes: list[EpisodeSummary] = list(info["skipped"])
+    while len(episodes) < 6:
+        _, _, terminated, truncated, info = env.step(env.defer_action)
+        if terminated or truncated:
+            episodes.append(info["episode_summary"])
+            _, info = env.reset()
+            episodes.extend(info["skipped"])
+    alone = run(Condition("alone", "the prior, no learner", network="kp"), 5, len(episodes))
+    assert [(e.outcome, e.cause, e.ticks) for e in episodes] == [
+        (e.outcome, e.cause, e.ticks) for e in alone.episodes
+    ]
+
+
+def test_rgb_array_frames_show_the_robot_where_it_is() -> None:
+    env = AmigoTrackEnv(prior="kp", render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame is not None and frame.dtype == np.uint8 and frame.ndim == 3
+    assert frame.shape[0] % 16 == 0 and frame.shape[1] % 16 == 0
+    snap = env.simulation.snapshot
+    top_down = env._frame
+    assert top_down is not None
+    # A point just behind the robot's centre (the heading line runs forward from it).
+    back = 0.08
+    col, row = top_down._px(
+        snap.x - back * math.cos(snap.heading_rad), snap.y - back * math.sin(snap.heading_rad)
+    )
+    assert tuple(frame[round(row), round(col)]) == (200, 30, 30)  # the robot's red
+    env.step(0)
+    later = env.render()
+    assert later is not None and not np.array_equal(later, frame)
+    assert AmigoTrackEnv(prior="kp").render() is None  # no render mode, no frame
+    with pytest.raises(ValueError, match="human"):
+        AmigoTrackEnv(render_mode="human")
+
+
+@pytest.mark.parametrize("mode", ["sync", "async"])
+def test_vector_environments_with_episode_statistics(mode: str) -> None:
+    """`make_vec` in both vector modes, with RecordEpisodeStatistics: no key collides."""
+    envs = gym.make_vec(
+        ENV_ID,
+        num_envs=2,
+        vectorization_mode=mode,
+        wrappers=[gym.wrappers.RecordEpisodeStatistics],
+        prior="kp",
+    )
+    try:
+        envs.reset(seed=3)
+        finished = 0
+        for _ in range(400):
+            *_, info = envs.step(envs.action_space.sample())
+            if "episode" in info:
+                done = info["_episode"]
+                finished += int(done.sum())
+                assert (info["episode"]["l"][done] >= 1).all()
+            if finished >= 2:
+                break
+        assert finished >= 2
+    finally:
+        envs.close()
+
+
+def test_record_video_writes_an_episode(tmp_path: Path) -> None:
+    folder = tmp_path / "videos"  # RecordVideo warns about a folder that exists already
+    env = gym.wrappers.RecordVideo(
+        gym.make(ENV_ID, prior="kp", render_mode="rgb_array"), str(folder), disable_logger=True
+    )
+    env.reset(seed=0)
+    for _ in range(200):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            break
+    env.close()  # type: ignore[no-untyped-call]  # gymnasium's RecordVideo.close is untyped
+    videos = list(folder.glob("*.mp4"))
+    assert videos and videos[0].stat().st_size > 1000
