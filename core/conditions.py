@@ -27,6 +27,9 @@ class Condition:
         agent: ``brain`` (the paper's architecture) or ``qlambda`` (the baseline learner).
         extra_networks: knowledge sets added on top of `network` (the signal's responses
             when they are given, see `core.setup.Setup`).
+        hybrid: for an outside learner (``agent`` other than ``brain``): it may defer to the
+            built-in behaviour, starts by deferring, and explores per encounter, so the
+            designed reflexes it starts from are kept until it has learned better.
     """
 
     name: str
@@ -40,6 +43,7 @@ class Condition:
     kp: bool = False
     agent: str = "brain"
     extra_networks: tuple[str, ...] = ()
+    hybrid: bool = False
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -115,6 +119,18 @@ CONDITIONS: dict[str, Condition] = {
             epsilon=0.1,
             success_reward=1.0,
             agent="qlambda",
+        ),
+        Condition(
+            "qlambda-hybrid",
+            "The designed reflexes kept (kp's design) and Q(lambda) learning only what no "
+            "low-level sensor covers: it may defer to the built-in behaviour, starts by "
+            "deferring, and explores per encounter.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            agent="qlambda",
+            hybrid=True,
         ),
         Condition(
             "expert",

@@ -2,28 +2,35 @@
 
 from __future__ import annotations
 
-import math
 import traceback
 from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
+import numpy.typing as npt
 
-from core.brain.catalog import Catalog
-from core.conditions import CONDITIONS, get_condition
+from core.analysis import (
+    CRITERION_RATE,
+    CRITERION_WINDOW,
+    episodes_to_criterion,
+    mean_ci,
+    paired_against,
+    summarise,
+    t_quantile_975,
+)
+from core.brain.catalog import Behaviour, Catalog, Stimulus
+from core.brain.network import BehaviourNetwork
+from core.conditions import Condition, get_condition
 from core.errors import UnknownNameError
-from core.events import Cause, Outcome
-from core.params import Params, configure, qlambda_config
-from core.qlambda import run_qlambda
+from core.events import Outcome
+from core.params import Params, configure, qlambda_config, tuned_params
+from core.qlambda import WatkinsQLambda, run_qlambda
 from core.runner import EpisodeSummary, run
 from core.setup import Setup
-from core.stats import paired_difference
 
-CRITERION_WINDOW = 10
-CRITERION_RATE = 0.8
 CAMERA_SENSOR = "camera_obstacle"
 DEFAULT_SETUP = Setup()
 
@@ -41,6 +48,8 @@ class Task:
     episodes: int
     params: Params = ()
     setup: Setup = DEFAULT_SETUP
+    eval_episodes: int = 0
+    """Episodes of frozen, held-out evaluation after training (0: none)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +74,14 @@ class TaskResult:
     camera_met: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)
     """Per camera obstacle stimulus met: (ticks it was active, encounters, episodes it was
     met in, successes among those episodes)."""
+    answers: tuple[tuple[str | None, ...], ...] = ()
+    """After each training episode, the behaviour the learner gives each camera obstacle
+    stimulus seen alone (catalogue order; None: no answer of its own)."""
+    evaluation: tuple[EpisodeSummary, ...] = ()
+    """The frozen evaluation's episodes on the held-out seed (see `core.evaluation`)."""
+    transfer: tuple[EpisodeSummary, ...] = ()
+    """The camera-only transfer test's episodes: frozen, the sonar's obstacle responses
+    removed."""
 
     @property
     def ok(self) -> bool:
@@ -104,68 +121,160 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
         catalog = catalog or setup.catalog()
         condition = setup.condition(get_condition(task.condition))
         if condition.agent == "qlambda":
-            from core.envs import AmigoTrackEnv
-
-            config = qlambda_config(condition, task.params)
-            env = AmigoTrackEnv(
-                prior=config.prior,
-                learnable=condition.learnable_sensors,
-                world_config=setup.world_config(),
-                catalog=catalog,
-                extra_networks=condition.extra_networks,
-            )
-            episodes, _, ticks = run_qlambda(task.seed, task.episodes, config, env=env)
-            return TaskResult(task, tuple(episodes), ticks)
-        from core.simulation import Simulation
-
-        condition, brain_config = configure(condition, task.params)
-        sim = Simulation(
-            condition,
-            task.seed,
-            catalog=catalog,
-            world_config=setup.world_config(),
-            brain_config=brain_config,
-        )
-        camera = [st.id for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
-        met_in = dict.fromkeys(camera, 0)
-        won_in = dict.fromkeys(camera, 0)
-
-        def tally(e: EpisodeSummary) -> None:
-            won = e.outcome is Outcome.SUCCESS
-            for s in camera:
-                if s in sim.met_this_episode:
-                    met_in[s] += 1
-                    won_in[s] += won
-
-        summary = run(condition, task.seed, task.episodes, simulation=sim, on_episode=tally)
-        names = [b.name for b in sim.brain.catalog.behaviours]
-        rltm = sim.brain.kp.rltm.items() if sim.brain.kp is not None else ()
-        designed = (
-            ((a.stimulus, a.behaviour), a.strength)
-            for a in sim.brain.network
-            if a.source not in ("learned", "kp")
-        )
-        return TaskResult(
-            task,
-            summary.episodes,
-            summary.ticks,
-            _camera_memory(catalog, sim.brain.ltm.items(), names),
-            _camera_memory(catalog, rltm, names),
-            _camera_memory(catalog, designed, names),
-            ticks_by_origin=summary.ticks_by_origin,
-            camera_met={
-                catalog.stimuli[s].name: (
-                    sim.stimulus_ticks[s],
-                    sim.encounters[s],
-                    met_in[s],
-                    won_in[s],
-                )
-                for s in camera
-                if sim.encounters[s]
-            },
-        )
+            return _run_qlambda_task(task, catalog, condition)
+        return _run_brain_task(task, catalog, condition)
     except Exception as e:  # a failed task is reported with its seed, never lost silently
         return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
+
+
+def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
+    from core.evaluation import evaluate, without_sonar
+    from core.simulation import Simulation
+
+    setup = task.setup
+    condition, brain_config = configure(condition, task.params)
+    world = setup.world_config()
+    sim = Simulation(
+        condition, task.seed, catalog=catalog, world_config=world, brain_config=brain_config
+    )
+    camera = [st.id for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
+    met_in = dict.fromkeys(camera, 0)
+    won_in = dict.fromkeys(camera, 0)
+    answers: list[tuple[str | None, ...]] = []
+
+    def after_episode(e: EpisodeSummary) -> None:
+        won = e.outcome is Outcome.SUCCESS
+        for s in camera:
+            if s in sim.met_this_episode:
+                met_in[s] += 1
+                won_in[s] += won
+        names = sim.brain.catalog.behaviours
+        answers.append(tuple(_name(names, sim.brain.answer(s)) for s in camera))
+
+    summary = run(condition, task.seed, task.episodes, simulation=sim, on_episode=after_episode)
+    brain = sim.brain
+    names = [b.name for b in brain.catalog.behaviours]
+    rltm = brain.kp.rltm.items() if brain.kp is not None else ()
+    designed = (
+        ((a.stimulus, a.behaviour), a.strength)
+        for a in brain.network
+        if a.source not in ("learned", "kp")
+    )
+    evaluation: tuple[EpisodeSummary, ...] = ()
+    transfer: tuple[EpisodeSummary, ...] = ()
+    if task.eval_episodes:
+
+        def held_out(network: BehaviourNetwork) -> tuple[EpisodeSummary, ...]:
+            return evaluate(
+                condition, brain.catalog, network, task.seed, task.eval_episodes,
+                world_config=world, brain_config=brain.config,
+            )  # fmt: skip
+
+        evaluation = held_out(brain.network)
+        transfer = held_out(without_sonar(brain.catalog, brain.network))
+    return TaskResult(
+        task,
+        summary.episodes,
+        summary.ticks,
+        _camera_memory(catalog, brain.ltm.items(), names),
+        _camera_memory(catalog, rltm, names),
+        _camera_memory(catalog, designed, names),
+        ticks_by_origin=summary.ticks_by_origin,
+        camera_met={
+            catalog.stimuli[s].name: (
+                sim.stimulus_ticks[s],
+                sim.encounters[s],
+                met_in[s],
+                won_in[s],
+            )
+            for s in camera
+            if sim.encounters[s]
+        },
+        answers=tuple(answers),
+        evaluation=evaluation,
+        transfer=transfer,
+    )
+
+
+def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
+    from core.envs import AmigoTrackEnv
+    from core.evaluation import eval_seed
+    from core.qlambda import answer, evaluate_qlambda
+
+    setup = task.setup
+    config = qlambda_config(condition, task.params)
+
+    def env_for(prior: str) -> AmigoTrackEnv:
+        return AmigoTrackEnv(
+            prior=prior,
+            learnable=condition.learnable_sensors,
+            world_config=setup.world_config(),
+            catalog=catalog,
+            extra_networks=condition.extra_networks,
+            defer=config.defer,
+        )
+
+    camera = [st for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
+    answers: list[tuple[str | None, ...]] = []
+    agent_ref: list[WatkinsQLambda] = []
+
+    def after_episode(_: EpisodeSummary) -> None:
+        if agent_ref:
+            agent = agent_ref[0]
+            answers.append(
+                tuple(
+                    _name(catalog.behaviours, answer(agent, _alone(catalog, st))) for st in camera
+                )
+            )
+
+    env = env_for(config.prior)
+    episodes, agent, ticks = run_qlambda(
+        task.seed, task.episodes, config, env=env, on_agent=agent_ref.append,
+        on_episode=after_episode,
+    )  # fmt: skip
+    evaluation: tuple[EpisodeSummary, ...] = ()
+    transfer: tuple[EpisodeSummary, ...] = ()
+    if task.eval_episodes:
+        seed = eval_seed(task.seed)
+        evaluation = tuple(evaluate_qlambda(agent, env_for(config.prior), seed, task.eval_episodes))
+        transfer = tuple(
+            evaluate_qlambda(agent, env_for(_without_sonar_set(config.prior)), seed,
+                             task.eval_episodes)
+        )  # fmt: skip
+    sim = env.simulation
+    return TaskResult(
+        task, tuple(episodes), ticks, answers=tuple(answers), evaluation=evaluation,
+        transfer=transfer, ticks_by_origin=dict(sim.ticks_by_origin),
+        camera_met={
+            st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id], 0, 0)
+            for st in camera
+            if sim.encounters[st.id]
+        },
+    )  # fmt: skip
+
+
+def _without_sonar_set(prior: str) -> str:
+    """The knowledge set a camera-only transfer test gives an outside learner's robot."""
+    return "position" if prior == "kp" else prior
+
+
+LANE_STIMULI = {"L": "Left", "M": "Middle", "R": "Right"}
+"""The position stimulus of each lane letter of a camera stimulus's name (Obstacle_M_R)."""
+
+
+def _alone(catalog: Catalog, stimulus: Stimulus) -> npt.NDArray[np.int8]:
+    """The observation of a camera stimulus seen alone, with its lane's position stimulus."""
+    obs = np.zeros(len(catalog.stimuli), dtype=np.int8)
+    obs[stimulus.id] = 1
+    parts = stimulus.name.split("_")
+    lane = LANE_STIMULI.get(parts[1]) if len(parts) == 3 else None
+    if lane is not None:
+        obs[catalog.stimulus(lane).id] = 1
+    return obs
+
+
+def _name(behaviours: Sequence[Behaviour], b: int) -> str | None:
+    return behaviours[b].name if 0 <= b < len(behaviours) else None
 
 
 TaskFunction = Callable[[Task], TaskResult]
@@ -277,8 +386,14 @@ def run_experiment(
     on_result: Callable[[TaskResult], None] | None = None,
     backend: Backend | None = None,
     setup: Setup | None = None,
+    eval_episodes: int = 0,
+    tuned: bool = False,
 ) -> list[TaskResult]:
     """Run every (condition, seed) task on `backend` (default: `jobs` local processes).
+
+    With `eval_episodes`, each task ends with a frozen, held-out evaluation of that many
+    episodes and the camera-only transfer test (`core.evaluation`). With `tuned`, each
+    condition runs with its tuned parameters (`core/data/tuned.toml`, `srlab tune`).
 
     Each task is a pure function of (condition, seed, episodes), so the results are the
     same whatever the backend and `jobs`; they are returned in (condition, seed) order.
@@ -292,172 +407,36 @@ def run_experiment(
     for c in conditions:
         get_condition(c)
     setup = (setup or Setup()).resolved()
-    tasks = [Task(c, s, episodes, setup=setup) for c in conditions for s in seeds]
+    if eval_episodes < 0:
+        raise ValueError("eval_episodes must be >= 0")
+    tasks = [
+        Task(
+            c, s, episodes, tuned_params(c) if tuned else (), setup=setup,
+            eval_episodes=eval_episodes,
+        )
+        for c in conditions
+        for s in seeds
+    ]  # fmt: skip
     return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
 
 
-# --- analysis -------------------------------------------------------------------------
-
-_T975 = (
-    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
-    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
-    2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
-)  # fmt: skip
-
-
-def t_quantile_975(df: int) -> float:
-    """Student's t 97.5% quantile for `df` degrees of freedom (1.96 beyond 30)."""
-    if df < 1:
-        return math.nan
-    return _T975[df - 1] if df <= len(_T975) else 1.96
-
-
-def mean_ci(values: Sequence[float]) -> dict[str, float]:
-    """Mean and the half-width of its 95% confidence interval (Student's t), over seeds."""
-    n = len(values)
-    if n == 0:
-        return {"mean": math.nan, "ci95": math.nan, "n": 0}
-    arr = np.asarray(values, dtype=np.float64)
-    mean = float(arr.mean())
-    if n == 1:
-        return {"mean": mean, "ci95": math.nan, "n": 1}
-    sd = float(arr.std(ddof=1))
-    return {"mean": mean, "ci95": t_quantile_975(n - 1) * sd / math.sqrt(n), "n": n}
-
-
-def episodes_to_criterion(
-    successes: Sequence[bool], window: int = CRITERION_WINDOW, rate: float = CRITERION_RATE
-) -> int | None:
-    """The first episode count after which the rolling success over `window` is >= `rate`."""
-    need = math.ceil(rate * window - 1e-9)
-    count = 0
-    for i, s in enumerate(successes):
-        count += s
-        if i >= window:
-            count -= successes[i - window]
-        if i + 1 >= window and count >= need:
-            return i + 1
-    return None
-
-
-def paired_against(
-    summary: dict[str, Any], reference: str, horizon: int | None = None
-) -> dict[str, dict[str, float]]:
-    """Each condition's success minus `reference`'s, paired by seed.
-
-    Over the first `horizon` episodes (None: all): the mean difference, its 95% bootstrap
-    interval and the sign-flip p, per condition.
-    """
-    ref = summary.get(reference, {})
-    if not ref.get("seeds"):
-        return {}
-    ref_by_seed = dict(zip(ref["seed_ids"], ref["success_by_seed"], strict=True))
-    out = {}
-    for name, s in summary.items():
-        if name == reference or not s.get("seeds"):
-            continue
-        mine = dict(zip(s["seed_ids"], s["success_by_seed"], strict=True))
-        seeds = [x for x in mine if x in ref_by_seed]
-        if len(seeds) < 2:
-            continue
-        a = [float(np.mean(mine[x][:horizon])) for x in seeds]
-        b = [float(np.mean(ref_by_seed[x][:horizon])) for x in seeds]
-        d = paired_difference(a, b)
-        out[name] = {**d.diff.as_dict(), "p": d.p}
-    return out
-
-
-def _ticks_by_origin(results: Sequence[TaskResult]) -> dict[str, int]:
-    """Ticks summed over seeds by what made their behaviour run, most first."""
-    total: dict[str, int] = {}
-    for r in results:
-        for origin, n in r.ticks_by_origin.items():
-            total[origin] = total.get(origin, 0) + n
-    return dict(sorted(total.items(), key=lambda kv: (-kv[1], kv[0])))
-
-
-def _camera_met(results: Sequence[TaskResult]) -> dict[str, dict[str, float]]:
-    """What each camera stimulus met: its ticks and encounters per seed, and more.
-
-    Also the seeds that met it, the episodes it was met in (all seeds together) and the
-    success rate of those episodes.
-    """
-    names = sorted({n for r in results for n in r.camera_met})
-    out = {}
-    for n in names:
-        met = [r.camera_met.get(n, (0, 0, 0, 0)) for r in results]
-        episodes = sum(m[2] for m in met)
-        out[n] = {
-            "ticks_per_seed": float(np.mean([m[0] for m in met])),
-            "encounters_per_seed": float(np.mean([m[1] for m in met])),
-            "seeds": sum(1 for m in met if m[1] > 0),
-            "episodes": episodes,
-            "success_when_met": sum(m[3] for m in met) / episodes if episodes else math.nan,
-        }
-    return out
-
-
-def summarise(results: Sequence[TaskResult], conditions: Sequence[str]) -> dict[str, Any]:
-    """Per condition, over seeds: the figures of the experiment's summary."""
-    out: dict[str, Any] = {}
-    for c in conditions:
-        rs = [r for r in results if r.task.condition == c and r.ok]
-        if not rs:
-            out[c] = {"seeds": 0}
-            continue
-        n_ep = min(len(r.episodes) for r in rs)
-        success = np.array([[e.outcome is Outcome.SUCCESS for e in r.episodes[:n_ep]] for r in rs])
-        last = min(CRITERION_WINDOW, n_ep)
-        crit = [episodes_to_criterion(list(row)) for row in success]
-        reached = sorted(x for x in crit if x is not None)
-
-        def per_episode(cause: Cause, rs: list[TaskResult] = rs) -> list[float]:
-            return [sum(e.cause is cause for e in r.episodes) / len(r.episodes) for r in rs]
-
-        collisions = [
-            a + b
-            for a, b in zip(
-                per_episode(Cause.WALL_COLLISION),
-                per_episode(Cause.OBSTACLE_COLLISION),
-                strict=True,
-            )
-        ]
-        memory = "rltm" if get_condition(c).kp else "ltm"
-
-        def reliability(r: TaskResult, key: str, memory: str = memory) -> float:
-            learned: dict[str, float] = getattr(r, memory)
-            return max(learned.get(key, 0.0), r.programmed.get(key, 0.0))
-
-        keys = sorted({k for r in rs for k in (*getattr(r, memory), *r.programmed)})
-        reliab = {k: mean_ci([reliability(r, k) for r in rs]) for k in keys}
-        out[c] = {
-            "description": CONDITIONS[c].description,
-            "seeds": len(rs),
-            "episodes": n_ep,
-            "success_rate": mean_ci(success.mean(axis=1).tolist()),
-            "success_last10": mean_ci(success[:, -last:].mean(axis=1).tolist()),
-            "success_curve": success.mean(axis=0).tolist(),
-            "success_by_seed": success.astype(int).tolist(),
-            "seed_ids": [r.task.seed for r in rs],
-            "success_curve_ci95": [
-                mean_ci(success[:, i].astype(float).tolist())["ci95"] for i in range(n_ep)
-            ],
-            "episodes_to_criterion": {
-                "median": float(np.median(reached)) if reached else None,
-                "reached": len(reached),
-                "never": len(crit) - len(reached),
-                "per_seed": crit,
-            },
-            "collisions_per_episode": mean_ci(collisions),
-            "obstacle_collisions_per_episode": mean_ci(per_episode(Cause.OBSTACLE_COLLISION)),
-            "wall_collisions_per_episode": mean_ci(per_episode(Cause.WALL_COLLISION)),
-            "violations_per_episode": mean_ci(per_episode(Cause.SIGNAL_VIOLATION)),
-            "timeouts_per_episode": mean_ci(per_episode(Cause.TIMEOUT)),
-            "camera_memory": memory if get_condition(c).agent == "brain" else None,
-            "learns_camera": get_condition(c).agent == "brain" and get_condition(c).learning,
-            "camera_reliability": reliab,
-            "ticks": sum(r.ticks for r in rs),
-            "ticks_by_origin": _ticks_by_origin(rs),
-            "camera_stimuli_met": _camera_met(rs),
-        }
-    return out
+__all__ = [
+    "CAMERA_SENSOR",
+    "CRITERION_RATE",
+    "CRITERION_WINDOW",
+    "WORKER_DIED",
+    "Backend",
+    "LocalBackend",
+    "Task",
+    "TaskFunction",
+    "TaskResult",
+    "episodes_to_criterion",
+    "mean_ci",
+    "paired_against",
+    "parse_conditions",
+    "run_experiment",
+    "run_task",
+    "run_tasks",
+    "summarise",
+    "t_quantile_975",
+]

@@ -9,13 +9,16 @@ Q(lambda) condition once instead of once per value.
 from __future__ import annotations
 
 import math
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal
+from functools import cache
+from typing import TYPE_CHECKING, Any, Literal
 
 from core.brain.brain import BrainConfig
-from core.conditions import Condition
-from core.errors import CoreError, UnknownNameError
+from core.brain.catalog import data_dir
+from core.conditions import Condition, get_condition
+from core.errors import CatalogError, CoreError, UnknownNameError
 
 if TYPE_CHECKING:
     from core.qlambda import QLambdaConfig
@@ -245,5 +248,33 @@ def qlambda_config(
         gamma=float(values.get("gamma", base.gamma)),
         lam=float(values.get("lambda", base.lam)),
         epsilon=float(values.get("epsilon", base.epsilon)),
-        prior=base.prior,
+        prior=condition.network,
+        defer=condition.hybrid,
+        per_encounter=condition.hybrid,
     )
+
+
+@cache
+def tuned() -> dict[str, Params]:
+    """The tuned parameters per condition, from `core/data/tuned.toml` (see `core.tune`).
+
+    Empty when nothing was tuned.
+    """
+    path = data_dir() / "tuned.toml"
+    if not path.is_file():
+        return {}
+    try:
+        with path.open("rb") as f:
+            raw: dict[str, Any] = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise CatalogError(f"{path}: {e}") from e
+    out = {}
+    for c, values in raw.items():
+        get_condition(c)
+        out[c] = normalise(values)
+    return out
+
+
+def tuned_params(condition: str) -> Params:
+    """The tuned parameters of `condition` (none when it was not tuned)."""
+    return tuned().get(condition, ())

@@ -30,6 +30,14 @@ class QLambdaConfig:
         epsilon: exploration rate of the epsilon-greedy behaviour policy.
         prior: the knowledge set the robot keeps as built-in behaviour (the KP condition's
             design by default, so Q(lambda) and KP start from the same knowledge).
+        defer: give the learner the environment's "defer" action (let the built-in
+            behaviour answer), preferred while nothing is learned (see `defer_prior`).
+        defer_prior: the initial value of "defer" in every state, above the 0 of every
+            other action: the learner starts by doing what the robot already does, and
+            overrides it only where it has learned better.
+        per_encounter: draw exploration once per encounter (a stimulus becoming the open
+            one), as the architecture does, and keep the choice while the same stimulus
+            stays open; otherwise at every decision.
     """
 
     alpha: float = 0.3
@@ -37,6 +45,9 @@ class QLambdaConfig:
     lam: float = 0.5
     epsilon: float = 0.1
     prior: str = "kp"
+    defer: bool = False
+    defer_prior: float = 1e-3
+    per_encounter: bool = False
 
     def __post_init__(self) -> None:
         for name in ("alpha", "gamma", "lam", "epsilon"):
@@ -47,20 +58,35 @@ class QLambdaConfig:
 class WatkinsQLambda:
     """Tabular Q over observations, Watkins' cut of traces after exploratory actions."""
 
-    def __init__(self, n_actions: int, config: QLambdaConfig, rng: np.random.Generator) -> None:
+    def __init__(
+        self,
+        n_actions: int,
+        config: QLambdaConfig,
+        rng: np.random.Generator,
+        defer_action: int = -1,
+    ) -> None:
         self.n_actions = n_actions
         self.config = config
+        self.defer_action = defer_action
         self.q: dict[bytes, np.ndarray[tuple[int], np.dtype[np.float64]]] = {}
         self._traces: dict[tuple[bytes, int], float] = {}
         self._rng = rng
+        self._encounter: tuple[int, int] = (-1, -1)
+        """(open stimulus, action) of the current encounter, for per-encounter exploration."""
 
     def values(self, state: bytes) -> np.ndarray[tuple[int], np.dtype[np.float64]]:
-        """Q(state, .), created at 0."""
+        """Q(state, .), created at 0 (the defer action at `defer_prior`)."""
         q = self.q.get(state)
         if q is None:
             q = np.zeros(self.n_actions)
+            if self.defer_action >= 0:
+                q[self.defer_action] = self.config.defer_prior
             self.q[state] = q
         return q
+
+    def peek(self, state: bytes) -> np.ndarray[tuple[int], np.dtype[np.float64]] | None:
+        """Q(state, .) if the state was ever met, without creating it."""
+        return self.q.get(state)
 
     def greedy(self, state: bytes) -> int:
         """An action of maximal value, ties broken at random."""
@@ -68,15 +94,30 @@ class WatkinsQLambda:
         best = np.flatnonzero(q == q.max())
         return int(best[0] if len(best) == 1 else self._rng.choice(best))
 
-    def act(self, state: bytes) -> int:
-        """The epsilon-greedy action."""
+    def act(self, state: bytes, stimulus: int = -1) -> int:
+        """The epsilon-greedy action for `state`, whose open stimulus is `stimulus`.
+
+        With `per_encounter`, exploration is drawn when a stimulus becomes the open one and
+        the explored action is kept while it stays open (greedy decisions stay greedy).
+        """
+        if self.config.per_encounter:
+            current, explored = self._encounter
+            if stimulus >= 0 and stimulus == current:
+                return explored if explored >= 0 else self.greedy(state)
+            if self._rng.random() < self.config.epsilon:
+                action = int(self._rng.integers(self.n_actions))
+                self._encounter = (stimulus, action)
+                return action
+            self._encounter = (stimulus, -1)
+            return self.greedy(state)
         if self._rng.random() < self.config.epsilon:
             return int(self._rng.integers(self.n_actions))
         return self.greedy(state)
 
     def start_episode(self) -> None:
-        """Clear the eligibility traces."""
+        """Clear the eligibility traces (and the current encounter)."""
         self._traces.clear()
+        self._encounter = (-1, -1)
 
     def update(self, s: bytes, a: int, reward: float, s2: bytes, a2: int, terminal: bool) -> None:
         """One Watkins Q(lambda) backup with replacing traces."""
@@ -110,6 +151,7 @@ def run_qlambda(
     *,
     on_episode: Callable[[EpisodeSummary], None] | None = None,
     env: AmigoTrackEnv | None = None,
+    on_agent: Callable[[WatkinsQLambda], None] | None = None,
 ) -> tuple[list[EpisodeSummary], WatkinsQLambda, int]:
     """Learn for `episodes` episodes of the track from `seed`.
 
@@ -119,12 +161,17 @@ def run_qlambda(
     if episodes < 1:
         raise ValueError("episodes must be >= 1")
     cfg = config or QLambdaConfig()
-    env = env or AmigoTrackEnv(prior=cfg.prior)
+    env = env or AmigoTrackEnv(prior=cfg.prior, defer=cfg.defer)
+    if env.defer != cfg.defer:
+        raise ValueError("the environment's defer action must match the config's")
     agent = WatkinsQLambda(
-        len(env.catalog.behaviours),
+        len(env.catalog.behaviours) + int(env.defer),
         cfg,
         np.random.default_rng(np.random.SeedSequence([seed, 0, 4])),
+        env.defer_action,
     )
+    if on_agent is not None:
+        on_agent(agent)  # before any episode, so `on_episode` can read what it learned
     done_episodes: list[EpisodeSummary] = []
 
     def record(e: EpisodeSummary) -> None:
@@ -141,11 +188,11 @@ def run_qlambda(
             break
         agent.start_episode()
         s = _key(obs)
-        a = agent.act(s)
+        a = agent.act(s, info["stimulus"])
         while True:
             obs, reward, terminated, truncated, info = env.step(a)
             s2 = _key(obs)
-            a2 = agent.act(s2)
+            a2 = agent.act(s2, info.get("stimulus", -1))
             agent.update(s, a, reward, s2, a2, terminated)
             s, a = s2, a2
             if terminated or truncated:
@@ -155,6 +202,52 @@ def run_qlambda(
             break
         obs, info = env.reset()
     return done_episodes, agent, env.simulation.tick_count
+
+
+def answer(agent: WatkinsQLambda, observation: Observation) -> int:
+    """The behaviour the learned policy gives for `observation` (-1: none of its own).
+
+    None when the state was never met (no learned value) or when the greedy action is to
+    defer to the built-in behaviour.
+    """
+    q = agent.peek(_key(observation))
+    if q is None:
+        return -1
+    best = int(np.argmax(q))
+    if best == agent.defer_action or np.all(q == q[0]):
+        return -1
+    return best
+
+
+def evaluate_qlambda(
+    agent: WatkinsQLambda, env: AmigoTrackEnv, seed: int, episodes: int
+) -> list[EpisodeSummary]:
+    """Run the greedy policy frozen (no exploration, no updates) in `env`.
+
+    `episodes` episodes of seed `seed`. A state never met takes the defer action, or the
+    first action (goforward1) when the learner has none, deterministically.
+    """
+    out: list[EpisodeSummary] = []
+    if episodes < 1:
+        return out
+    obs, info = env.reset(seed=seed)
+    while True:
+        out.extend(info["skipped"])
+        if len(out) >= episodes:
+            return out[:episodes]
+        while True:
+            q = agent.peek(_key(obs))
+            if q is None:
+                a = agent.defer_action if agent.defer_action >= 0 else 0
+            else:
+                a = int(np.argmax(q))
+            obs, _, terminated, truncated, info = env.step(a)
+            if terminated or truncated:
+                out.append(info["episode_summary"])
+                break
+        if len(out) >= episodes:
+            return out[:episodes]
+        obs, info = env.reset()
 
 
 def _sweep_task(args: tuple[QLambdaConfig, int, int]) -> tuple[int, int, list[bool]]:

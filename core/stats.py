@@ -9,7 +9,7 @@ cycles on the same seed.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +35,11 @@ class Estimate:
     def as_dict(self) -> dict[str, float | int]:
         """The estimate as JSON-ready numbers."""
         return {"mean": self.mean, "low": self.low, "high": self.high, "n": self.n}
+
+    @classmethod
+    def of(cls, d: Mapping[str, float]) -> Estimate:
+        """The estimate back from `as_dict`'s numbers (or `analysis.mean_ci`'s)."""
+        return cls(float(d["mean"]), float(d["low"]), float(d["high"]), int(d["n"]))
 
 
 def _rng(seed: int) -> np.random.Generator:

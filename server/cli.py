@@ -6,10 +6,10 @@ import argparse
 import json
 import math
 import os
-import shlex
 import sys
 import time
 from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import IO, Any
 
@@ -32,6 +32,7 @@ from server.sweep_cli import (
     add_setup_arguments,
     add_sweep_parser,
     add_task_arguments,
+    command_line,
     on_result_updater,
     open_backend,
     progress_display,
@@ -117,7 +118,67 @@ def build_parser() -> argparse.ArgumentParser:
         "innate and qlambda)",
     )
     add_task_arguments(exp, _positive_int, _seed, Path("results"))
+    exp.add_argument(
+        "--eval-episodes",
+        type=_number(int, 0, math.inf, True, "0 or more"),
+        default=0,
+        metavar="N",
+        help="after training, N episodes of frozen evaluation on held-out seeds, and N of "
+        "the camera-only transfer test (default 0: none)",
+    )
+    exp.add_argument(
+        "--untuned",
+        action="store_true",
+        help="run every condition with its default parameters, not the tuned ones "
+        "(core/data/tuned.toml, written by srlab tune)",
+    )
+    exp.add_argument(
+        "--no-probe",
+        action="store_true",
+        help="do not judge what was learned with the placement probe (srlab probe)",
+    )
     add_sweep_parser(sub, _positive_int, _seed)
+
+    tn = sub.add_parser(
+        "tune",
+        help="tune every learner with the same budget on seeds the experiments never use",
+        description="Run each learning condition's 27-point grid (core/tune.py) on the "
+        "tuning seeds, print every point best first, and with --write keep each learner's "
+        "best in core/data/tuned.toml, which srlab experiment then runs with.",
+    )
+    tn.add_argument(
+        "--conditions",
+        default="delayed,dp,rp,kp,sonar,qlambda,qlambda-hybrid",
+        help="comma-separated learners (default: every one with a grid)",
+    )
+    tn.add_argument("--seeds", type=_positive_int, default=5, help="tuning seeds (default 5)")
+    tn.add_argument(
+        "--seed-base", type=_seed, default=1000, help="first tuning seed (default 1000)"
+    )
+    tn.add_argument(
+        "--episodes", type=_positive_int, default=50, help="episodes per seed (default 50)"
+    )
+    tn.add_argument("--jobs", type=_positive_int, default=os.cpu_count() or 1)
+    add_backend_arguments(tn)
+    add_setup_arguments(tn)
+    tn.add_argument("--write", action="store_true", help="write core/data/tuned.toml")
+    tn.add_argument("--out", type=Path, help="also write tuning.md and tuning.json here")
+    tn.add_argument("--quiet", action="store_true", help="no progress display")
+
+    pr = sub.add_parser(
+        "probe",
+        help="which responses to each camera obstacle stimulus are correct, from the world",
+        description="Place robot and obstacle in K placements inside each camera obstacle "
+        "stimulus's definition and run each behaviour as its response: a response is "
+        "correct when it gets the robot past the obstacle in at least 75%% of them. "
+        "Results are cached per world, sensor definition and settings (SRLAB_CACHE_DIR).",
+    )
+    add_setup_arguments(pr, signal=False)
+    pr.add_argument(
+        "--placements", type=_positive_int, default=20, help="placements per stimulus (20)"
+    )
+    pr.add_argument("--seed", type=_seed, default=0, help="seed of the placements (default 0)")
+    pr.add_argument("--json", action="store_true", help="print one JSON object")
 
     check = sub.add_parser(
         "world-check",
@@ -354,7 +415,9 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
 
 
 def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
-    from core.experiment import parse_conditions, run_experiment, summarise
+    from core.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
+    from core.params import tuned_params
+    from core.stats import Estimate, pct
     from server.report import write_report
 
     conditions = parse_conditions(args.conditions)
@@ -375,11 +438,24 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
                 on_result_updater(progress, bar),
                 backend,
                 setup,
+                args.eval_episodes,
+                tuned=not args.untuned,
             )
         elapsed = time.perf_counter() - started
-    summary = summarise(results, conditions)
+    probed = None
+    if not args.no_probe:
+        from server.probe_cache import cached_probe
+
+        with (
+            err.status("judging what was learned (srlab probe)")
+            if not args.quiet
+            else nullcontext()
+        ):
+            probed, _ = cached_probe(setup)
+    camera = [s.name for s in catalog.stimuli_of_sensor(CAMERA_SENSOR)]
+    summary = summarise(results, conditions, probed.correct() if probed else None, camera)
     params = {
-        "command": "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "srlab experiment",
+        "command": command_line(args),
         "conditions": conditions,
         "seeds": len(seeds),
         "seed_base": args.seed_base,
@@ -391,27 +467,41 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         "where": where,
         "elapsed_s": elapsed,
         "ticks": sum(r.ticks for r in results),
+        "eval_episodes": args.eval_episodes,
+        "tuned": {
+            c: dict(tuned_params(c)) for c in conditions if not args.untuned and tuned_params(c)
+        },
+        "probe": probed.as_dict() if probed is not None else None,
     }
     paths = write_report(args.out, results, summary, catalog, params)
     table = Table(
         title=f"srlab experiment: {len(seeds)} seeds x {args.episodes} episodes, world "
         f"{setup.world_name}, sensors {setup.sensors_name}, signal {setup.signal}"
     )
-    for col in ("condition", "success", "last 10", "to criterion", "collisions/ep", "viol./ep"):
+    held_out = args.eval_episodes > 0
+    cols = ["condition", "success [95% CI]", "episodes 1-10"]
+    cols += ["held-out", "camera only"] if held_out else []
+    cols += ["collisions/ep", "viol./ep"]
+    for col in cols:
         table.add_column(col, justify="right" if col != "condition" else "left")
     for name, s in summary.items():
         if not s.get("seeds"):
-            table.add_row(name, "failed", "", "", "", "")
+            table.add_row(name, "failed", *([""] * (len(cols) - 2)))
             continue
-        crit = s["episodes_to_criterion"]
-        table.add_row(
+        first10 = s["success_horizons"].get("1-10")
+        row = [
             name,
-            f"{s['success_rate']['mean']:.0%}",
-            f"{s['success_last10']['mean']:.0%}",
-            "never" if crit["median"] is None else f"{crit['median']:.0f} ({crit['never']} never)",
+            pct(Estimate.of(s["success_rate"])),
+            "" if first10 is None else pct(Estimate.of(first10)),
+        ]
+        if held_out:
+            ev = s.get("evaluation", {})
+            row += [pct(Estimate.of(ev[k])) for k in ("frozen", "camera_only")] if ev else ["", ""]
+        row += [
             f"{s['collisions_per_episode']['mean']:.2f}",
             f"{s['violations_per_episode']['mean']:.2f}",
-        )
+        ]
+        table.add_row(*row)
     console = print_table(stdout, table)
     ticks = params["ticks"]
     console.print(f"{ticks:,} ticks in {elapsed:.1f} s on {where} ({ticks / elapsed:,.0f} ticks/s)")
@@ -422,6 +512,103 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         first = (r.error or "").splitlines()[0]
         err.print(f"[red]task {r.task.condition} seed {r.task.seed} failed:[/] {first}")
     return 1 if failed else 0
+
+
+def _tune(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    from core.brain.catalog import data_dir
+    from core.experiment import parse_conditions
+    from core.tune import GRIDS, TUNING_SEED_BASE, describe, plan, tune, tuned_toml
+
+    conditions = parse_conditions(args.conditions)
+    if args.seed_base < TUNING_SEED_BASE:
+        raise ValueError(
+            f"--seed-base {args.seed_base}: tuning seeds start at {TUNING_SEED_BASE}, so the "
+            "experiments' seeds are never tuned on"
+        )
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    setup = setup_of(args)
+    total = sum(len(s.tasks()) for s in plan(conditions, seeds, args.episodes, setup).values())
+    err = Console(file=stderr, stderr=True)
+    started = time.perf_counter()
+    with open_backend(args, err) as (backend, where):
+        progress, bar = progress_display(err, "tune", total, args.quiet)
+        with progress:
+            rows = tune(
+                conditions, seeds, args.episodes, setup, backend, on_result_updater(progress, bar)
+            )
+    elapsed = time.perf_counter() - started
+    command = command_line(args)
+    for c, points in rows.items():
+        names = [n for n, _ in GRIDS[c]]
+        table = Table(title=f"{c}: {len(points)} points, {len(seeds)} seeds x {args.episodes} "
+                      f"episodes, best first")  # fmt: skip
+        for n in (*names, "success"):
+            table.add_column(n, justify="right")
+        for p in points[:5]:
+            table.add_row(*(f"{p.point[n]:g}" for n in names), f"{p.success:.1%}")
+        print_table(stdout, table)
+    best = {c: points[0] for c, points in rows.items()}
+    out = stdout
+    out.write(f"{total} tasks in {elapsed:.1f} s on {where}\n")
+    for c, p in best.items():
+        out.write(f"best for {c}: {describe(p.point)} ({p.success:.1%})\n")
+    if args.write:
+        path = data_dir() / "tuned.toml"
+        path.write_text(tuned_toml(best, command, setup))
+        out.write(f"wrote {path}\n")
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        doc = {
+            "command": command, "seeds": seeds, "episodes": args.episodes,
+            "elapsed_s": elapsed, **setup_params(setup),
+            "learners": {
+                c: [{"point": p.point, "success": p.success, "per_seed": p.per_seed}
+                    for p in points]
+                for c, points in rows.items()
+            },
+        }  # fmt: skip
+        (args.out / "tuning.json").write_text(json.dumps(doc, indent=1) + "\n")
+        lines = [
+            "# srlab tune", "", f"`{command}`", "",
+            f"Every learner's grid on tuning seeds {seeds[0]}-{seeds[-1]} x {args.episodes} "
+            f"episodes (world {setup.world_name}, sensors {setup.sensors_name}, signal "
+            f"{setup.signal}), {elapsed:.0f} s. Mean success over the tuning seeds, best first.",
+        ]  # fmt: skip
+        for c, points in rows.items():
+            names = [n for n, _ in GRIDS[c]]
+            lines += ["", f"## {c}", "", "| " + " | ".join(names) + " | success |",
+                      "|---" * (len(names) + 1) + "|"]  # fmt: skip
+            for p in points:
+                vals = " | ".join(f"{p.point[n]:g}" for n in names)
+                lines.append(f"| {vals} | {p.success:.1%} |")
+        (args.out / "tuning.md").write_text("\n".join(lines) + "\n")
+        out.write(f"wrote {args.out / 'tuning.md'} and tuning.json\n")
+    return 0
+
+
+def _probe(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    from server.probe_cache import cached_probe
+
+    setup = setup_of(args)
+    err = Console(file=stderr, stderr=True)
+    with err.status(f"probing {setup.world_name} ({setup.sensors_name})"):
+        result, cached = cached_probe(setup, args.placements, args.seed)
+    if args.json:
+        stdout.write(json.dumps(result.as_dict()) + "\n")
+        return 0
+    table = Table(
+        title=f"srlab probe: world {result.world}, sensors {result.sensors}, "
+        f"{result.k} placements a stimulus{' (cached)' if cached else ''}"
+    )
+    for col in ("stimulus", "correct responses (share of placements passed)", "best"):
+        table.add_column(col)
+    for name, p in result.stimuli.items():
+        good = sorted(p.correct, key=lambda b: -p.passed[b])
+        cells = ", ".join(f"{b} {p.passed[b]:.0%}" for b in good) or "[red]none[/]"
+        best, share = p.best
+        table.add_row(name, cells, f"{best} {share:.0%}")
+    print_table(stdout, table)
+    return 0
 
 
 def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
@@ -496,7 +683,7 @@ def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> 
         from server.report import clean_json, world_check_markdown
 
         args.out.mkdir(parents=True, exist_ok=True)
-        report["command"] = "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else ""
+        report["command"] = command_line(args)
         report = clean_json(report)
         (args.out / "world-check.json").write_text(json.dumps(report, indent=2) + "\n")
         (args.out / "world-check.md").write_text(world_check_markdown(report))
@@ -558,6 +745,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `srlab` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(argv) if argv is not None else sys.argv[1:]
     try:
         if args.command == "simulate":
             return _simulate(args, sys.stdout, sys.stderr)
@@ -567,6 +755,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return sweep_command(args, sys.stdout, sys.stderr)
         if args.command == "world-check":
             return _world_check(args, sys.stdout, sys.stderr)
+        if args.command == "probe":
+            return _probe(args, sys.stdout, sys.stderr)
+        if args.command == "tune":
+            return _tune(args, sys.stdout, sys.stderr)
         if args.command == "qlambda-sweep":
             return _qlambda_sweep(args, sys.stdout, sys.stderr)
         if args.command == "db":

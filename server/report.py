@@ -11,11 +11,13 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
+from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HORIZONS, paired_table
 from core.brain.catalog import Catalog
-from core.experiment import CAMERA_SENSOR, TaskResult, paired_against, t_quantile_975
+from core.experiment import CAMERA_SENSOR, TaskResult, t_quantile_975
 
 # The paper's Table II and the non-zero cells of its Table III (reliability of LTM after
 # 50 episodic trials), keyed by our stimulus and behaviour names.
@@ -115,8 +117,17 @@ def _camera_names(catalog: Catalog) -> list[str]:
     return [s.name for s in catalog.stimuli if s.sensor == CAMERA_SENSOR]
 
 
-def plot_reliability(path: Path, summary: dict[str, Any], catalog: Catalog) -> None:
-    """Heatmaps like Table III: behaviours x camera obstacle stimuli, one per condition."""
+def plot_reliability(
+    path: Path,
+    summary: dict[str, Any],
+    catalog: Catalog,
+    probe: dict[str, Any] | None = None,
+) -> None:
+    """Heatmaps like Table III: behaviours x camera obstacle stimuli, one per condition.
+
+    The paper's Table III is drawn beside them, for DP, RP and KP; with a probe, the cells
+    of correct responses are outlined.
+    """
     learned = [n for n, s in summary.items() if s.get("seeds") and s.get("learns_camera")]
     stimuli = _camera_names(catalog)
     behaviours = [b.name for b in catalog.behaviours]
@@ -129,63 +140,52 @@ def plot_reliability(path: Path, summary: dict[str, Any], catalog: Catalog) -> N
         }
     )
     behaviours += extra
-    cols = max(1, len(learned))
-    fig, axes = plt.subplots(
-        1, cols, figsize=(2.6 * cols + 2.5, 7.5), dpi=110, squeeze=False, sharey=True
-    )
-    for ax, name in zip(axes[0], learned, strict=False):
+    panels: list[tuple[str, np.ndarray[Any, Any]]] = []
+    for name in learned:
         rel = summary[name]["camera_reliability"]
         grid = np.array(
             [[rel.get(f"{s}/{b}", {}).get("mean", 0.0) for s in stimuli] for b in behaviours]
         )
+        panels.append((f"{name} ({summary[name]['camera_memory'].upper()})", grid))
+    for cname in ("dp", "rp", "kp"):
+        paper = np.array(
+            [
+                [PAPER_TABLE_III.get(s, {}).get(b, {}).get(cname, 0.0) for s in stimuli]
+                for b in behaviours
+            ]
+        )
+        panels.append((f"paper {cname.upper()}", paper))
+    correct = {s: set(v["correct"]) for s, v in (probe or {}).get("stimuli", {}).items()}
+    cols = len(panels)
+    fig, axes = plt.subplots(
+        1, cols, figsize=(2.4 * cols + 2.5, 7.5), dpi=110, squeeze=False, sharey=True
+    )
+    im = None
+    for ax, (title, grid) in zip(axes[0], panels, strict=True):
         im = ax.imshow(grid, vmin=0, vmax=1, cmap="viridis", aspect="auto")
         ax.set_xticks(range(len(stimuli)), [s.removeprefix("Obstacle_") for s in stimuli])
         ax.tick_params(axis="x", labelrotation=90, labelsize=7)
-        ax.set_title(f"{name} ({summary[name]['camera_memory'].upper()})", fontsize=9)
+        ax.set_title(title, fontsize=9)
         for i, j in zip(*np.nonzero(grid >= 0.05), strict=True):
             ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center", fontsize=5, color="w")
+        if not title.startswith("paper"):
+            for j, s in enumerate(stimuli):
+                for i, b in enumerate(behaviours):
+                    if b in correct.get(s, ()):
+                        ax.add_patch(
+                            matplotlib.patches.Rectangle(
+                                (j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="#ff9f1c",
+                                linewidth=0.8,
+                            )
+                        )  # fmt: skip
     axes[0][0].set_yticks(range(len(behaviours)), behaviours, fontsize=7)
-    if learned:
+    if im is not None:
         fig.colorbar(im, ax=axes[0].tolist(), shrink=0.6, label="reliability (mean over seeds)")
     meaning = "where in the view" if catalog.definition == "paper" else "obstacle side"
-    fig.suptitle(f"Reliability of camera obstacle S-R pairs (robot lane _ {meaning})")
+    outlined = "; outlined: correct by the placement probe" if correct else ""
+    fig.suptitle(f"Reliability of camera obstacle S-R pairs (robot lane _ {meaning}){outlined}")
     fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
-
-
-def _paired_lines(summary: dict[str, Any]) -> list[str]:
-    """The paired-by-seed comparison with kp, when kp ran."""
-    reference = "kp"
-    if not summary.get(reference, {}).get("seeds"):
-        return []
-    horizons = [("episodes 1-10", 10), ("all episodes", None)]
-    diffs = {label: paired_against(summary, reference, h) for label, h in horizons}
-    names = [n for n in summary if n in diffs["all episodes"]]
-    if not names:
-        return []
-    lines = [
-        "## Paired by seed, against kp",
-        "",
-        "Each condition's success minus kp's, seed by seed (every condition meets the same "
-        "obstacles and lamp cycles on a seed): the mean difference in points, its 95% "
-        "bootstrap interval, and the sign-flip test's two-sided p of no difference. "
-        "`sonar` is kp with propagation off, so kp's row against it is what propagation adds.",
-        "",
-        "| condition - kp | " + " | ".join(label for label, _ in horizons) + " |",
-        "|---|" + "---|" * len(horizons),
-    ]
-    for n in names:
-        cells = []
-        for label, _ in horizons:
-            d = diffs[label].get(n)
-            cells.append(
-                "-"
-                if d is None
-                else f"{100 * d['mean']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}],"
-                f" p {d['p']:.3f}"
-            )
-        lines.append(f"| {n} | " + " | ".join(cells) + " |")
-    return [*lines, ""]
 
 
 def _origin_table(summary: dict[str, Any]) -> list[str]:
@@ -208,110 +208,242 @@ def _origin_table(summary: dict[str, Any]) -> list[str]:
     return rows
 
 
-def summary_markdown(
-    summary: dict[str, Any],
-    catalog: Catalog,
-    params: dict[str, Any],
-    failed: Sequence[TaskResult],
-) -> str:
-    """The experiment's summary as readable tables."""
-    lines = [
-        "# srlab experiment",
-        "",
-        f"`{params['command']}`",
-        "",
-        f"{params['seeds']} seeds x {params['episodes']} episodes per condition; "
-        f"{params['ticks']:,} ticks in {params['elapsed_s']:.1f} s.",
-        "",
+def _ci(stat: dict[str, float] | None, pct: bool = True, digits: int = 0) -> str:
+    """A mean with its 95% bootstrap interval: ``52% [40, 63]`` (or ``0.25 [0.20, 0.31]``)."""
+    if not stat:
+        return "-"
+    mean = stat.get("mean", math.nan)
+    if mean is None or math.isnan(mean):
+        return "-"
+    low, high = stat.get("low", math.nan), stat.get("high", math.nan)
+    scale, unit = (100.0, "%") if pct else (1.0, "")
+    d = digits if pct else max(digits, 2)
+    head = f"{scale * mean:.{d}f}{unit}"
+    if low is None or high is None or math.isnan(low) or math.isnan(high):
+        return head
+    return f"{head} [{scale * low:.{d}f}, {scale * high:.{d}f}]"
+
+
+def _points(stat: dict[str, float] | None) -> str:
+    """A rate of change in points, with its interval: ``+2.1 [+0.4, +3.9]``."""
+    if not stat or stat.get("mean") is None or math.isnan(stat["mean"]):
+        return "-"
+    low, high = stat.get("low", math.nan), stat.get("high", math.nan)
+    head = f"{100 * stat['mean']:+.1f}"
+    if low is None or high is None or math.isnan(low) or math.isnan(high):
+        return head
+    return f"{head} [{100 * low:+.1f}, {100 * high:+.1f}]"
+
+
+def _diff(d: dict[str, float] | None) -> str:
+    """A paired difference in points with its interval and p."""
+    if d is None:
+        return "-"
+    p = d["p"]
+    ptxt = "p < 0.001" if p < 0.001 else f"p {p:.3f}"
+    return f"{100 * d['mean']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}], {ptxt}"
+
+
+def _setup_line(params: dict[str, Any]) -> str:
+    return (
         f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
         f"signal {params.get('signal', 'learned')}"
         + (
             " (its correct responses given to every condition, so success measures the obstacle)."
             if params.get("signal") == "given"
             else " (learned as each condition learns)."
+        )
+    )
+
+
+def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]:
+    labels = [label for label, _ in HORIZONS]
+    present = [
+        lab for lab in labels if any(lab in s.get("success_horizons", {}) for s in summary.values())
+    ]
+    evaluated = any("evaluation" in s for s in summary.values())
+    head = ["condition", *(f"success, episodes {lab}" for lab in present), "trend / 10 episodes"]
+    if evaluated:
+        head += ["held-out, frozen", "held-out, camera only"]
+    lines = [
+        "## Success",
+        "",
+        "Mean over seeds of each seed's success rate, with its 95% bootstrap interval. The "
+        "trend is the per-seed least-squares slope of success against the episode, in points "
+        "per 10 episodes."
+        + (
+            f" Held-out: after training, what was learned frozen (no exploration, no learning) "
+            f"for {params.get('eval_episodes')} episodes on seeds the training never used; "
+            "camera only: the same with the sonar's obstacle responses removed."
+            if evaluated
+            else ""
         ),
         "",
-        "## Results",
-        "",
-        "| condition | success, all episodes | success, last 10 | episodes to criterion "
-        "(median; reached/never) | collisions / episode | violations / episode |",
-        "|---|---|---|---|---|---|",
+        "| " + " | ".join(head) + " |",
+        "|---" * len(head) + "|",
     ]
     for name, s in summary.items():
         if not s.get("seeds"):
-            lines.append(f"| {name} | no successful task | | | | |")
+            lines.append(f"| {name} | no successful task |" + " |" * (len(head) - 2))
+            continue
+        cells = [_ci(s["success_horizons"].get(lab)) for lab in present]
+        cells.append(_points(s.get("trend_per_10")))
+        if evaluated:
+            ev = s.get("evaluation", {})
+            cells += [_ci(ev.get("frozen")), _ci(ev.get("camera_only"))]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
+def _failure_lines(summary: dict[str, Any]) -> list[str]:
+    causes = [
+        ("obstacle collisions", "obstacle_collisions_per_episode"),
+        ("wall collisions", "wall_collisions_per_episode"),
+        ("signal violations", "violations_per_episode"),
+        ("timeouts", "timeouts_per_episode"),
+    ]
+    lines = [
+        "## Failures by cause",
+        "",
+        "Failed episodes per episode, by cause: mean over seeds [95% bootstrap interval].",
+        "",
+        "| condition | " + " | ".join(c for c, _ in causes) + " |",
+        "|---|" + "---|" * len(causes),
+    ]
+    for name, s in summary.items():
+        if s.get("seeds"):
+            lines.append(
+                f"| {name} | " + " | ".join(_ci(s[k], pct=False) for _, k in causes) + " |"
+            )
+    return [*lines, ""]
+
+
+def _paired_lines(summary: dict[str, Any]) -> list[str]:
+    """Every pair of conditions, paired by seed, per horizon."""
+    table = paired_table(summary)
+    if not table:
+        return []
+    horizons = [label for label, _ in HORIZONS if any(label in r for r in table.values())]
+    lines = [
+        "## Paired by seed",
+        "",
+        "Every pair of conditions: the first's success minus the second's, seed by seed "
+        "(every condition meets the same obstacles and lamp cycles on a seed), in points, "
+        "with its 95% bootstrap interval and the sign-flip test's two-sided p of no "
+        "difference. `kp - sonar` is what propagation adds (`sonar` is kp without it).",
+        "",
+        "| pair | " + " | ".join(f"episodes {h}" for h in horizons) + " |",
+        "|---|" + "---|" * len(horizons),
+    ]
+    for pair, row in table.items():
+        lines.append(f"| {pair} | " + " | ".join(_diff(row.get(h)) for h in horizons) + " |")
+    return [*lines, ""]
+
+
+def _correctness_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]:
+    judged = {n: s["correctness"] for n, s in summary.items() if s.get("correctness")}
+    probe = params.get("probe")
+    if not judged or not probe:
+        return []
+    stimuli = list(probe["stimuli"])
+    lines = [
+        "## What was learned, judged by the placement probe",
+        "",
+        f"`srlab probe --world {probe['world']} --sensors {probe['sensors']}` placed robot "
+        f"and obstacle {probe['k']} times inside each camera stimulus's definition and ran "
+        "every behaviour as its response; a response is correct when it gets the robot past "
+        f"the obstacle in at least {probe['correct_share']:.0%} of them:",
+        "",
+        "| stimulus | correct responses |",
+        "|---|---|",
+    ]
+    for stim in stimuli:
+        good = probe["stimuli"][stim]["correct"]
+        lines.append(f"| {stim.removeprefix('Obstacle_')} | {', '.join(good) or 'none'} |")
+    first = next(iter(judged.values()))
+    for checkpoint in first["checkpoints"]:
+        lines += [
+            "",
+            f"After episode {checkpoint}: the share of seeds whose learner answers each "
+            "stimulus (seen alone) correctly / wrongly / not at all.",
+            "",
+            "| condition | " + " | ".join(s.removeprefix("Obstacle_") for s in stimuli) + " |",
+            "|---|" + "---|" * len(stimuli),
+        ]
+        for name, c in judged.items():
+            row = c["checkpoints"].get(checkpoint)
+            if row is None:
+                continue
+            cells = [
+                f"{row[s]['correct']:.0%} / {row[s]['wrong']:.0%} / {row[s]['none']:.0%}"
+                for s in stimuli
+            ]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "The knowledge criterion: the first episode after which a seed's answer to the "
+        "stimulus is correct and stays correct to the end; median over the seeds that get "
+        "there, and how many do (of all seeds).",
+        "",
+        "| condition | " + " | ".join(s.removeprefix("Obstacle_") for s in stimuli) + " |",
+        "|---|" + "---|" * len(stimuli),
+    ]
+    for name, c in judged.items():
+        cells = []
+        for s in stimuli:
+            per_seed = c["criterion"][s]["per_seed"]
+            got = sorted(x for x in per_seed if x is not None)
+            cells.append(
+                f"{np.median(got):.0f} ({len(got)}/{len(per_seed)})"
+                if got
+                else f"- (0/{len(per_seed)})"
+            )
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
+def _criterion_lines(summary: dict[str, Any]) -> list[str]:
+    lines = [
+        "## Episodes to the success criterion (secondary)",
+        "",
+        f"The first episode after which at least {CRITERION_RATE:.0%} of the last "
+        f"{CRITERION_WINDOW} episodes succeeded, beside what a process that learns nothing "
+        "scores on it: independent episodes at each seed's own success rate (the null's "
+        "median, and the share of its runs that reach the criterion at all). A criterion "
+        "reached no sooner than its null says nothing about learning.",
+        "",
+        "| condition | median (reached/never) | null: median, share reaching it |",
+        "|---|---|---|",
+    ]
+    for name, s in summary.items():
+        if not s.get("seeds"):
             continue
         crit = s["episodes_to_criterion"]
         median = "-" if crit["median"] is None else f"{crit['median']:.0f}"
+        null = crit.get("null", {})
+        nmed = "-" if null.get("median") is None else f"{null['median']:.0f}"
+        share = null.get("reached_share", math.nan)
         lines.append(
-            f"| {name} | {_fmt(s['success_rate'], pct=True)} | "
-            f"{_fmt(s['success_last10'], pct=True)} | {median} ({crit['reached']}/"
-            f"{crit['never']}) | {_fmt(s['collisions_per_episode'])} | "
-            f"{_fmt(s['violations_per_episode'])} |"
+            f"| {name} | {median} ({crit['reached']}/{crit['never']}) | {nmed}, {share:.0%} |"
         )
-    lines += [
-        "",
-        "Episodes to criterion: the first episode after which the success rate over the "
-        "last 10 episodes is at least 80%. The ± figures are 95% confidence intervals over "
-        "seeds (Student's t).",
-        "",
-        *_paired_lines(summary),
-        "## What ran",
-        "",
-        "Share of all ticks by what made the behaviour run: the source of the association "
-        "that released it (innate, designed, dp, learned, kp, expert), exploration, the "
-        "keep-moving default, or an external learner's command. A learned or propagated "
-        "pair that never runs has taught the robot nothing.",
-        "",
-        *_origin_table(summary),
-        "",
-        "## Reliability of the camera obstacle S-R pairs (Table III)",
-        "",
-        "Mean reliability over seeds (± 95% CI) of every camera obstacle pair that reached "
-        "0.01 in some condition: LTM for delayed, DP and RP, RLTM for KP; DP's programmed "
-        "pairs count as 1, as in the paper. Stimulus names are robot lane _ "
-        + ("the third of the view." if params.get("sensors") == "paper" else "obstacle side."),
-        "",
-    ]
-    learned = [n for n, s in summary.items() if s.get("seeds") and s.get("learns_camera")]
-    keys = sorted(
-        {
-            k
-            for n in learned
-            for k, v in summary[n]["camera_reliability"].items()
-            if v["mean"] >= 0.01
-        },
-        key=lambda k: (_camera_names(catalog).index(k.split("/")[0]), k),
-    )
-    if learned:
-        lines.append("| stimulus | behaviour | " + " | ".join(learned) + " |")
-        lines.append("|---|---|" + "---|" * len(learned))
-        for k in keys:
-            stim, beh = k.split("/", 1)
-            cells = [
-                _fmt(summary[n]["camera_reliability"].get(k, {"mean": 0.0, "ci95": 0.0}))
-                for n in learned
-            ]
-            lines.append(
-                f"| {stim.removeprefix('Obstacle_')} | {beh} | " + " | ".join(cells) + " |"
-            )
-    lines += ["", "## Side by side with the paper", "", "### Table II (innate knowledge only)", ""]
-    lines.append("| | successes | episodes | rate |")
-    lines.append("|---|---|---|---|")
-    for where, (won, played) in PAPER_TABLE_II.items():
-        lines.append(f"| paper, {where} | {won} | {played} | {won / played:.0%} |")
-    if summary.get("innate", {}).get("seeds"):
-        s = summary["innate"]
-        total = s["seeds"] * s["episodes"]
-        ok = round(s["success_rate"]["mean"] * total)
-        lines.append(f"| srlab | {ok} | {total} | {ok / total:.0%} |")
-    lines += [
-        "",
+    return [*lines, ""]
+
+
+def _table3_lines(summary: dict[str, Any], catalog: Catalog, params: dict[str, Any]) -> list[str]:
+    probe = params.get("probe") or {}
+    correct = {s: set(v["correct"]) for s, v in probe.get("stimuli", {}).items()}
+
+    def mark(stim: str, behaviour: str) -> str:
+        if stim not in correct:
+            return ""
+        return " (correct)" if behaviour in correct[stim] else " (wrong)"
+
+    lines = [
         "### Table III: the strongest response to each of the paper's stimuli",
         "",
         "Behaviour and reliability of the strongest pair per stimulus, the paper's after 50 "
         "episodes and srlab's (mean over seeds; DP's programmed pairs count as 1, as in the "
-        "paper).",
+        "paper); srlab's marked correct or wrong by the placement probe.",
         "",
         "| stimulus | paper DP | srlab DP | paper RP | srlab RP | paper KP | srlab KP |",
         "|---|---|---|---|---|---|---|",
@@ -325,7 +457,7 @@ def summary_markdown(
             rel = cond.get("camera_reliability", {}) if cond.get("seeds") else {}
             mine = [(v["mean"], k.split("/", 1)[1]) for k, v in rel.items() if k.startswith(stim)]
             top = max(mine, default=(0.0, ""))
-            cells.append(f"{top[1]} {top[0]:.2f}" if top[0] >= 0.005 else "-")
+            cells.append(f"{top[1]} {top[0]:.2f}{mark(stim, top[1])}" if top[0] >= 0.005 else "-")
         lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
     if params.get("sensors") == "paper":
         note = (
@@ -341,35 +473,128 @@ def summary_markdown(
             "go straight. Compare the shape (which condition learns which response, how "
             "reliably) rather than cell by cell."
         )
-    lines += ["", note]
-    met = [(n, s["camera_stimuli_met"]) for n, s in summary.items() if s.get("camera_stimuli_met")]
-    if met:
-        lines += [
-            "",
-            "## Camera obstacle stimuli met",
-            "",
-            "Encounters per seed (times the stimulus became active) over the whole run, mean "
-            "over seeds, and in brackets the success rate of the episodes it was met in, all "
-            "seeds together: a pair can only be learned for a stimulus the robot meets, and "
-            "from a delayed reward only where the lap succeeds.",
-            "",
-            "| stimulus | " + " | ".join(n for n, _ in met) + " |",
-            "|---|" + "---|" * len(met),
-        ]
-        for stim in _camera_names(catalog):
+    return [*lines, "", note]
+
+
+def _reliability_lines(
+    summary: dict[str, Any], catalog: Catalog, params: dict[str, Any]
+) -> list[str]:
+    learned = [n for n, s in summary.items() if s.get("seeds") and s.get("learns_camera")]
+    lines = [
+        "## Reliability of the camera obstacle S-R pairs (Table III)",
+        "",
+        "Mean reliability over seeds [95% bootstrap interval] of every camera obstacle pair "
+        "that reached 0.01 in some condition: LTM for delayed, DP and RP, RLTM for KP; DP's "
+        "programmed pairs count as 1, as in the paper. Reliability is Eq. (1)'s V, not "
+        "correctness: KP's RLTM credits each success at d_k = 1, LTM at d_k of hundreds of "
+        "ticks, by construction. Stimulus names are robot lane _ "
+        + ("the third of the view." if params.get("sensors") == "paper" else "obstacle side."),
+        "",
+    ]
+    keys = sorted(
+        {
+            k
+            for n in learned
+            for k, v in summary[n]["camera_reliability"].items()
+            if v["mean"] >= 0.01
+        },
+        key=lambda k: (_camera_names(catalog).index(k.split("/")[0]), k),
+    )
+    if learned:
+        lines.append("| stimulus | behaviour | " + " | ".join(learned) + " |")
+        lines.append("|---|---|" + "---|" * len(learned))
+        for k in keys:
+            stim, beh = k.split("/", 1)
             cells = [
-                f"{m[stim]['encounters_per_seed']:.1f} ({m[stim]['success_when_met']:.0%})"
-                if stim in m
-                else "0"
-                for _, m in met
+                _ci(summary[n]["camera_reliability"].get(k, {"mean": 0.0}), pct=False)
+                for n in learned
             ]
-            lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
+            lines.append(
+                f"| {stim.removeprefix('Obstacle_')} | {beh} | " + " | ".join(cells) + " |"
+            )
+    return [*lines, ""]
+
+
+def _met_lines(summary: dict[str, Any], catalog: Catalog) -> list[str]:
+    met = [(n, s["camera_stimuli_met"]) for n, s in summary.items() if s.get("camera_stimuli_met")]
+    if not met:
+        return []
+    lines = [
+        "## Camera obstacle stimuli met",
+        "",
+        "Encounters per seed (times the stimulus became active) over the whole run, mean "
+        "over seeds, and in brackets the success rate of the episodes it was met in, all "
+        "seeds together: a pair can only be learned for a stimulus the robot meets, and "
+        "from a delayed reward only where the lap succeeds.",
+        "",
+        "| stimulus | " + " | ".join(n for n, _ in met) + " |",
+        "|---|" + "---|" * len(met),
+    ]
+    for stim in _camera_names(catalog):
+        cells = [
+            f"{m[stim]['encounters_per_seed']:.1f} ({m[stim]['success_when_met']:.0%})"
+            if stim in m
+            else "0"
+            for _, m in met
+        ]
+        lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
+def summary_markdown(
+    summary: dict[str, Any],
+    catalog: Catalog,
+    params: dict[str, Any],
+    failed: Sequence[TaskResult],
+) -> str:
+    """The experiment's summary as readable tables."""
+    lines = [
+        "# srlab experiment",
+        "",
+        f"`{params['command']}`",
+        "",
+        f"{params['seeds']} seeds x {params['episodes']} episodes per condition; "
+        f"{params['ticks']:,} ticks in {params['elapsed_s']:.1f} s.",
+        "",
+        _setup_line(params),
+        "",
+        *_success_lines(summary, params),
+        *_failure_lines(summary),
+        *_paired_lines(summary),
+        *_correctness_lines(summary, params),
+        "## What ran",
+        "",
+        "Share of all ticks by what made the behaviour run: the source of the association "
+        "that released it (innate, designed, dp, learned, kp, expert), exploration, the "
+        "keep-moving default, or an external learner's command. A learned or propagated "
+        "pair that never runs has taught the robot nothing.",
+        "",
+        *_origin_table(summary),
+        "",
+        *_reliability_lines(summary, catalog, params),
+        "## Side by side with the paper",
+        "",
+        "### Table II (innate knowledge only)",
+        "",
+        "| | successes | episodes | rate |",
+        "|---|---|---|---|",
+    ]
+    for where, (won, played) in PAPER_TABLE_II.items():
+        lines.append(f"| paper, {where} | {won} | {played} | {won / played:.0%} |")
+    if summary.get("innate", {}).get("seeds"):
+        s = summary["innate"]
+        total = s["seeds"] * s["episodes"]
+        ok = round(s["success_rate"]["mean"] * total)
+        lines.append(f"| srlab | {ok} | {total} | {ok / total:.0%} |")
+    lines += ["", *_table3_lines(summary, catalog, params), ""]
+    lines += _criterion_lines(summary)
+    lines += _met_lines(summary, catalog)
     if failed:
-        lines += ["", "## Failed tasks", ""]
+        lines += ["## Failed tasks", ""]
         for r in failed:
             first = (r.error or "").splitlines()[0]
             lines.append(f"- {r.task.condition} seed {r.task.seed}: {first}")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines).rstrip() + "\n"
 
 
 def write_report(
@@ -397,14 +622,52 @@ def write_report(
             {"condition": r.task.condition, "seed": r.task.seed, "error": r.error} for r in failed
         ],
     }
+    doc["paired"] = paired_table(summary)
     paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
     paths[1].write_text(summary_markdown(summary, catalog, params, failed))
     write_runs(paths[2], results)
     curves = out / "learning_curves.png"
     plot_learning_curves(curves, summary)
     reliability = out / "reliability.png"
-    plot_reliability(reliability, summary, catalog)
-    return [*paths, curves, reliability]
+    plot_reliability(reliability, summary, catalog, params.get("probe"))
+    written = [*paths, curves, reliability]
+    if any(s.get("correctness") for s in summary.values()):
+        knowledge = out / "knowledge.png"
+        plot_knowledge(knowledge, summary)
+        written.append(knowledge)
+    return written
+
+
+def plot_knowledge(path: Path, summary: dict[str, Any], stimuli: int = 3) -> None:
+    """The knowledge criterion over episodes, for the camera stimuli met most.
+
+    The share of seeds whose answer is correct and stays correct from that episode on.
+    """
+    judged = {n: s for n, s in summary.items() if s.get("correctness")}
+    met: dict[str, float] = {}
+    for s in judged.values():
+        for stim, m in s.get("camera_stimuli_met", {}).items():
+            met[stim] = met.get(stim, 0.0) + m["encounters_per_seed"]
+    names = sorted(met, key=lambda k: -met[k])[:stimuli]
+    fig, axes = plt.subplots(1, max(1, len(names)), figsize=(4.2 * max(1, len(names)), 3.8),
+                             dpi=110, squeeze=False, sharey=True)  # fmt: skip
+    for ax, stim in zip(axes[0], names, strict=False):
+        for name, s in judged.items():
+            survival = s["correctness"]["criterion"].get(stim, {}).get("survival")
+            if not survival:
+                continue
+            x = np.arange(1, len(survival) + 1)
+            ax.step(x, 1.0 - np.asarray(survival), where="post", label=name, linewidth=1.6)
+        ax.set_title(stim.removeprefix("Obstacle_"), fontsize=10)
+        ax.set_xlabel("episode")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("share of seeds correct from here on")
+    axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    fig.suptitle("Knowledge criterion: the answer is correct and stays correct (probe)")
+    fig.tight_layout()
+    fig.savefig(path, bbox_inches="tight")
+    plt.close(fig)
 
 
 def clean_json(value: Any) -> Any:

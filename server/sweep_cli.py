@@ -200,9 +200,11 @@ def setup_params(setup: Setup) -> dict[str, str]:
     return {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
 
 
-def command_line() -> str:
-    """The command as typed, for the report."""
-    return "srlab " + shlex.join(sys.argv[1:]) if sys.argv[1:] else "srlab"
+def command_line(args: argparse.Namespace) -> str:
+    """The command as typed (the arguments `main` was given), for the report."""
+    argv = getattr(args, "argv", None)
+    argv = sys.argv[1:] if argv is None else argv
+    return "srlab " + shlex.join(argv) if argv else f"srlab {args.command}"
 
 
 def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
@@ -229,7 +231,7 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
         elapsed = time.perf_counter() - started
     summary = summarise_sweep(plan, results)
     params = {
-        "command": command_line(),
+        "command": command_line(args),
         "conditions": list(plan.conditions),
         "seeds": len(plan.seeds),
         "seed_base": args.seed_base,

@@ -22,6 +22,18 @@ from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _cache_dir(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """Caches (the placement probe's) go to a temporary folder, never to the home's."""
+    old = os.environ.get("SRLAB_CACHE_DIR")
+    os.environ["SRLAB_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+    if old is None:
+        os.environ.pop("SRLAB_CACHE_DIR", None)
+    else:
+        os.environ["SRLAB_CACHE_DIR"] = old
+
+
 @pytest.fixture(scope="session")
 def catalog() -> Catalog:
     """srlab's own catalogue (immutable, so one per session)."""

@@ -123,6 +123,17 @@ class Brain:
         if self.kp is not None:
             self.kp.reset_episode()
 
+    def answer(self, stimulus: int) -> int:
+        """The behaviour the network releases for `stimulus` perceived alone (-1: none).
+
+        What the robot has learned (or was given) for a stimulus, read without running it:
+        the competition among the stimulus's own associations over the threshold, with no
+        exploration.
+        """
+        decision = self.selector.released([stimulus])
+        released = decision.how is How.RELEASED and decision.stimulus == stimulus
+        return decision.behaviour if released else -1
+
     def _add_behaviour(self, behaviour: Behaviour) -> Behaviour:
         """Make a synthesised behaviour part of the catalogue and runnable."""
         self.catalog = self.catalog.with_behaviour(behaviour)

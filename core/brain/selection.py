@@ -229,6 +229,13 @@ class Selector:
                 target = s
         return target
 
+    def released(self, active: list[int]) -> Decision:
+        """What the competition alone would release for `active`.
+
+        No exploration and no incumbent; a default decision when nothing is released.
+        """
+        return self._choose(self.values(active), active, -1)
+
     def open_stimulus(self, active: list[int], learnable: frozenset[int]) -> int:
         """The most salient active stimulus of `learnable` that nothing answers, or -1.
 
@@ -243,7 +250,7 @@ class Selector:
                 target = s
         if target < 0:
             return -1
-        decision = self._choose(self.values(active), active, -1)
+        decision = self.released(active)
         if decision.how is How.RELEASED and prio[decision.stimulus] >= prio[target]:
             return -1
         return target

@@ -231,7 +231,12 @@ def test_mean_ci_by_hand() -> None:
 
 
 def test_mean_ci_of_equal_values_has_no_width() -> None:
-    assert mean_ci([0.5] * 4) == {"mean": 0.5, "ci95": 0.0, "n": 4}
+    assert mean_ci([0.5] * 4) == {"mean": 0.5, "ci95": 0.0, "low": 0.5, "high": 0.5, "n": 4}
+
+
+def test_mean_ci_carries_the_bootstrap_interval_inside_the_values() -> None:
+    got = mean_ci([0.2, 0.4, 0.9, 0.5])
+    assert 0.2 <= got["low"] < got["mean"] < got["high"] <= 0.9
 
 
 def test_mean_ci_of_one_or_no_value_has_no_interval() -> None:
@@ -285,3 +290,16 @@ def test_paired_against_pairs_seeds_and_a_condition_against_itself_is_zero() -> 
     first = core.experiment.paired_against(summary, "kp", horizon=1)
     assert first["better"]["mean"] == pytest.approx(1 / 3)  # 0, 0, +1 over episode 1
     assert core.experiment.paired_against(summary, "nobody") == {}
+
+
+def test_the_new_conditions_with_evaluation_are_the_same_whatever_the_jobs() -> None:
+    args = (["sonar", "qlambda-hybrid"], [0, 1], 3)
+    serial = run_experiment(*args, jobs=1, eval_episodes=2, tuned=True)
+    parallel = run_experiment(*args, jobs=2, eval_episodes=2, tuned=True)
+    assert [r.task for r in serial] == [r.task for r in parallel]
+    for a, b in zip(serial, parallel, strict=True):
+        assert a.ok and b.ok, (a.error, b.error)
+        assert (a.episodes, a.evaluation, a.transfer, a.answers) == (
+            b.episodes, b.evaluation, b.transfer, b.answers,
+        )  # fmt: skip
+        assert len(a.evaluation) == len(a.transfer) == 2

@@ -25,7 +25,8 @@ from core.qlambda import QLambdaConfig
 def test_no_parameters_configure_exactly_the_conditions_defaults(name: str) -> None:
     condition = get_condition(name)
     if condition.agent == "qlambda":
-        assert qlambda_config(condition) == QLambdaConfig()
+        hybrid = condition.hybrid  # defers to kp's design and explores per encounter
+        assert qlambda_config(condition) == QLambdaConfig(defer=hybrid, per_encounter=hybrid)
     else:
         assert configure(condition) == (condition, condition.brain_config())
 

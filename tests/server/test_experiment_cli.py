@@ -29,7 +29,7 @@ def exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
 def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("report")
     argv = ["experiment", "--conditions", "innate,kp", "--seeds", "2", "--episodes", "3"]
-    assert main([*argv, "--jobs", "1", "--out", str(out), "--quiet"]) == 0
+    assert main([*argv, "--eval-episodes", "2", "--jobs", "1", "--out", str(out), "--quiet"]) == 0
     return out
 
 
@@ -41,7 +41,24 @@ def test_experiment_writes_every_report_file(report: Path) -> None:
         "runs.jsonl",
         "learning_curves.png",
         "reliability.png",
+        "knowledge.png",
     }
+
+
+def test_experiment_reports_held_out_evaluation_and_the_probe(report: Path) -> None:
+    doc = json.loads((report / "summary.json").read_text())
+    assert doc["params"]["eval_episodes"] == 2
+    assert doc["params"]["probe"] is not None
+    for name in ("innate", "kp"):
+        ev = doc["conditions"][name]["evaluation"]
+        assert ev["episodes"] == 2
+        for key in ("frozen", "camera_only"):
+            assert 0.0 <= ev[key]["mean"] <= 1.0
+            assert ev[key]["n"] == 2
+    pair = doc["paired"]
+    assert pair, "every pair of conditions is compared seed by seed"
+    md = (report / "summary.md").read_text()
+    assert "held-out, frozen" in md
 
 
 def test_experiment_summary_json(report: Path) -> None:
@@ -95,14 +112,16 @@ def test_experiment_runs_jsonl_has_one_line_per_episode(report: Path) -> None:
 def test_experiment_summary_md(report: Path) -> None:
     md = (report / "summary.md").read_text()
     assert md.startswith("# srlab experiment\n")
-    assert "## Results" in md
+    assert "## Success" in md
     side_by_side = md.index("## Side by side with the paper")
     assert md.index("### Table II", side_by_side) < md.index("### Table III", side_by_side)
     assert "| innate |" in md
     assert "| kp |" in md
     assert "## Failed tasks" not in md
     assert "World `soft-obstacle`, camera stimuli `path`, signal learned" in md
-    for section in ("## Paired by seed, against kp", "## What ran", "## Camera obstacle"):
+    assert "| innate - kp |" in md  # every pair, first minus second
+    sections = ("## Paired by seed", "## Failures by cause", "## What ran", "## Camera obstacle")
+    for section in (*sections, "## What was learned, judged by the placement probe"):
         assert section in md
     met = md[md.index("## Camera obstacle") :]
     assert "%)" in met  # encounters per seed (success rate of the episodes they were met in)
@@ -120,7 +139,7 @@ def test_experiment_summary_counts_what_ran_and_what_was_met(report: Path) -> No
         assert met["encounters_per_seed"] > 0 and 1 <= met["seeds"] <= 2
 
 
-@pytest.mark.parametrize("name", ["learning_curves.png", "reliability.png"])
+@pytest.mark.parametrize("name", ["learning_curves.png", "reliability.png", "knowledge.png"])
 def test_experiment_plots_are_pngs(report: Path, name: str) -> None:
     path = report / name
     assert path.read_bytes()[:8] == PNG_SIGNATURE

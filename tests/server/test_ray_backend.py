@@ -42,11 +42,13 @@ SWEEP = [
 EXPERIMENT = [
     "experiment",
     "--conditions",
-    "innate,rp,qlambda",
+    "innate,rp,qlambda,sonar,qlambda-hybrid",
     "--seeds",
     "2",
     "--episodes",
     "3",
+    "--eval-episodes",
+    "2",
     "--quiet",
 ]
 

@@ -1,0 +1,78 @@
+"""The analysis: horizons, trends, the criterion's null, correctness and paired tables."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import pytest
+
+from core.analysis import (
+    correctness,
+    criterion_null,
+    episodes_to_criterion,
+    paired_table,
+    trend_per_10,
+)
+
+
+def test_trend_per_10_is_the_least_squares_slope() -> None:
+    assert trend_per_10([0, 0, 0, 0]) == pytest.approx(0.0)
+    # x = 0..19, y alternating 0, 1: cov = 5, var = 665 (by hand), slope 5 / 665 per episode.
+    assert trend_per_10([0, 1] * 10) == pytest.approx(10 * 5 / 665)
+    assert trend_per_10([0] * 10 + [1] * 10) > 0.5
+    assert math.isnan(trend_per_10([1]))
+
+
+def test_a_process_that_learns_nothing_reaches_the_criterion_by_chance() -> None:
+    """At 90% success, 8 of 10 comes within the first windows; at 10%, almost never."""
+    high = criterion_null([[1] * 45 + [0] * 5] * 5)
+    low = criterion_null([[1] * 5 + [0] * 45] * 5)
+    assert high["median"] is not None and high["median"] <= 15
+    assert high["reached_share"] > 0.9
+    assert low["median"] is None and low["reached_share"] < 0.05
+    assert criterion_null([[1] * 45 + [0] * 5]) == criterion_null([[1] * 45 + [0] * 5])
+
+
+@dataclass
+class Fake:
+    """What `correctness` reads of a task result."""
+
+    answers: tuple[tuple[str | None, ...], ...]
+    ok: bool = True
+    task: object = field(default=None)
+
+
+def test_correctness_at_checkpoints_and_the_knowledge_criterion() -> None:
+    camera = ["Obstacle_M_L", "Obstacle_M_M"]
+    correct = {"Obstacle_M_L": frozenset({"rightturn30"}), "Obstacle_M_M": frozenset()}
+    seed_a = [(None, None)] * 5 + [("rightturn30", "leftturn30")] * 5  # learns at 6, stays
+    seed_b = [("rightturn30", None)] * 3 + [("leftturn15", None)] * 7  # right, then wrong
+    out = correctness([Fake(tuple(seed_a)), Fake(tuple(seed_b))], camera, correct)  # type: ignore[list-item]
+    at10 = out["checkpoints"]["10"]
+    assert at10["Obstacle_M_L"] == {"correct": 0.5, "wrong": 0.5, "none": 0.0}
+    assert at10["Obstacle_M_M"] == {"correct": 0.0, "wrong": 0.5, "none": 0.5}
+    ml = out["criterion"]["Obstacle_M_L"]
+    assert ml["per_seed"] == [6, None]
+    assert ml["survival"][:5] == [1.0] * 5 and ml["survival"][5:] == [0.5] * 5
+    assert out["criterion"]["Obstacle_M_M"]["per_seed"] == [None, None]  # no correct answer
+
+
+def test_paired_table_has_every_pair_once_per_horizon() -> None:
+    row = {"seeds": 3, "episodes": 10, "seed_ids": [0, 1, 2]}
+    summary = {
+        "a": {**row, "success_by_seed": [[1] * 10, [1] * 10, [0] * 10]},
+        "b": {**row, "success_by_seed": [[0] * 10, [1] * 10, [0] * 10]},
+        "c": {**row, "success_by_seed": [[0] * 10, [0] * 10, [0] * 10]},
+    }
+    table = paired_table(summary)
+    assert set(table) == {"a - b", "a - c", "b - c"}
+    assert set(table["a - b"]) == {"1-10", "all"}  # 1-50 is longer than the run
+    assert table["a - c"]["all"]["mean"] == pytest.approx(2 / 3)
+    assert table["a - b"]["all"]["seeds"] == 3
+
+
+def test_episodes_to_criterion_by_hand() -> None:
+    assert episodes_to_criterion([True] * 8 + [False] * 2) == 10
+    assert episodes_to_criterion([False] * 5 + [True] * 9) == 13
+    assert episodes_to_criterion([True, False] * 10) is None
