@@ -39,13 +39,13 @@ if "$PY" -c 'import torch, sys; sys.exit(torch.version.cuda is not None)' 2>/dev
     say "a CPU-only torch is installed already"
 elif [[ -n "$wheel" ]]; then
     say "torch from $wheel"
-    "$UV" pip install --quiet --python "$PY" --constraint "$pins" "$wheel"
+    "$UV" pip install --quiet --compile-bytecode --python "$PY" --constraint "$pins" "$wheel"
 else
     say "no CPU torch wheel for $tag in $TORCH_WHEELS: torch from $TORCH_CPU_INDEX"
-    "$UV" pip install --quiet --python "$PY" --index-url "$TORCH_CPU_INDEX" torch
+    "$UV" pip install --quiet --compile-bytecode --python "$PY" --index-url "$TORCH_CPU_INDEX" torch
 fi
 say "stable-baselines3 and the rest of the extra at uv.lock's versions"
-"$UV" pip install --quiet --python "$PY" --requirement "$pins"
+"$UV" pip install --quiet --compile-bytecode --python "$PY" --requirement "$pins"
 "$PY" - <<'EOF'
 import importlib.metadata as md
 import sys
