@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install run test test-fast lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-baselines run test test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | test | test-fast | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | test | test-fast | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -20,6 +20,14 @@ $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
 	@touch $@
 
 install: $(BIN)/srlab
+
+# The optional srlab[baselines] extra (stable-baselines3, DQN and PPO) on a CPU-only torch,
+# into .venv, without CUDA's ~5 GB: torch from a CPU wheel in $$TORCH_WHEELS (default pip's
+# find-links, /opt/wheels) or PyTorch's CPU index, then the extra at uv.lock's versions.
+# `make test` never installs it (its baseline tests skip); a later `make install` that
+# re-syncs removes it again.
+install-baselines: install
+	bash scripts/install-baselines.sh $(UV) $(BIN)/python
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install
@@ -42,6 +50,9 @@ test: lint typecheck
 
 test-fast: install
 	$(BIN)/pytest tests/core -q
+
+test-baselines: install-baselines
+	$(BIN)/pytest tests/baselines -q
 
 format: install
 	$(BIN)/ruff format .
