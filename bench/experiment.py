@@ -8,7 +8,10 @@ bare pymunk stepping (eight ray casts, the same track) measured in the same run:
 - the headline experiment: every condition but the deep baselines (innate, delayed, dp,
   rp, kp, sonar, expert, qlambda, qlambda-hybrid), both signal settings, 20 seeds x 50
   episodes, with 10 episodes of held-out evaluation and of the camera-only transfer test
-  per task, and the placement probe computed afresh (goal: at most 120 s).
+  per task, and the placement probe computed afresh (goal: at most 120 s);
+- with the srlab[baselines] extra installed (``make install-baselines``), the deep
+  baselines' extra time: dqn and ppo, the same seeds, episodes and evaluation, both
+  signal settings (no goal: printed so that it is known).
 """
 
 from __future__ import annotations
@@ -19,13 +22,16 @@ import time
 from collections.abc import Sequence
 
 from bench.ticks import bare_pymunk, measure
+from core import baselines
 from core.experiment import TaskResult, run_experiment
 from core.probe import probe
-from core.setup import Setup
+from core.setup import Setup, SignalMode
 
 PAPER = ["innate", "delayed", "dp", "rp", "kp", "qlambda"]
+DEEP = ["dqn", "ppo"]
 HEADLINE = ["innate", "delayed", "dp", "rp", "kp", "sonar", "expert", "qlambda", "qlambda-hybrid"]
 EVAL_EPISODES = 10
+SIGNALS: tuple[SignalMode, ...] = ("given", "learned")
 
 
 def _report(title: str, results: Sequence[TaskResult], elapsed: float, jobs: int, bare: float,
@@ -47,7 +53,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--only", choices=["paper", "headline"], help="run one of the two")
+    parser.add_argument(
+        "--only", choices=["paper", "headline", "deep"], help="run one of the three"
+    )
     args = parser.parse_args()
     seeds = list(range(args.seeds))
 
@@ -64,7 +72,7 @@ def main() -> None:
     if args.only in (None, "headline"):
         started = time.perf_counter()
         results = []
-        for signal in ("given", "learned"):
+        for signal in SIGNALS:
             results += run_experiment(
                 HEADLINE, seeds, args.episodes, args.jobs, setup=Setup(signal=signal),
                 eval_episodes=EVAL_EPISODES, tuned=True,
@@ -79,6 +87,25 @@ def main() -> None:
             results, elapsed, args.jobs, bare, 120,
         )  # fmt: skip
         print(f"  of which the probe    {time.perf_counter() - probed:8.1f} s")
+    if args.only in (None, "deep"):
+        if not baselines.available():
+            print(f"deep baselines: skipped, the extra is not installed ({baselines.INSTALL_HINT})")
+            return
+        started = time.perf_counter()
+        results = []
+        for signal in SIGNALS:
+            results += run_experiment(
+                DEEP, seeds, args.episodes, args.jobs, setup=Setup(signal=signal),
+                eval_episodes=EVAL_EPISODES, tuned=True,
+            )  # fmt: skip
+        elapsed = time.perf_counter() - started
+        print(
+            f"the deep baselines' extra time: {', '.join(DEEP)} x 2 signal settings x "
+            f"{args.seeds} seeds x {args.episodes} episodes, with the same evaluation"
+        )
+        print(f"  wall time             {elapsed:8.1f} s   (no goal)")
+        per_task = elapsed * args.jobs / len(results)
+        print(f"  per task (one core)   {per_task:8.1f} s")
 
 
 if __name__ == "__main__":

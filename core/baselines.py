@@ -202,6 +202,23 @@ class EpisodeRecorder(gym.Wrapper[Observation, np.int64, Observation, np.int64])
         return obs, float(reward), terminated, truncated, info
 
 
+def available() -> bool:
+    """Whether the ``srlab[baselines]`` extra (stable-baselines3 and torch) is installed."""
+    try:
+        _require()
+    except BaselinesUnavailableError:
+        return False
+    return True
+
+
+def answer(model: BaseAlgorithm, observation: Observation, defer_action: int) -> int:
+    """The behaviour the trained policy gives for `observation` (-1: it defers)."""
+    with _one_thread():
+        action, _ = model.predict(observation, deterministic=True)
+    a = int(action)
+    return -1 if a == defer_action else a
+
+
 def _require() -> None:
     try:
         import stable_baselines3  # noqa: F401
@@ -277,11 +294,13 @@ def learn(
     *,
     env: AmigoTrackEnv | None = None,
     on_episode: Callable[[EpisodeSummary], None] | None = None,
+    on_model: Callable[[BaseAlgorithm], None] | None = None,
 ) -> tuple[list[EpisodeSummary], BaseAlgorithm, int]:
     """Train `algo` for `episodes` episodes of the track from `seed`.
 
     Returns the episodes' summaries (including those the learner had no decision in),
-    the trained model, and the ticks of those episodes.
+    the trained model, and the ticks of those episodes. `on_model` is given the model
+    once it is built, before training, so that `on_episode` can look at it.
     """
     if episodes < 1:
         raise ValueError("episodes must be >= 1")
@@ -289,6 +308,8 @@ def learn(
     recorder = EpisodeRecorder(env or AmigoTrackEnv(prior="kp", defer=True), on_episode)
     with _one_thread():
         model = make_model(algo, recorder, seed, cfg)
+        if on_model is not None:
+            on_model(model)
 
         def more(_locals: dict[str, Any], _globals: dict[str, Any]) -> bool:
             return len(recorder.episodes) < episodes

@@ -24,7 +24,8 @@ class Condition:
         learnable_sensors: the logical sensors whose stimuli are explored and learned.
         trainer: the reinforcement program that rewards responses at once (None: none).
         kp: whether knowledge propagation runs.
-        agent: ``brain`` (the paper's architecture) or ``qlambda`` (the baseline learner).
+        agent: ``brain`` (the paper's architecture), ``qlambda`` (the tabular baseline), or
+            ``dqn`` / ``ppo`` (stable-baselines3's, the ``srlab[baselines]`` extra).
         extra_networks: knowledge sets added on top of `network` (the signal's responses
             when they are given, see `core.setup.Setup`).
         hybrid: for an outside learner (``agent`` other than ``brain``): it may defer to the
@@ -133,6 +134,28 @@ CONDITIONS: dict[str, Condition] = {
             hybrid=True,
         ),
         Condition(
+            "dqn",
+            "stable-baselines3's DQN on srlab/AmigoTrack-v0 (the srlab[baselines] extra): "
+            "kp's design kept, DQN answering what it leaves open, free to defer to it, from "
+            "the same delayed reward.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            agent="dqn",
+            hybrid=True,
+        ),
+        Condition(
+            "ppo",
+            "stable-baselines3's PPO on srlab/AmigoTrack-v0 (the srlab[baselines] extra), "
+            "as dqn: kp's design kept, free to defer to it, the same delayed reward.",
+            network="kp",
+            learning=True,
+            success_reward=1.0,
+            agent="ppo",
+            hybrid=True,
+        ),
+        Condition(
             "expert",
             "A hand-designed correct response to every stimulus, no learning.",
             network="expert",
@@ -150,6 +173,10 @@ CONDITIONS: dict[str, Condition] = {
         ),
     )
 }
+
+
+DEEP_AGENTS = ("dqn", "ppo")
+"""The agents of the deep baselines (`core.baselines`), which need the optional extra."""
 
 
 def get_condition(name: str) -> Condition:

@@ -31,3 +31,7 @@ class StorageError(CoreError):
 
 class RunStateError(CoreError):
     """A command that does not fit the run's state (a reward to a run that is not running)."""
+
+
+class ExtraMissingError(CoreError):
+    """A condition needs an optional extra that is not installed (e.g. srlab[baselines])."""

@@ -7,7 +7,7 @@ from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -23,13 +23,16 @@ from core.analysis import (
 )
 from core.brain.catalog import Behaviour, Catalog, Stimulus
 from core.brain.network import BehaviourNetwork
-from core.conditions import Condition, get_condition
-from core.errors import UnknownNameError
+from core.conditions import DEEP_AGENTS, Condition, get_condition
+from core.errors import ExtraMissingError, UnknownNameError
 from core.events import Outcome
-from core.params import Params, configure, qlambda_config, tuned_params
+from core.params import Params, baseline_params, configure, qlambda_config, tuned_params
 from core.qlambda import WatkinsQLambda, run_qlambda
 from core.runner import EpisodeSummary, run
 from core.setup import Setup
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 CAMERA_SENSOR = "camera_obstacle"
 DEFAULT_SETUP = Setup()
@@ -90,12 +93,23 @@ class TaskResult:
 
 
 def parse_conditions(text: str) -> list[str]:
-    """A comma-separated list of known condition names, in order, without repeats."""
+    """A comma-separated list of known condition names, in order, without repeats.
+
+    A deep baseline (dqn, ppo) without the srlab[baselines] extra installed is an error
+    here, before anything runs.
+    """
     names = [n.strip() for n in text.split(",") if n.strip()]
     if not names:
         raise UnknownNameError("no condition given")
-    for n in names:
-        get_condition(n)
+    deep = [n for n in names if get_condition(n).agent in DEEP_AGENTS]
+    if deep:
+        from core import baselines
+
+        if not baselines.available():
+            raise ExtraMissingError(
+                f"{', '.join(deep)} need{'s' if len(deep) == 1 else ''} the srlab[baselines] "
+                f"extra (stable-baselines3 on a CPU-only torch): run `{baselines.INSTALL_HINT}`"
+            )
     return list(dict.fromkeys(names))
 
 
@@ -122,6 +136,8 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
         condition = setup.condition(get_condition(task.condition))
         if condition.agent == "qlambda":
             return _run_qlambda_task(task, catalog, condition)
+        if condition.agent in DEEP_AGENTS:
+            return _run_deep_task(task, catalog, condition)
         return _run_brain_task(task, catalog, condition)
     except Exception as e:  # a failed task is reported with its seed, never lost silently
         return TaskResult(task, error=f"{type(e).__name__}: {e}\n{traceback.format_exc()}")
@@ -245,6 +261,62 @@ def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> Tas
     return TaskResult(
         task, tuple(episodes), ticks, answers=tuple(answers), evaluation=evaluation,
         transfer=transfer, ticks_by_origin=dict(sim.ticks_by_origin),
+        camera_met={
+            st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id], 0, 0)
+            for st in camera
+            if sim.encounters[st.id]
+        },
+    )  # fmt: skip
+
+
+def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
+    """A deep baseline (DQN or PPO, `core.baselines`) trained and evaluated like the others."""
+    from core import baselines
+    from core.envs import AmigoTrackEnv
+    from core.evaluation import eval_seed
+
+    algo: baselines.Algo = "dqn" if condition.agent == "dqn" else "ppo"
+    config = baselines.BaselineConfig.with_params(algo, baseline_params(condition, task.params))
+    setup = task.setup
+
+    def env_for(prior: str) -> AmigoTrackEnv:
+        return baselines.baseline_env(setup, prior, defer=condition.hybrid)
+
+    env = env_for(condition.network)
+    camera = [st for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
+    alone = [_alone(catalog, st) for st in camera]
+    answers: list[tuple[str | None, ...]] = []
+    model_ref: list[BaseAlgorithm] = []
+
+    def after_episode(_: EpisodeSummary) -> None:
+        model = model_ref[0]
+        answers.append(
+            tuple(
+                _name(catalog.behaviours, baselines.answer(model, obs, env.defer_action))
+                for obs in alone
+            )
+        )
+
+    episodes, model, ticks = baselines.learn(
+        algo, task.seed, task.episodes, config, env=env, on_episode=after_episode,
+        on_model=model_ref.append,
+    )  # fmt: skip
+    evaluation: tuple[EpisodeSummary, ...] = ()
+    transfer: tuple[EpisodeSummary, ...] = ()
+    if task.eval_episodes:
+        seeds = (eval_seed(task.seed),)
+        evaluation = tuple(
+            baselines.evaluate(model, lambda: env_for(condition.network), seeds,
+                               task.eval_episodes)
+        )  # fmt: skip
+        transfer = tuple(
+            baselines.evaluate(model, lambda: env_for(_without_sonar_set(condition.network)),
+                               seeds, task.eval_episodes)
+        )  # fmt: skip
+    sim = env.simulation
+    return TaskResult(
+        task, tuple(episodes), ticks, answers=tuple(answers[: task.episodes]),
+        evaluation=evaluation, transfer=transfer, ticks_by_origin=dict(sim.ticks_by_origin),
         camera_met={
             st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id], 0, 0)
             for st in camera

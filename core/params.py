@@ -37,7 +37,7 @@ def _learns(c: Condition) -> bool:
 
 
 def _explores(c: Condition) -> bool:
-    return c.learning
+    return c.learning and c.agent != "ppo"  # PPO explores by its stochastic policy
 
 
 def _brain(c: Condition) -> bool:
@@ -50,6 +50,22 @@ def _kp(c: Condition) -> bool:
 
 def _qlambda(c: Condition) -> bool:
     return c.agent == "qlambda"
+
+
+def _td(c: Condition) -> bool:
+    return c.agent in ("qlambda", "dqn", "ppo")
+
+
+def _deep(c: Condition) -> bool:
+    return c.agent in ("dqn", "ppo")
+
+
+def _dqn(c: Condition) -> bool:
+    return c.agent == "dqn"
+
+
+def _ppo(c: Condition) -> bool:
+    return c.agent == "ppo"
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,7 +149,7 @@ PARAMETERS: dict[str, Parameter] = {
         Parameter(
             "epsilon",
             "exploration rate (default 0.1)",
-            "float", 0.0, 1.0, True, _explores, "every learning condition, qlambda too",
+            "float", 0.0, 1.0, True, _explores, "every learning condition but ppo",
         ),
         Parameter(
             "threshold",
@@ -162,13 +178,33 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         Parameter(
             "gamma",
-            "Q(lambda)'s discount per decision (default 0.99)",
-            "float", 0.0, 1.0, True, _qlambda, "qlambda",
+            "discount per decision of Q(lambda), DQN and PPO (default 0.99)",
+            "float", 0.0, 1.0, True, _td, "qlambda, dqn, ppo",
         ),
         Parameter(
             "lambda",
             "Q(lambda)'s trace decay (default 0.5)",
             "float", 0.0, 1.0, True, _qlambda, "qlambda",
+        ),
+        Parameter(
+            "learning_rate",
+            "Adam's step size of DQN and PPO (default 5e-4)",
+            "float", 0.0, 1.0, False, _deep, "dqn, ppo",
+        ),
+        Parameter(
+            "target_update_interval",
+            "decisions between DQN's target network copies (default 250)",
+            "int", 1.0, 1e6, True, _dqn, "dqn",
+        ),
+        Parameter(
+            "n_steps",
+            "PPO's rollout length, in decisions (default 256)",
+            "int", 2.0, 1e5, True, _ppo, "ppo",
+        ),
+        Parameter(
+            "ent_coef",
+            "PPO's entropy bonus (default 0.01)",
+            "float", 0.0, 1.0, True, _ppo, "ppo",
         ),
     )
 }  # fmt: skip
@@ -252,6 +288,22 @@ def qlambda_config(
         defer=condition.hybrid,
         per_encounter=condition.hybrid,
     )
+
+
+def baseline_params(
+    condition: Condition, params: Mapping[str, ParamValue] | Params = ()
+) -> dict[str, float]:
+    """A deep baseline's `core.baselines.BaselineConfig` fields with `params` set.
+
+    The condition's exploration rate is DQN's epsilon unless `params` sets it.
+    """
+    values = dict(params)
+    normalise(values)
+    _unused(condition, values)
+    out = {n: float(v) for n, v in values.items()}
+    if condition.agent == "dqn":
+        out.setdefault("epsilon", condition.epsilon)
+    return out
 
 
 @cache

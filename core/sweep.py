@@ -27,6 +27,7 @@ from core.experiment import (
 )
 from core.params import ParameterError, ParamValue, applicable, get_parameter
 from core.setup import Setup
+from core.stats import paired_difference
 
 Point = dict[str, ParamValue]
 Axes = tuple[tuple[str, tuple[ParamValue, ...]], ...]
@@ -190,17 +191,28 @@ def summarise_sweep(sweep: Sweep, results: Sequence[TaskResult]) -> dict[str, An
             if not sweep.applies(name, c):
                 continue
             rows = []
+            by_seed: list[dict[int, dict[str, float]]] = []
             for v in values:
                 at = [p for p in sweep.points() if p[name] == v]
-                per_seed: list[dict[str, float]] = []
+                per_seed: dict[int, dict[str, float]] = {}
                 for s in sweep.seeds:
                     runs = [by_task[sweep.task(p, c, s)] for p in at]
                     if all(r.ok and r.episodes for r in runs):
                         figs = [_per_seed(r) for r in runs]
-                        per_seed.append({f: float(np.mean([x[f] for x in figs])) for f in FIGURES})
+                        per_seed[s] = {f: float(np.mean([x[f] for x in figs])) for f in FIGURES}
                 row: dict[str, Any] = {"value": v}
                 for f in FIGURES:
-                    row[f] = mean_ci([x[f] for x in per_seed])
+                    row[f] = mean_ci([x[f] for x in per_seed.values()])
+                if by_seed:
+                    # Against the first value, seed by seed (the same episodes on a seed).
+                    both = [s for s in sweep.seeds if s in per_seed and s in by_seed[0]]
+                    if both:
+                        d = paired_difference(
+                            [per_seed[s]["success_rate"] for s in both],
+                            [by_seed[0][s]["success_rate"] for s in both],
+                        )
+                        row["success_vs_first"] = {**d.diff.as_dict(), "p": d.p}
+                by_seed.append(per_seed)
                 rows.append(row)
             table[c] = rows
         by_parameter[name] = {

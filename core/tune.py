@@ -40,6 +40,16 @@ _QLAMBDA: Axes = (
     ("lambda", (0.5, 0.8, 0.95)),
     ("epsilon", (0.05, 0.1, 0.2)),
 )
+_DQN: Axes = (
+    ("learning_rate", (2.5e-4, 5e-4, 1e-3)),
+    ("target_update_interval", (100, 250, 1000)),
+    ("epsilon", (0.05, 0.1, 0.2)),
+)
+_PPO: Axes = (
+    ("learning_rate", (2.5e-4, 5e-4, 1e-3)),
+    ("n_steps", (128, 256, 512)),
+    ("ent_coef", (0.0, 0.01, 0.05)),
+)
 GRIDS: dict[str, Axes] = {
     "delayed": _BRAIN,
     "dp": _BRAIN,
@@ -48,6 +58,8 @@ GRIDS: dict[str, Axes] = {
     "kp": _KP,
     "qlambda": _QLAMBDA,
     "qlambda-hybrid": _QLAMBDA,
+    "dqn": _DQN,
+    "ppo": _PPO,
 }
 """Each learner's grid: three of its parameters, three values each (27 points)."""
 
@@ -101,23 +113,50 @@ def tune(
     return out
 
 
-def tuned_toml(best: Mapping[str, TunedPoint], command: str, setup: Setup) -> str:
-    """`core/data/tuned.toml`'s text for the winners."""
-    lines = [
-        "# Each learner's parameters as tuned by `srlab tune` (see core/tune.py): the best of",
-        "# a 27-point grid on the tuning seeds, the same budget for every learner. Written by",
-        f"#   {command}",
-        f"# in world {setup.world_name}, sensors {setup.sensors_name}, signal {setup.signal}.",
-        "# `srlab experiment` runs with these unless given --untuned.",
-        "",
-    ]
+TUNED_HEADER = (
+    "# Each learner's parameters as tuned by `srlab tune` (see core/tune.py): the best of\n"
+    "# a 27-point grid on the tuning seeds, the same budget for every learner.\n"
+    "# `srlab experiment` runs with these unless given --untuned.\n"
+)
+
+
+def tuned_toml(
+    best: Mapping[str, TunedPoint], command: str, setup: Setup, previous: str = ""
+) -> str:
+    """`core/data/tuned.toml`'s text for the winners.
+
+    Each learner's section says which command tuned it; the sections of `previous` (the
+    file's text before) for learners not tuned now are kept as they were, so learners can
+    be tuned in separate runs (the deep baselines need the srlab[baselines] extra).
+    """
+    kept = {c: text for c, text in _sections(previous).items() if c not in best}
+    lines = [TUNED_HEADER]
+    for text in kept.values():
+        lines.append(text.rstrip("\n") + "\n")
     for c, p in best.items():
         lines.append(f"[{toml_key(c)}]")
-        lines.append(f"# mean success over the tuning seeds: {p.success:.3f}")
+        lines.append(f"# by {command}")
+        lines.append(
+            f"# in world {setup.world_name}, sensors {setup.sensors_name}, signal "
+            f"{setup.signal}; mean success over the tuning seeds: {p.success:.3f}"
+        )
         for k, v in p.point.items():
             lines.append(f"{toml_key(k)} = {str(v).lower() if isinstance(v, bool) else v!r}")
         lines.append("")
     return "\n".join(lines)
+
+
+def _sections(text: str) -> dict[str, str]:
+    """The `[learner]` sections of a tuned.toml text, by learner, each with its lines."""
+    out: dict[str, str] = {}
+    name: str | None = None
+    for line in text.splitlines(keepends=True):
+        if line.startswith("["):
+            name = line.strip()[1:-1].strip('"')
+            out[name] = ""
+        if name is not None:
+            out[name] += line
+    return out
 
 
 def toml_key(name: str) -> str:

@@ -6,7 +6,11 @@ last `--window` episodes, the mean over seeds with its 95% bootstrap band
 (`core.stats.bootstrap_mean`). Needs the srlab[baselines] extra (``make
 install-baselines``):
 
-    .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 2000 --seeds 5
+    .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 1000 --seeds 3 \
+        --signal given
+
+(what ``scripts/results.sh`` runs). Without the extra, ``--learners`` without dqn and ppo
+still runs.
 
 It writes ``curve.png`` and ``curve.json`` (every episode's success per learner and seed,
 and the seconds each run took) into the folder, and prints each learner's success over
@@ -28,37 +32,41 @@ from typing import Any
 import matplotlib
 import numpy as np
 
-from core.baselines import ALGOS, Algo, baseline_env, run_baseline
+from core.errors import ExtraMissingError
 from core.events import Outcome
-from core.experiment import Task, run_task
-from core.qlambda import QLambdaConfig, run_qlambda
+from core.experiment import Task, parse_conditions, run_task
+from core.params import tuned_params
 from core.setup import SIGNAL_MODES, Setup
 from core.stats import bootstrap_mean
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # after choosing the headless backend
 
-LEARNERS = ("dqn", "ppo", "qlambda", "kp")
-COLOURS = {"dqn": "tab:red", "ppo": "tab:purple", "qlambda": "tab:blue", "kp": "tab:green"}
+LEARNERS = ("dqn", "ppo", "qlambda", "qlambda-hybrid", "kp", "sonar")
+COLOURS = {
+    "dqn": "tab:red",
+    "ppo": "tab:purple",
+    "qlambda": "tab:blue",
+    "qlambda-hybrid": "tab:cyan",
+    "kp": "tab:green",
+    "sonar": "tab:olive",
+}
 LATE = 100
 
 
 def train(learner: str, seed: int, episodes: int, setup: Setup) -> tuple[list[bool], float]:
-    """One learner's episodes' successes on one seed, and the seconds it took."""
+    """One learner's episodes' successes on one seed, and the seconds it took.
+
+    Every learner runs as its `srlab experiment` condition does, with its tuned
+    parameters (core/data/tuned.toml).
+    """
     started = time.perf_counter()
-    if learner in ALGOS:
-        algo: Algo = "dqn" if learner == "dqn" else "ppo"
-        eps = list(run_baseline(algo, seed, episodes, setup).episodes)
-    elif learner == "qlambda":
-        config = QLambdaConfig()
-        env = baseline_env(setup, prior=config.prior, defer=False)
-        eps, _, _ = run_qlambda(seed, episodes, config, env=env)
-    else:
-        result = run_task(Task(learner, seed, episodes, setup=setup))
-        if not result.ok:
-            raise RuntimeError(f"{learner} seed {seed}: {result.error}")
-        eps = list(result.episodes)
-    return [e.outcome is Outcome.SUCCESS for e in eps], time.perf_counter() - started
+    task = Task(learner, seed, episodes, params=tuned_params(learner), setup=setup)
+    result = run_task(task)
+    if not result.ok:
+        raise RuntimeError(f"{learner} seed {seed}: {result.error}")
+    successes = [e.outcome is Outcome.SUCCESS for e in result.episodes]
+    return successes, time.perf_counter() - started
 
 
 def _train(args: tuple[str, int, int, Setup]) -> tuple[list[bool], float]:
@@ -113,6 +121,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     for n in learners:
         if n not in LEARNERS:
             parser.error(f"unknown learner {n!r} (known: {', '.join(LEARNERS)})")
+    try:
+        parse_conditions(",".join(learners))
+    except ExtraMissingError as e:
+        parser.error(str(e))
     setup = Setup(args.world, args.sensors, args.signal).resolved()
     seeds = list(range(args.seeds))
     tasks = [(n, s, args.episodes, setup) for n in learners for s in seeds]

@@ -554,7 +554,8 @@ def _tune(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
         out.write(f"best for {c}: {describe(p.point)} ({p.success:.1%})\n")
     if args.write:
         path = data_dir() / "tuned.toml"
-        path.write_text(tuned_toml(best, command, setup))
+        previous = path.read_text() if path.is_file() else ""
+        path.write_text(tuned_toml(best, command, setup, previous))
         out.write(f"wrote {path}\n")
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

@@ -16,7 +16,7 @@ import numpy as np
 from core.experiment import TaskResult
 from core.params import Params, ParamValue
 from core.sweep import Sweep, format_value, point_label
-from server.report import ROLLING, _fmt, clean_json
+from server.report import ROLLING, _diff, _fmt, clean_json
 
 
 def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
@@ -172,7 +172,9 @@ def sweep_markdown(
         "## Each parameter's effect",
         "",
         "Per value: the mean over seeds (± 95% CI) of each seed's figures averaged over the "
-        "grid points with that value, so the other swept parameters are averaged out.",
+        "grid points with that value, so the other swept parameters are averaged out; and "
+        "its difference from the first value's success, seed by seed, in points with its 95% "
+        "bootstrap interval and sign-flip p.",
     ]
     for name in sweep.names:
         entry = summary["by_parameter"][name]
@@ -182,15 +184,15 @@ def sweep_markdown(
             "",
             f"{entry['description'][:1].upper()}{entry['description'][1:]}.",
             "",
-            f"| {name} | condition | success, all episodes | success, last 10 | "
-            "collisions / episode | violations / episode |",
-            "|---|---|---|---|---|---|",
+            f"| {name} | condition | success, all episodes | minus the first value, paired | "
+            "success, last 10 | collisions / episode | violations / episode |",
+            "|---|---|---|---|---|---|---|",
         ]
         for cond, rows in entry["conditions"].items():
             for r in rows:
                 lines.append(
                     f"| {format_value(r['value'])} | {cond} | "
-                    f"{_fmt(r['success_rate'], pct=True)} | "
+                    f"{_fmt(r['success_rate'], pct=True)} | {_diff(r.get('success_vs_first'))} | "
                     f"{_fmt(r['success_last10'], pct=True)} | "
                     f"{_fmt(r['collisions_per_episode'])} | {_fmt(r['violations_per_episode'])} |"
                 )

@@ -71,3 +71,22 @@ def test_parameters_out_of_place_or_bounds_are_refused(
 def test_an_unknown_algorithm_is_refused() -> None:
     with pytest.raises(ValueError, match="unknown algorithm 'a2c'"):
         run_baseline("a2c", 0, 1, Setup())  # type: ignore[arg-type]
+
+
+def test_a_deep_condition_without_the_extra_is_refused_before_anything_runs(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from core.errors import ExtraMissingError
+    from core.experiment import parse_conditions
+    from server.cli import main
+
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)
+    with pytest.raises(ExtraMissingError, match=r"dqn, ppo need the srlab\[baselines\] extra"):
+        parse_conditions("kp,dqn,ppo")
+    assert parse_conditions("kp,sonar") == ["kp", "sonar"]
+    with pytest.raises(SystemExit) as e:
+        main(["experiment", "--conditions", "kp,dqn", "--seeds", "1", "--episodes", "1"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "dqn needs the srlab[baselines] extra" in err and INSTALL_HINT in err
+    assert "Traceback" not in err

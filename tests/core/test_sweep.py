@@ -127,6 +127,7 @@ def test_per_value_figures_average_the_other_parameters_then_the_seeds(
     eps = summary["by_parameter"]["epsilon"]
     assert eps["ignored_by"] == []
     assert [r["value"] for r in eps["conditions"]["kp"]] == [0.0, 1.0]
+    seen: list[list[float]] = []
     for i, value in enumerate((0.0, 1.0)):
         per_seed = []
         for seed in (0, 1):
@@ -138,6 +139,13 @@ def test_per_value_figures_average_the_other_parameters_then_the_seeds(
         row = eps["conditions"]["kp"][i]
         assert row["success_rate"]["mean"] == pytest.approx(sum(per_seed) / 2)
         assert row["success_rate"]["n"] == 2
+        seen.append(per_seed)
+    first, second = eps["conditions"]["kp"]
+    assert "success_vs_first" not in first
+    diffs = [b - a for a, b in zip(*seen, strict=True)]
+    assert second["success_vs_first"]["mean"] == pytest.approx(sum(diffs) / 2)
+    assert second["success_vs_first"]["n"] == 2
+    assert 0.0 <= second["success_vs_first"]["p"] <= 1.0
     eta = summary["by_parameter"]["eta"]
     assert list(eta["conditions"]) == ["kp"]
     assert eta["ignored_by"] == ["qlambda"]

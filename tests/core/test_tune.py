@@ -45,6 +45,22 @@ def test_tune_ranks_points_best_first_and_the_file_reads_back() -> None:
     assert "qlambda-hybrid" in raw
 
 
+def test_retuning_some_learners_keeps_the_others_sections() -> None:
+    first = tuned_toml(
+        {"kp": TunedPoint({"eta": 0.3}, 0.8, (0.8,)), "rp": TunedPoint({"eta": 0.05}, 0.9, (0.9,))},
+        "srlab tune", Setup(),
+    )  # fmt: skip
+    again = tuned_toml(
+        {"dqn": TunedPoint({"learning_rate": 0.001}, 0.6, (0.6,)),
+         "kp": TunedPoint({"eta": 0.5}, 0.85, (0.85,))},
+        "srlab tune --conditions dqn,kp", Setup(), previous=first,
+    )  # fmt: skip
+    raw = tomllib.loads(again)
+    assert raw == {"kp": {"eta": 0.5}, "rp": {"eta": 0.05}, "dqn": {"learning_rate": 0.001}}
+    assert "# by srlab tune --conditions dqn,kp" in again
+    assert again.count("[rp]") == 1 and again.count("[kp]") == 1
+
+
 def test_the_shipped_tuned_parameters_are_valid_and_only_for_learners() -> None:
     for name, params in tuned().items():
         assert CONDITIONS[name].learning
