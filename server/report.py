@@ -262,7 +262,7 @@ def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]
         lab for lab in labels if any(lab in s.get("success_horizons", {}) for s in summary.values())
     ]
     evaluated = any("evaluation" in s for s in summary.values())
-    head = ["condition", *(f"success, episodes {lab}" for lab in present), "trend / 10 episodes"]
+    head = ["condition", *(f"success, {_horizon(lab)}" for lab in present), "trend / 10 episodes"]
     if evaluated:
         head += ["held-out, frozen", "held-out, camera only"]
     lines = [
@@ -318,6 +318,11 @@ def _failure_lines(summary: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def _horizon(label: str) -> str:
+    """A horizon's column title: ``episodes 1-10`` or ``all episodes``."""
+    return "all episodes" if label == "all" else f"episodes {label}"
+
+
 def _paired_lines(summary: dict[str, Any]) -> list[str]:
     """Every pair of conditions, paired by seed, per horizon."""
     table = paired_table(summary)
@@ -332,7 +337,7 @@ def _paired_lines(summary: dict[str, Any]) -> list[str]:
         "with its 95% bootstrap interval and the sign-flip test's two-sided p of no "
         "difference. `kp - sonar` is what propagation adds (`sonar` is kp without it).",
         "",
-        "| pair | " + " | ".join(f"episodes {h}" for h in horizons) + " |",
+        "| pair | " + " | ".join(_horizon(h) for h in horizons) + " |",
         "|---|" + "---|" * len(horizons),
     ]
     for pair, row in table.items():
@@ -525,20 +530,22 @@ def _met_lines(summary: dict[str, Any], catalog: Catalog) -> list[str]:
         "Encounters per seed (times the stimulus became active) over the whole run, mean "
         "over seeds, and in brackets the success rate of the episodes it was met in, all "
         "seeds together: a pair can only be learned for a stimulus the robot meets, and "
-        "from a delayed reward only where the lap succeeds.",
+        "from a delayed reward only where the lap succeeds. (`-`: not recorded for the "
+        "learners that run through the Gymnasium environment.)",
         "",
         "| stimulus | " + " | ".join(n for n, _ in met) + " |",
         "|---|" + "---|" * len(met),
     ]
     for stim in _camera_names(catalog):
-        cells = [
-            f"{m[stim]['encounters_per_seed']:.1f} ({m[stim]['success_when_met']:.0%})"
-            if stim in m
-            else "0"
-            for _, m in met
-        ]
+        cells = [_met_cell(m[stim]) if stim in m else "0" for _, m in met]
         lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
     return [*lines, ""]
+
+
+def _met_cell(m: dict[str, float]) -> str:
+    rate = m["success_when_met"]
+    won = "-" if rate is None or math.isnan(rate) else f"{rate:.0%}"
+    return f"{m['encounters_per_seed']:.1f} ({won})"
 
 
 def summary_markdown(
