@@ -295,10 +295,14 @@ def summarise(
             "camera_stimuli_met": _camera_met(rs),
         }
         if any(r.evaluation for r in rs):
+            frozen = [_rate_of(r.evaluation) for r in rs]
+            camera_only = [_rate_of(r.transfer) for r in rs]
             summary["evaluation"] = {
-                "frozen": mean_ci([_rate_of(r.evaluation) for r in rs]),
-                "camera_only": mean_ci([_rate_of(r.transfer) for r in rs]),
+                "frozen": mean_ci(frozen),
+                "camera_only": mean_ci(camera_only),
                 "episodes": len(rs[0].evaluation),
+                "frozen_by_seed": frozen,
+                "camera_only_by_seed": camera_only,
             }
         if camera and correct is not None:
             summary["correctness"] = correctness(rs, camera, correct)
@@ -321,25 +325,42 @@ def paired_against(
     }
 
 
-def paired(
-    summary: Mapping[str, Any], a: str, b: str, horizon: int | None = None
-) -> dict[str, float] | None:
-    """Condition `a`'s success minus `b`'s over the first `horizon` episodes, seed by seed.
+HELD_OUT = (("held-out", "frozen_by_seed"), ("camera only", "camera_only_by_seed"))
+"""The held-out figures compared seed by seed: their labels and per-seed keys."""
 
-    None when the two share fewer than two seeds.
+
+def _per_seed(s: Mapping[str, Any], horizon: int | None, key: str | None) -> dict[int, float]:
+    """A condition's figure per seed id: success over a horizon, or a held-out rate."""
+    if key is None:
+        values = [float(np.mean(row[:horizon])) for row in s["success_by_seed"]]
+    else:
+        values = list(s.get("evaluation", {}).get(key, []))
+        if len(values) != len(s["seed_ids"]):
+            return {}
+    return {x: v for x, v in zip(s["seed_ids"], values, strict=True) if not math.isnan(v)}
+
+
+def paired(
+    summary: Mapping[str, Any],
+    a: str,
+    b: str,
+    horizon: int | None = None,
+    held_out: str | None = None,
+) -> dict[str, float] | None:
+    """Condition `a`'s success minus `b`'s, seed by seed.
+
+    Over the first `horizon` training episodes, or with `held_out` (a key of
+    `HELD_OUT`) the held-out evaluation's rate, which every condition runs on the same
+    held-out seed per training seed. None when the two share fewer than two seeds.
     """
     sa, sb = summary.get(a, {}), summary.get(b, {})
     if not sa.get("seeds") or not sb.get("seeds"):
         return None
-    mine = dict(zip(sa["seed_ids"], sa["success_by_seed"], strict=True))
-    theirs = dict(zip(sb["seed_ids"], sb["success_by_seed"], strict=True))
+    mine, theirs = _per_seed(sa, horizon, held_out), _per_seed(sb, horizon, held_out)
     seeds = [x for x in mine if x in theirs]
     if len(seeds) < 2:
         return None
-    d = paired_difference(
-        [float(np.mean(mine[x][:horizon])) for x in seeds],
-        [float(np.mean(theirs[x][:horizon])) for x in seeds],
-    )
+    d = paired_difference([mine[x] for x in seeds], [theirs[x] for x in seeds])
     return {**d.diff.as_dict(), "p": d.p, "seeds": len(seeds)}
 
 
@@ -355,6 +376,10 @@ def paired_table(summary: Mapping[str, Any]) -> dict[str, dict[str, dict[str, fl
                 if h is not None and h > n_ep:
                     continue
                 d = paired(summary, a, b, h)
+                if d is not None:
+                    row[label] = d
+            for label, key in HELD_OUT:
+                d = paired(summary, a, b, held_out=key)
                 if d is not None:
                     row[label] = d
             if row:

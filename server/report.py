@@ -15,9 +15,10 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
-from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HORIZONS, paired_table
+from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
 from core.brain.catalog import Catalog
-from core.experiment import CAMERA_SENSOR, TaskResult, t_quantile_975
+from core.experiment import CAMERA_SENSOR, TaskResult
+from core.stats import bootstrap_mean
 
 # The paper's Table II and the non-zero cells of its Table III (reliability of LTM after
 # 50 episodic trials), keyed by our stimulus and behaviour names.
@@ -79,35 +80,61 @@ def write_runs(path: Path, results: Sequence[TaskResult]) -> None:
 ROLLING = 5
 
 
+CONDITION_COLOURS = {
+    "innate": "#7f7f7f", "unaware": "#c7c7c7", "delayed": "#ff7f0e", "dp": "#2ca02c",
+    "rp": "#d62728", "kp": "#1f3fb4", "sonar": "#8c564b", "reflexes": "#e377c2",
+    "expert": "#000000", "qlambda": "#17becf", "qlambda-hybrid": "#9467bd",
+    "dqn": "#bcbd22", "ppo": "#ff9896",
+}  # fmt: skip
+"""One colour per condition in every plot, so a condition is found at a glance."""
+OUTSIDE_LEARNERS = ("qlambda", "qlambda-hybrid", "dqn", "ppo")
+"""The baselines that learn through the Gymnasium environment, plotted in their own panel."""
+
+
+def _rolling_curve(success_by_seed: list[list[int]]) -> tuple[Any, Any, Any]:
+    """Per episode: the mean over seeds of the rolling success, and its bootstrap band."""
+    runs = np.asarray(success_by_seed, dtype=float)
+    kernel = np.ones(ROLLING)
+    counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
+    rolled = np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
+    band = [bootstrap_mean(rolled[:, i].tolist()) for i in range(rolled.shape[1])]
+    low = np.array([b.low if not math.isnan(b.low) else b.mean for b in band])
+    high = np.array([b.high if not math.isnan(b.high) else b.mean for b in band])
+    return rolled.mean(axis=0), low, high
+
+
 def plot_learning_curves(path: Path, summary: dict[str, Any]) -> None:
-    """Success rate per episode (rolling mean over 5 episodes) over seeds, with a 95% CI band."""
-    fig, ax = plt.subplots(figsize=(9, 5), dpi=110)
-    for name, s in summary.items():
-        if not s.get("seeds"):
-            continue
-        runs = np.asarray(s["success_by_seed"], dtype=float)
-        kernel = np.ones(ROLLING)
-        counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
-        rolled = np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
-        y = rolled.mean(axis=0)
-        n = len(rolled)
-        ci = (
-            t_quantile_975(n - 1) * rolled.std(axis=0, ddof=1) / math.sqrt(n)
-            if n > 1
-            else np.zeros_like(y)
-        )
-        x = np.arange(1, len(y) + 1)
-        (line,) = ax.plot(x, y, label=f"{name} (n={n})", linewidth=1.8)
-        ax.fill_between(
-            x, np.clip(y - ci, 0, 1), np.clip(y + ci, 0, 1), color=line.get_color(), alpha=0.15
-        )
-    ax.set_xlabel("episode")
-    ax.set_ylabel(f"success rate (rolling {ROLLING} episodes)")
-    ax.set_ylim(-0.02, 1.02)
-    ax.axhline(0.8, color="grey", linestyle=":", linewidth=1)
-    ax.set_title("Learning curves: mean over seeds, band = 95% CI")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    """Success per episode (rolling mean over 5 episodes) over seeds, with a 95% bootstrap band.
+
+    With outside learners among the conditions, two panels: the architecture's conditions,
+    and the baselines beside kp and its ablation.
+    """
+    ran = [n for n, s in summary.items() if s.get("seeds")]
+    outside = [n for n in ran if n in OUTSIDE_LEARNERS]
+    panels = [[n for n in ran if n not in OUTSIDE_LEARNERS]]
+    if outside:
+        panels.append([n for n in ran if n in ("kp", "sonar")] + outside)
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(9 if len(panels) == 1 else 14, 5), dpi=110, squeeze=False
+    )
+    titles = ["the architecture's conditions", "the baselines beside kp"]
+    for ax, names, title in zip(axes[0], panels, titles, strict=False):
+        for name in names:
+            s = summary[name]
+            y, low, high = _rolling_curve(s["success_by_seed"])
+            x = np.arange(1, len(y) + 1)
+            colour = CONDITION_COLOURS.get(name)
+            (line,) = ax.plot(x, y, label=f"{name} (n={s['seeds']})", linewidth=1.8, color=colour)
+            ax.fill_between(x, low, high, color=line.get_color(), alpha=0.15)
+        ax.set_xlabel("episode")
+        ax.set_ylim(-0.02, 1.02)
+        ax.axhline(0.8, color="grey", linestyle=":", linewidth=1)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="lower right", fontsize=8)
+        if len(panels) > 1:
+            ax.set_title(title, fontsize=10)
+    axes[0][0].set_ylabel(f"success rate (rolling {ROLLING} episodes)")
+    fig.suptitle("Learning curves: mean over seeds, band = 95% bootstrap interval")
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -319,8 +346,10 @@ def _failure_lines(summary: dict[str, Any]) -> list[str]:
 
 
 def _horizon(label: str) -> str:
-    """A horizon's column title: ``episodes 1-10`` or ``all episodes``."""
-    return "all episodes" if label == "all" else f"episodes {label}"
+    """A horizon's column title: ``episodes 1-10``, ``all episodes``, ``held-out, frozen``."""
+    named = {"all": "all episodes", "held-out": "held-out, frozen",
+             "camera only": "held-out, camera only"}  # fmt: skip
+    return named.get(label, f"episodes {label}")
 
 
 def _paired_lines(summary: dict[str, Any]) -> list[str]:
@@ -328,14 +357,17 @@ def _paired_lines(summary: dict[str, Any]) -> list[str]:
     table = paired_table(summary)
     if not table:
         return []
-    horizons = [label for label, _ in HORIZONS if any(label in r for r in table.values())]
+    labels = [label for label, _ in (*HORIZONS, *HELD_OUT)]
+    horizons = [label for label in labels if any(label in r for r in table.values())]
     lines = [
         "## Paired by seed",
         "",
         "Every pair of conditions: the first's success minus the second's, seed by seed "
         "(every condition meets the same obstacles and lamp cycles on a seed), in points, "
         "with its 95% bootstrap interval and the sign-flip test's two-sided p of no "
-        "difference. `kp - sonar` is what propagation adds (`sonar` is kp without it).",
+        "difference; the held-out columns compare the frozen evaluations, which every "
+        "condition runs on the same held-out seed per training seed. `kp - sonar` is what "
+        "propagation adds (`sonar` is kp without it).",
         "",
         "| pair | " + " | ".join(_horizon(h) for h in horizons) + " |",
         "|---|" + "---|" * len(horizons),

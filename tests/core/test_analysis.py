@@ -72,6 +72,23 @@ def test_paired_table_has_every_pair_once_per_horizon() -> None:
     assert table["a - b"]["all"]["seeds"] == 3
 
 
+def test_held_out_rates_are_paired_by_training_seed() -> None:
+    row = {"seeds": 3, "episodes": 10, "success_by_seed": [[0] * 10] * 3}
+    summary = {
+        "a": {**row, "seed_ids": [0, 1, 2],
+              "evaluation": {"frozen_by_seed": [1.0, 0.5, 0.5],
+                             "camera_only_by_seed": [0.0, 0.0, 1.0]}},
+        "b": {**row, "seed_ids": [2, 1, 0],  # another order: paired by id, not position
+              "evaluation": {"frozen_by_seed": [0.0, 0.5, 0.5],
+                             "camera_only_by_seed": [0.0, 0.0, 0.0]}},
+        "c": {**row, "seed_ids": [0, 1, 2]},  # no held-out evaluation
+    }  # fmt: skip
+    table = paired_table(summary)
+    assert table["a - b"]["held-out"]["mean"] == pytest.approx((0.5 + 0.0 + 0.5) / 3)
+    assert table["a - b"]["camera only"]["mean"] == pytest.approx(1 / 3)
+    assert "held-out" not in table["a - c"] and "all" in table["a - c"]
+
+
 def test_episodes_to_criterion_by_hand() -> None:
     assert episodes_to_criterion([True] * 8 + [False] * 2) == 10
     assert episodes_to_criterion([False] * 5 + [True] * 9) == 13
