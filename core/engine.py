@@ -43,6 +43,7 @@ from core.events import (
     RewardApplied,
     RewardDue,
 )
+from core.latency import LatencyHistogram
 from core.params import applicable, configure
 from core.ports import (
     BehaviourSpec,
@@ -229,25 +230,21 @@ class Subscription:
 
 @dataclass
 class EngineStats:
-    """Pacing and storage figures, for benchmarks and the live view."""
+    """Pacing and storage figures, for benchmarks and the live view.
+
+    The latencies are histograms (`core.latency`): reading them costs the same whatever
+    the run's age.
+    """
 
     ticks: int = 0
     overruns: int = 0
     """Tick periods skipped because a tick ran past its deadline."""
-    lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=200_000))
+    lateness_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """How late each realtime tick started after its deadline."""
-    reward_commit_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    reward_commit_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """Time from applying each reward to committing its learning (queueing included)."""
-    reward_ack_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    reward_ack_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """Time from a trainer's reward arriving to its acknowledgement."""
-
-    @staticmethod
-    def percentile(values: deque[float], q: float) -> float:
-        """The q-th percentile (0-100) of some samples, nan if none."""
-        if not values:
-            return math.nan
-        ordered = sorted(values)
-        return ordered[min(len(ordered) - 1, max(0, math.ceil(q / 100 * len(ordered)) - 1))]
 
 
 @dataclass
@@ -873,7 +870,7 @@ class Engine:
             if clock() < deadline:
                 continue  # woken early (a rate change): sleep what is left
             started = clock()
-            self.stats.lateness_s.append(max(0.0, started - deadline))
+            self.stats.lateness_s.add(max(0.0, started - deadline))
             await self._step()
             period = 1.0 / self._hz
             deadline += period
@@ -1137,7 +1134,7 @@ class Engine:
         done = time.perf_counter()
         for w, reward_id in zip(writes, ids, strict=True):
             w.job.logged_id = reward_id
-            self.stats.reward_commit_s.append(done - w.queued)
+            self.stats.reward_commit_s.add(done - w.queued)
             w.job.committed.set()
 
     async def _log_command(self, job: _CommandJob) -> None:
@@ -1209,7 +1206,7 @@ class Engine:
             job.logged.set()
             self._unacked.remove(job)
             if job.ack is not None and not job.ack.done():
-                self.stats.reward_ack_s.append(time.perf_counter() - job.arrived)
+                self.stats.reward_ack_s.add(time.perf_counter() - job.arrived)
                 job.ack.set_result(
                     RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
                 )

@@ -444,7 +444,7 @@ def test_realtime_pacing_is_measured() -> None:
 
     asyncio.run(drive(engine, script))
     assert len(engine.stats.lateness_s) >= 30
-    assert all(x >= 0.0 for x in engine.stats.lateness_s)
+    assert engine.stats.lateness_s.min >= 0.0
 
 
 @pytest.mark.parametrize("hz", [0.0, 1e-300, 0.05, HZ_MIN - 1e-9, HZ_MAX + 1, math.inf, math.nan])

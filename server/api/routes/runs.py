@@ -10,7 +10,7 @@ from fastapi import APIRouter, HTTPException, Path, Request, status
 from fastapi.responses import RedirectResponse
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import Engine, EngineStats
+from core.engine import Engine
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.trace import unpack
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -39,16 +39,15 @@ def _ms(x: float) -> float | None:
 
 def _live_state(engine: Engine) -> LiveState:
     stats = engine.stats
-    pct = EngineStats.percentile
     return LiveState(
         tick=engine.sim.tick_count,
         episode=max(engine.sim.episode, 0),
         hz=engine.hz,
         ticks_run=stats.ticks,
-        lateness_p99_ms=_ms(pct(stats.lateness_s, 99)),
-        lateness_max_ms=_ms(max(stats.lateness_s, default=math.nan)),
+        lateness_p99_ms=_ms(stats.lateness_s.percentile(99)),
+        lateness_max_ms=_ms(stats.lateness_s.max),
         overruns=stats.overruns,
-        reward_ack_p99_ms=_ms(pct(stats.reward_ack_s, 99)),
+        reward_ack_p99_ms=_ms(stats.reward_ack_s.percentile(99)),
         ticks_by_origin=dict(engine.sim.ticks_by_origin),
     )
 
