@@ -380,6 +380,8 @@ class Engine:
         self.stats = EngineStats()
         self.status = RunStatus.CREATED
         self.error: str | None = None
+        self.end_stored = False
+        """The run has ended and storage holds its final status."""
         self._replay = replay
         t = totals or RunTotals(0, 0, sim.tick_count)
         self._episodes_done = t.episodes
@@ -576,9 +578,12 @@ class Engine:
 
     def subscribe(self, maxsize: int = 256, tick_hz: float = 0.0) -> Subscription:
         """A bounded queue of this run's events (ticks at most `tick_hz` per second)."""
-        sub = Subscription(maxsize, tick_hz)
+        return self.attach(Subscription(maxsize, tick_hz))
+
+    def attach(self, sub: Subscription) -> Subscription:
+        """Feed an existing subscription (one made while the run had no engine)."""
         self._subscribers.append(sub)
-        self._tick_subscribers += tick_hz > 0
+        self._tick_subscribers += sub.tick_period < math.inf
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
@@ -762,6 +767,7 @@ class Engine:
         if persist:
             try:
                 await self._io(self.store.set_status, self.run_id, status, self.error)
+                self.end_stored = True
             except StorageError as e:
                 self.error = self.error or str(e)
                 status = RunStatus.FAILED

@@ -15,6 +15,7 @@ from core.brain.catalog import Catalog
 from core.brain.selection import Selector
 from core.engine import StatusChanged, SubscriptionClosed, TickPublished
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
+from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
 
@@ -123,18 +124,21 @@ async def stream_events(
     """Follow a run live: ticks (throttled), rewards, episode ends, network changes, status.
 
     Server-sent events; each has an `event:` name (tick, reward, episode, association,
-    status) and JSON `data:`. The stream ends when the run does.
+    status) and JSON `data:`. The stream ends when the run does. A run that is not running
+    (created, stopped, interrupted, failed) is followed from its next start; a finished
+    one cannot start again (409).
     """
-    await run_in_threadpool(store.load_run, run_id)
-    engine = engines.get(run_id)
-    if engine is None:
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
-    sub = engine.subscribe(maxsize=512, tick_hz=tick_hz)
-    brain = engine.sim.brain
+    stored = await run_in_threadpool(store.load_run, run_id)
+    if engines.get(run_id) is None and stored.status is RunStatus.FINISHED:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is finished")
+    sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
+    live = engines.get(run_id)
+    now = live.status if live is not None else stored.status
 
     async def events() -> AsyncIterator[bytes]:
+        engine = live
         try:
-            first = {"status": engine.status.value, "run": run_id}
+            first = {"status": now.value, "run": run_id}
             yield f"event: status\ndata: {json.dumps(first)}\n\n".encode()
             while True:
                 try:
@@ -147,13 +151,17 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
+                engine = engine or engines.get(run_id)  # fed from the run's start on
+                if engine is None:
+                    continue
+                brain = engine.sim.brain
                 # The brain's catalogue of now: it grows when KP synthesises a behaviour.
                 encoded = encode(event, brain.catalog, brain.selector)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()
         finally:
-            engine.unsubscribe(sub)
+            engines.unsubscribe(run_id, sub)
 
     return StreamingResponse(
         events(),

@@ -127,8 +127,8 @@ async def create_run(
         sensors=body.sensors or "",
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
-    engine = await io(engines.create, spec, network)
-    return await _run(store, engines, engine.run_id)
+    run_id = await io(engines.create, spec, network)
+    return await _run(store, engines, run_id)
 
 
 @router.get("")
@@ -149,12 +149,12 @@ async def get_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPub
 
 @router.post("/{run_id}/start", dependencies=[WriteGuard])
 async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
-    """Start a created run, or resume a stopped or interrupted one from its checkpoint."""
+    """Start a created run, or resume a stopped or interrupted one from its checkpoint.
+
+    429 when `SRLAB_MAX_RUNS` runs are running: the run stays as it was.
+    """
     await io(store.load_run, run_id)
-    engine = engines.get(run_id)
-    if engine is None or engine.status.value != "created":
-        await io(engines.prepare, run_id)  # from its checkpoint and log
-    engines.start(run_id)
+    await engines.start(run_id)  # from its checkpoint and log
     await engines.started(run_id)
     return await _run(store, engines, run_id)
 
