@@ -128,7 +128,7 @@ async def stream_events(
     (created, stopped, interrupted, failed) is followed from its next start; a finished
     one cannot start again (409).
     """
-    stored = await run_in_threadpool(store.load_run, run_id)
+    stored = await run_in_threadpool(store.run_summary, run_id)
     if engines.get(run_id) is None and stored.status is RunStatus.FINISHED:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is finished")
     sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
