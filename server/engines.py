@@ -23,6 +23,10 @@ class TooManyRunsError(RunStateError):
     """The service runs as many runs as it may."""
 
 
+class TooManyStreamsError(RunStateError):
+    """The service (or the run) has as many live event streams open as it may."""
+
+
 class EngineManager:
     """Owns the `Engine` of every run ticking (or paused) in this process, and no other.
 
@@ -34,7 +38,15 @@ class EngineManager:
     stored is kept until then: it is the truth about how the run ended).
     """
 
-    def __init__(self, store: RunStore, catalog: Catalog, max_runs: int) -> None:
+    def __init__(
+        self,
+        store: RunStore,
+        catalog: Catalog,
+        max_runs: int,
+        *,
+        max_streams: int = 64,
+        max_streams_per_run: int = 16,
+    ) -> None:
         self.store = store
         self.catalog = catalog
         """The shipped catalogue under the default sensor definition (names only: each
@@ -46,6 +58,10 @@ class EngineManager:
         """Runs whose slot is taken while their engine is rebuilt."""
         self._waiting: dict[int, list[Subscription]] = {}
         """Subscriptions to runs not running here: fed from the run's next start."""
+        self.max_streams = max_streams
+        self.max_streams_per_run = max_streams_per_run
+        self._streams: dict[int, set[Subscription]] = {}
+        """The subscriptions `subscribe` gave, by run, until `unsubscribe`."""
 
     def get(self, run_id: int) -> Engine | None:
         """The engine of a run ticking or paused here (or one whose end is not stored)."""
@@ -110,14 +126,35 @@ class EngineManager:
         self._tasks[run_id] = asyncio.create_task(self._run(engine), name=f"run {run_id}")
         return engine
 
+    def streams(self, run_id: int | None = None) -> int:
+        """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
+        if run_id is not None:
+            return len(self._streams.get(run_id, ()))
+        return sum(len(subs) for subs in self._streams.values())
+
     def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
-        """A subscription to a run's events, now if it runs here, else from its next start."""
+        """A subscription to a run's events, now if it runs here, else from its next start.
+
+        At most `max_streams` are open at once, `max_streams_per_run` to one run: past
+        either, `TooManyStreamsError`, and nothing is subscribed.
+        """
+        if self.streams() >= self.max_streams:
+            raise TooManyStreamsError(
+                f"{self.max_streams} event streams are open already (SRLAB_MAX_STREAMS)"
+            )
+        if self.streams(run_id) >= self.max_streams_per_run:
+            raise TooManyStreamsError(
+                f"run {run_id} has {self.max_streams_per_run} event streams open already "
+                "(SRLAB_MAX_STREAMS_PER_RUN)"
+            )
         engine = self._engines.get(run_id)
         task = self._tasks.get(run_id)
         if engine is not None and task is not None and not task.done():
-            return engine.subscribe(maxsize, tick_hz)
-        sub = Subscription(maxsize, tick_hz)
-        self._waiting.setdefault(run_id, []).append(sub)
+            sub = engine.subscribe(maxsize, tick_hz)
+        else:
+            sub = Subscription(maxsize, tick_hz)
+            self._waiting.setdefault(run_id, []).append(sub)
+        self._streams.setdefault(run_id, set()).add(sub)
         return sub
 
     def unsubscribe(self, run_id: int, sub: Subscription) -> None:
@@ -130,6 +167,11 @@ class EngineManager:
             waiting.remove(sub)
             if not waiting:
                 del self._waiting[run_id]
+        open_ = self._streams.get(run_id)
+        if open_ is not None:
+            open_.discard(sub)
+            if not open_:
+                del self._streams[run_id]
         sub.close()
 
     def _settle_status(self, engine: Engine) -> None:

@@ -132,7 +132,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         sessions = make_sessionmaker(engine)
         store = SqlAlchemyRunStore(sessions)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
-        manager = EngineManager(store, catalog, settings.max_runs)
+        manager = EngineManager(
+            store,
+            catalog,
+            settings.max_runs,
+            max_streams=settings.max_streams,
+            max_streams_per_run=settings.max_streams_per_run,
+        )
         # Load the sensing kernel's machine code now, not in the first run's first tick.
         from starlette.concurrency import run_in_threadpool
 

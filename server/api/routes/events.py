@@ -18,9 +18,12 @@ from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, R
 from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
+from server.engines import TooManyStreamsError
 
 router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
 HEARTBEAT_S = 15.0
+STREAM_RETRY_AFTER_S = 5
+"""What a client refused a stream (503) is told to wait."""
 COMPETITORS = 8
 
 
@@ -127,11 +130,25 @@ async def stream_events(
     status) and JSON `data:`. The stream ends when the run does. A run that is not running
     (created, stopped, interrupted, failed) is followed from its next start; a finished
     one cannot start again (409).
+
+    At most `SRLAB_MAX_STREAMS` streams are open at once, `SRLAB_MAX_STREAMS_PER_RUN` to
+    one run: past either, 503 with `Retry-After` (checked first, before any database read).
     """
-    stored = await run_in_threadpool(store.run_summary, run_id)
-    if engines.get(run_id) is None and stored.status is RunStatus.FINISHED:
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is finished")
-    sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
+    try:
+        sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
+    except TooManyStreamsError as e:
+        raise HTTPException(
+            status.HTTP_503_SERVICE_UNAVAILABLE,
+            str(e),
+            headers={"Retry-After": str(STREAM_RETRY_AFTER_S)},
+        ) from None
+    try:
+        stored = await run_in_threadpool(store.run_summary, run_id)
+        if engines.get(run_id) is None and stored.status is RunStatus.FINISHED:
+            raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is finished")
+    except BaseException:
+        engines.unsubscribe(run_id, sub)
+        raise
     live = engines.get(run_id)
     now = live.status if live is not None else stored.status
 
