@@ -20,12 +20,13 @@ event rather than ever block the tick task.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from core.brain.brain import BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog
@@ -42,6 +43,7 @@ from core.events import (
     RewardApplied,
     RewardDue,
 )
+from core.latency import LatencyHistogram
 from core.params import applicable, configure
 from core.ports import (
     BehaviourSpec,
@@ -82,6 +84,50 @@ FAST_YIELD_TICKS = 128
 APPROACH_S = 0.005
 """A realtime tick first sleeps until this long before its deadline (at most a quarter of
 the period), then sleeps the rest: see `sleep_until`."""
+
+HZ_MIN = 0.5
+"""The slowest realtime tick rate: a tick at least every 2 s, so a reward is applied and a
+run answers its controls within a couple of seconds even before `Pacer` wakes it."""
+HZ_MAX = 1000.0
+"""The fastest realtime tick rate."""
+
+
+def check_hz(hz: float) -> float:
+    """`hz` if it is a realtime tick rate from `HZ_MIN` to `HZ_MAX`, else `ValueError`."""
+    if isinstance(hz, bool) or not isinstance(hz, int | float) or not HZ_MIN <= hz <= HZ_MAX:
+        raise ValueError(f"hz must be a number from {HZ_MIN:g} to {HZ_MAX:g}, got {hz!r}")
+    return float(hz)
+
+
+class Pacer(Protocol):
+    """The realtime tick task's clock: the time, and sleeps that a wake-up cuts short."""
+
+    def now(self) -> float:
+        """Seconds on a monotonic clock."""
+        ...
+
+    async def sleep(self, seconds: float, wake: asyncio.Event) -> None:
+        """Sleep `seconds`, or until `wake` is set if that comes first."""
+        ...
+
+
+class MonotonicPacer:
+    """`time.monotonic` and the event loop's timers: the engine's pacer outside tests.
+
+    time.monotonic, not loop.time(): uvloop's clock ticks in whole milliseconds.
+    """
+
+    def now(self) -> float:
+        """`time.monotonic()`."""
+        return time.monotonic()
+
+    async def sleep(self, seconds: float, wake: asyncio.Event) -> None:
+        """Wait for `wake` at most `seconds`."""
+        if wake.is_set():
+            return
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(max(0.0, seconds)):
+                await wake.wait()
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,25 +230,21 @@ class Subscription:
 
 @dataclass
 class EngineStats:
-    """Pacing and storage figures, for benchmarks and the live view."""
+    """Pacing and storage figures, for benchmarks and the live view.
+
+    The latencies are histograms (`core.latency`): reading them costs the same whatever
+    the run's age.
+    """
 
     ticks: int = 0
     overruns: int = 0
     """Tick periods skipped because a tick ran past its deadline."""
-    lateness_s: deque[float] = field(default_factory=lambda: deque(maxlen=200_000))
+    lateness_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """How late each realtime tick started after its deadline."""
-    reward_commit_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    reward_commit_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """Time from applying each reward to committing its learning (queueing included)."""
-    reward_ack_s: deque[float] = field(default_factory=lambda: deque(maxlen=100_000))
+    reward_ack_s: LatencyHistogram = field(default_factory=LatencyHistogram)
     """Time from a trainer's reward arriving to its acknowledgement."""
-
-    @staticmethod
-    def percentile(values: deque[float], q: float) -> float:
-        """The q-th percentile (0-100) of some samples, nan if none."""
-        if not values:
-            return math.nan
-        ordered = sorted(values)
-        return ordered[min(len(ordered) - 1, max(0, math.ceil(q / 100 * len(ordered)) - 1))]
 
 
 @dataclass
@@ -329,6 +371,7 @@ class Engine:
         replay: StoredRun | None = None,
         totals: RunTotals | None = None,
         trace: bool = True,
+        pacer: Pacer | None = None,
     ) -> None:
         self.run_id = run_id
         self.spec = spec
@@ -337,12 +380,19 @@ class Engine:
         self.stats = EngineStats()
         self.status = RunStatus.CREATED
         self.error: str | None = None
+        self.end_stored = False
+        """The run has ended and storage holds its final status."""
         self._replay = replay
         t = totals or RunTotals(0, 0, sim.tick_count)
         self._episodes_done = t.episodes
         self._successes = t.successes
         self._episode_rewards = 0
-        self._hz = spec.hz
+        # A run stored before rates were bounded ticks at the nearest bounded rate.
+        self._hz = min(max(float(spec.hz), HZ_MIN), HZ_MAX)
+        self._pacer: Pacer = pacer or MonotonicPacer()
+        self._wake = asyncio.Event()
+        """Set by stop, pause, interrupt and rate changes: a sleeping tick task wakes now."""
+        self._rate_changed = False
         self._trace = TraceRecorder() if trace else None
         self._due: deque[_RewardJob] = deque()
         self._commands: deque[_CommandJob] = deque()
@@ -451,6 +501,7 @@ class Engine:
         world_config: WorldConfig | None = None,
         network: tuple[Association, ...] | None = None,
         trace: bool = True,
+        pacer: Pacer | None = None,
     ) -> Engine:
         """A new run, stored with status created.
 
@@ -459,6 +510,7 @@ class Engine:
         `world_config` replace the setup's: a catalogue must use the definition the spec
         names, and is the definition of a spec that names none.
         """
+        check_hz(spec.hz)
         setup, catalog = cls._setup(spec, catalog)
         setup = setup.resolved()
         spec = replace(spec, world=setup.world, sensors=setup.sensors)
@@ -470,7 +522,7 @@ class Engine:
         state = export_state(sim)
         state["last_external_reward_id"] = 0
         store.end_episodes(run_id, (), Checkpoint(0, 0, encode(state)), RunTotals(0, 0, 0))
-        return cls(run_id, spec, store, sim, trace=trace)
+        return cls(run_id, spec, store, sim, trace=trace, pacer=pacer)
 
     @classmethod
     def restore(
@@ -482,6 +534,7 @@ class Engine:
         world_config: WorldConfig | None = None,
         trace: bool = True,
         mode: Mode | None = None,
+        pacer: Pacer | None = None,
     ) -> Engine:
         """A stored run, rebuilt from its last checkpoint; `run()` replays its log first.
 
@@ -514,7 +567,9 @@ class Engine:
         else:  # stored before runs got a checkpoint at creation
             sim = cls._new_simulation(spec, catalog, world_config, None)
             totals = RunTotals(0, 0, 0)
-        engine = cls(run_id, spec, store, sim, replay=stored, totals=totals, trace=trace)
+        engine = cls(
+            run_id, spec, store, sim, replay=stored, totals=totals, trace=trace, pacer=pacer
+        )
         engine._replay_skip_upto = skip
         engine._last_external_id = skip
         return engine
@@ -523,9 +578,12 @@ class Engine:
 
     def subscribe(self, maxsize: int = 256, tick_hz: float = 0.0) -> Subscription:
         """A bounded queue of this run's events (ticks at most `tick_hz` per second)."""
-        sub = Subscription(maxsize, tick_hz)
+        return self.attach(Subscription(maxsize, tick_hz))
+
+    def attach(self, sub: Subscription) -> Subscription:
+        """Feed an existing subscription (one made while the run had no engine)."""
         self._subscribers.append(sub)
-        self._tick_subscribers += tick_hz > 0
+        self._tick_subscribers += sub.tick_period < math.inf
         return sub
 
     def unsubscribe(self, sub: Subscription) -> None:
@@ -550,12 +608,12 @@ class Engine:
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
         """
+        self._check_running()
         if not self._replayed.is_set():
             # A resumed run replays its log first; a new reward stamped inside the replay
             # would be applied in an order a later replay could not repeat.
             await self._replayed.wait()
-        if self.status is not RunStatus.RUNNING or self._closing:
-            raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+            self._check_running()
         stamp = self.sim.tick_count + 1
         if self._settling >= stamp:
             # That boundary is being settled: a reward arriving now takes the next one, so
@@ -583,10 +641,10 @@ class Engine:
 
     async def edit(self, command: EditAssociation) -> int:
         """Change the running robot's network at the next tick boundary; returns the log id."""
+        self._check_running(paused=True)
         if not self._replayed.is_set():
             await self._replayed.wait()
-        if self.status not in (RunStatus.RUNNING, RunStatus.PAUSED) or self._closing:
-            raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+            self._check_running(paused=True)
         cat = self.sim.brain.catalog
         cat.stimulus(command.stimulus)
         cat.behaviour(command.behaviour)
@@ -599,12 +657,23 @@ class Engine:
         assert job.ack is not None
         return await job.ack
 
+    def _check_running(self, *, paused: bool = False) -> None:
+        """`RunStateError` unless the run is running (or paused, with `paused`).
+
+        Checked before waiting for a replay too: a run that was never started answers at
+        once instead of holding a reward until it is.
+        """
+        ok = (RunStatus.RUNNING, RunStatus.PAUSED) if paused else (RunStatus.RUNNING,)
+        if self.status not in ok or self._closing:
+            raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
+
     def pause(self) -> None:
-        """Stop ticking at the next boundary until `resume`."""
+        """Stop ticking at the next boundary until `resume` (a sleeping tick task wakes)."""
         if self.status is RunStatus.RUNNING:
             self._paused = True
             self._resumed.clear()
             self._set_status(RunStatus.PAUSED)
+            self._wake.set()
 
     def resume(self) -> None:
         """Tick again after a pause."""
@@ -614,9 +683,14 @@ class Engine:
             self._resumed.set()
 
     def stop(self) -> None:
-        """End the run at the next tick boundary (status stopped)."""
+        """End the run now, at the boundary after its current tick (status stopped).
+
+        A realtime run sleeping until its next tick wakes at once: a stop never waits out
+        a tick period.
+        """
         self._stop = True
         self._resumed.set()
+        self._wake.set()
 
     def interrupt(self) -> None:
         """End the run at the next tick boundary (status interrupted: it can be resumed)."""
@@ -624,10 +698,14 @@ class Engine:
         self.stop()
 
     def set_rate(self, hz: float) -> None:
-        """Change the realtime tick rate."""
-        if not 0.0 < hz <= 1000.0:
-            raise ValueError("hz must be in (0, 1000]")
-        self._hz = hz
+        """Change the realtime tick rate (`HZ_MIN` to `HZ_MAX`, else `ValueError`).
+
+        The next tick is due one new period after the last one started: a sleeping tick
+        task wakes and sleeps again for what is left of that.
+        """
+        self._hz = check_hz(hz)
+        self._rate_changed = True
+        self._wake.set()
 
     @property
     def hz(self) -> float:
@@ -689,6 +767,7 @@ class Engine:
         if persist:
             try:
                 await self._io(self.store.set_status, self.run_id, status, self.error)
+                self.end_stored = True
             except StorageError as e:
                 self.error = self.error or str(e)
                 status = RunStatus.FAILED
@@ -773,19 +852,31 @@ class Engine:
                     await self._settle(self.sim.tick_count + 1, internal_only=True)
                 self._end_episode(ended)
 
+    async def _nap(self, seconds: float) -> None:
+        await self._pacer.sleep(seconds, self._wake)
+
     async def _realtime(self) -> None:
-        # time.monotonic, not loop.time(): uvloop's clock ticks in whole milliseconds.
-        clock = time.monotonic
+        clock = self._pacer.now
+        wake = self._wake
         deadline = clock()
+        started = deadline
         while self._more():
-            await sleep_until(deadline, min(APPROACH_S, 0.25 / self._hz), clock)
+            # A control that arrives from here on sets `wake` again: none is lost.
+            wake.clear()
+            await sleep_until(deadline, min(APPROACH_S, 0.25 / self._hz), clock, self._nap)
+            if self._stop:
+                break
             if self._paused:
                 await self._resumed.wait()
                 deadline = clock()
                 continue
-            if self._stop:
-                break
-            self.stats.lateness_s.append(max(0.0, clock() - deadline))
+            if self._rate_changed:
+                self._rate_changed = False
+                deadline = started + 1.0 / self._hz
+            if clock() < deadline:
+                continue  # woken early (a rate change): sleep what is left
+            started = clock()
+            self.stats.lateness_s.add(max(0.0, started - deadline))
             await self._step()
             period = 1.0 / self._hz
             deadline += period
@@ -1049,7 +1140,7 @@ class Engine:
         done = time.perf_counter()
         for w, reward_id in zip(writes, ids, strict=True):
             w.job.logged_id = reward_id
-            self.stats.reward_commit_s.append(done - w.queued)
+            self.stats.reward_commit_s.add(done - w.queued)
             w.job.committed.set()
 
     async def _log_command(self, job: _CommandJob) -> None:
@@ -1121,7 +1212,7 @@ class Engine:
             job.logged.set()
             self._unacked.remove(job)
             if job.ack is not None and not job.ack.done():
-                self.stats.reward_ack_s.append(time.perf_counter() - job.arrived)
+                self.stats.reward_ack_s.add(time.perf_counter() - job.arrived)
                 job.ack.set_result(
                     RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
                 )
@@ -1202,13 +1293,18 @@ def _pair(sim: Simulation, a: Association) -> NetworkPair:
 
 
 __all__ = [
+    "HZ_MAX",
+    "HZ_MIN",
     "Engine",
     "EngineStats",
+    "MonotonicPacer",
+    "Pacer",
     "RewardAck",
     "StatusChanged",
     "Subscription",
     "SubscriptionClosed",
     "TickPublished",
+    "check_hz",
     "sleep_until",
 ]
 _ = RewardApplied  # re-exported type of published reward events

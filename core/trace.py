@@ -93,21 +93,34 @@ def unpack(blob: bytes) -> list[TraceRow]:
     else:
         raise ValueError("not an srlab trace")
     arr = np.frombuffer(zlib.decompress(blob[len(MAGIC) :]), dtype=dtype)
-    rows = []
-    for r in arr:
-        mask = int(r["stimuli"])
-        rows.append(
-            TraceRow(
-                int(r["tick"]),
-                float(r["x"]),
-                float(r["y"]),
-                float(r["heading"]),
-                int(r["behaviour"]),
-                HOWS[int(r["how"])],
-                int(r["lamp"]),
-                tuple(i for i in range(64) if mask >> i & 1),
-                ORIGINS[int(r["origin"])] if v2 else "",
-                int(r["released_by"]) if v2 else -1,
-            )
+    # Whole columns as Python lists: indexing numpy's structured rows one field at a time
+    # cost about 50 us a row, most of a stored episode's read.
+    n = len(arr)
+    origins = [ORIGINS[o] for o in arr["origin"].tolist()] if v2 else [""] * n
+    released = arr["released_by"].tolist() if v2 else [-1] * n
+    return [
+        TraceRow(tick, x, y, heading, behaviour, HOWS[how], lamp, _bits(mask), origin, by)
+        for tick, x, y, heading, behaviour, how, lamp, mask, origin, by in zip(
+            arr["tick"].tolist(),
+            arr["x"].tolist(),
+            arr["y"].tolist(),
+            arr["heading"].tolist(),
+            arr["behaviour"].tolist(),
+            arr["how"].tolist(),
+            arr["lamp"].tolist(),
+            arr["stimuli"].tolist(),
+            origins,
+            released,
+            strict=True,
         )
-    return rows
+    ]
+
+
+def _bits(mask: int) -> tuple[int, ...]:
+    """The indices of the set bits of `mask`, lowest first."""
+    out = []
+    while mask:
+        low = mask & -mask
+        out.append(low.bit_length() - 1)
+        mask ^= low
+    return tuple(out)

@@ -22,6 +22,11 @@ class Settings(BaseSettings):
         token: bearer token every write needs when the service listens beyond loopback.
         max_runs: runs that may tick at the same time; past it, starting one is refused
             with 429.
+        max_streams: live event streams (GET /api/runs/{id}/events) open at once, over
+            every run; past it, or past `max_streams_per_run` on one run, a new stream is
+            refused with 503 and `Retry-After`. Each stream costs the event loop that paces
+            realtime ticks some encoding per event.
+        max_streams_per_run: live event streams one run may have open at once.
         reward_rate_per_s: rewards a client may inject per second (a token bucket).
         reward_burst: how many rewards it may inject at once.
         max_body_bytes: larger request bodies get 413 before they are read.
@@ -43,6 +48,8 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=1, le=65535)
     token: str | None = None
     max_runs: int = Field(8, ge=1)
+    max_streams: int = Field(64, ge=1)
+    max_streams_per_run: int = Field(16, ge=1)
     reward_rate_per_s: float = Field(20.0, gt=0)
     reward_burst: int = Field(40, ge=1)
     max_body_bytes: int = Field(64 * 1024, ge=1024)

@@ -9,7 +9,7 @@ from collections.abc import Iterable
 
 from core.brain.catalog import Catalog
 from core.brain.network import Association
-from core.engine import Engine
+from core.engine import Engine, Subscription
 from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
 from core.setup import Setup
@@ -23,10 +23,30 @@ class TooManyRunsError(RunStateError):
     """The service runs as many runs as it may."""
 
 
-class EngineManager:
-    """Owns one `Engine` per run that was created or started in this process."""
+class TooManyStreamsError(RunStateError):
+    """The service (or the run) has as many live event streams open as it may."""
 
-    def __init__(self, store: RunStore, catalog: Catalog, max_runs: int) -> None:
+
+class EngineManager:
+    """Owns the `Engine` of every run ticking (or paused) in this process, and no other.
+
+    A created run is stored with a checkpoint before its first tick, and a run that has
+    ended has all of its state in storage: neither keeps an engine in memory, so memory
+    does not grow with the number of stored runs. Starting a run rebuilds its engine from
+    its checkpoint and log, after its slot under `max_runs` is taken; when the run ends, its
+    engine is let go once its final status is stored (an engine whose status could not be
+    stored is kept until then: it is the truth about how the run ended).
+    """
+
+    def __init__(
+        self,
+        store: RunStore,
+        catalog: Catalog,
+        max_runs: int,
+        *,
+        max_streams: int = 64,
+        max_streams_per_run: int = 16,
+    ) -> None:
         self.store = store
         self.catalog = catalog
         """The shipped catalogue under the default sensor definition (names only: each
@@ -34,9 +54,17 @@ class EngineManager:
         self.max_runs = max_runs
         self._engines: dict[int, Engine] = {}
         self._tasks: dict[int, asyncio.Task[RunStatus]] = {}
+        self._starting: set[int] = set()
+        """Runs whose slot is taken while their engine is rebuilt."""
+        self._waiting: dict[int, list[Subscription]] = {}
+        """Subscriptions to runs not running here: fed from the run's next start."""
+        self.max_streams = max_streams
+        self.max_streams_per_run = max_streams_per_run
+        self._streams: dict[int, set[Subscription]] = {}
+        """The subscriptions `subscribe` gave, by run, until `unsubscribe`."""
 
     def get(self, run_id: int) -> Engine | None:
-        """The engine of a run, if this process has one."""
+        """The engine of a run ticking or paused here (or one whose end is not stored)."""
         return self._engines.get(run_id)
 
     def engines(self) -> Iterable[Engine]:
@@ -44,14 +72,14 @@ class EngineManager:
         return self._engines.values()
 
     def running(self) -> int:
-        """How many runs are ticking or paused."""
-        return sum(1 for t in self._tasks.values() if not t.done())
+        """How many runs are ticking, paused or starting."""
+        return len(self._starting) + sum(1 for t in self._tasks.values() if not t.done())
 
-    def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> Engine:
-        """A new stored run (status created); `network` overrides the condition's.
+    def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
+        """Store a new run (status created) and return its id (blocking: call in a thread).
 
-        It runs in the spec's world preset and sensor definition (an unknown name raises
-        `UnknownNameError`).
+        `network` overrides the condition's. It runs in the spec's world preset and sensor
+        definition (an unknown name raises `UnknownNameError`).
         """
         assoc = None
         if network is not None:
@@ -66,21 +94,85 @@ class EngineManager:
                 )
                 for p in network
             )
-        engine = Engine.create(spec, self.store, network=assoc)
-        self._engines[engine.run_id] = engine
+        return Engine.create(spec, self.store, network=assoc).run_id
+
+    async def start(self, run_id: int) -> Engine:
+        """Start a stored run from its checkpoint and log (created, stopped, interrupted).
+
+        The run slot is taken first: a start refused (`TooManyRunsError`) or one that fails
+        leaves no engine behind, so the run stays as it was stored.
+        """
+        task = self._tasks.get(run_id)
+        if run_id in self._starting or (task is not None and not task.done()):
+            engine = self._engines.get(run_id)
+            status = engine.status.value if engine is not None else "starting"
+            raise RunStateError(f"run {run_id} is {status}")
+        if self.running() >= self.max_runs:
+            raise TooManyRunsError(
+                f"{self.max_runs} runs are running already (SRLAB_MAX_RUNS): stop one first"
+            )
+        self._starting.add(run_id)
+        try:
+            stale = self._engines.get(run_id)
+            if stale is not None:  # it ended here without its status stored
+                await asyncio.to_thread(self._settle_status, stale)
+            # In its stored world and definition.
+            engine = await asyncio.to_thread(Engine.restore, run_id, self.store)
+        finally:
+            self._starting.discard(run_id)
+        self._engines[run_id] = engine
+        for sub in self._waiting.pop(run_id, ()):
+            engine.attach(sub)
+        self._tasks[run_id] = asyncio.create_task(self._run(engine), name=f"run {run_id}")
         return engine
 
-    def prepare(self, run_id: int) -> Engine:
-        """Rebuild a stored run's engine from its checkpoint (blocking: call in a thread)."""
+    def streams(self, run_id: int | None = None) -> int:
+        """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
+        if run_id is not None:
+            return len(self._streams.get(run_id, ()))
+        return sum(len(subs) for subs in self._streams.values())
+
+    def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
+        """A subscription to a run's events, now if it runs here, else from its next start.
+
+        At most `max_streams` are open at once, `max_streams_per_run` to one run: past
+        either, `TooManyStreamsError`, and nothing is subscribed.
+        """
+        if self.streams() >= self.max_streams:
+            raise TooManyStreamsError(
+                f"{self.max_streams} event streams are open already (SRLAB_MAX_STREAMS)"
+            )
+        if self.streams(run_id) >= self.max_streams_per_run:
+            raise TooManyStreamsError(
+                f"run {run_id} has {self.max_streams_per_run} event streams open already "
+                "(SRLAB_MAX_STREAMS_PER_RUN)"
+            )
+        engine = self._engines.get(run_id)
         task = self._tasks.get(run_id)
-        if task is not None and not task.done():
-            engine = self._engines[run_id]
-            raise RunStateError(f"run {run_id} is {engine.status.value}")
-        if task is not None:
-            self._settle_status(self._engines[run_id])
-        engine = Engine.restore(run_id, self.store)  # in its stored world and definition
-        self._engines[run_id] = engine
-        return engine
+        if engine is not None and task is not None and not task.done():
+            sub = engine.subscribe(maxsize, tick_hz)
+        else:
+            sub = Subscription(maxsize, tick_hz)
+            self._waiting.setdefault(run_id, []).append(sub)
+        self._streams.setdefault(run_id, set()).add(sub)
+        return sub
+
+    def unsubscribe(self, run_id: int, sub: Subscription) -> None:
+        """Stop feeding a subscription `subscribe` gave."""
+        engine = self._engines.get(run_id)
+        if engine is not None:
+            engine.unsubscribe(sub)
+        waiting = self._waiting.get(run_id)
+        if waiting is not None and sub in waiting:
+            waiting.remove(sub)
+            if not waiting:
+                del self._waiting[run_id]
+        open_ = self._streams.get(run_id)
+        if open_ is not None:
+            open_.discard(sub)
+            if not open_:
+                del self._streams[run_id]
+        sub.close()
 
     def _settle_status(self, engine: Engine) -> None:
         """Store how a run this process ran ended, if storage still says it is going.
@@ -92,36 +184,29 @@ class EngineManager:
             final = engine.status if engine.status not in ACTIVE else RunStatus.INTERRUPTED
             self.store.set_status(engine.run_id, final, engine.error)
 
-    def start(self, run_id: int) -> Engine:
-        """Start a created or prepared run (on the event loop)."""
-        engine = self._engines.get(run_id)
-        task = self._tasks.get(run_id)
-        if engine is None:
-            raise RunStateError(f"run {run_id} is not prepared")
-        if task is not None and not task.done():
-            raise RunStateError(f"run {run_id} is {engine.status.value}")
-        if self.running() >= self.max_runs:
-            raise TooManyRunsError(
-                f"{self.max_runs} runs are running already (SRLAB_MAX_RUNS): stop one first"
-            )
-        self._tasks[run_id] = asyncio.create_task(self._run(engine), name=f"run {run_id}")
-        return engine
-
     async def started(self, run_id: int, timeout_s: float = 5.0) -> None:
         """Wait until a started run ticks (or has already ended)."""
-        engine = self._engines[run_id]
-        task = self._tasks[run_id]
+        engine = self._engines.get(run_id)
+        task = self._tasks.get(run_id)
+        if engine is None or task is None:
+            return
         async with asyncio.timeout(timeout_s):
             while engine.status in (RunStatus.CREATED, RunStatus.INTERRUPTED, RunStatus.STOPPED):
                 if task.done():
                     return
                 await asyncio.sleep(0.001)
 
+    async def ended(self, run_id: int, timeout_s: float) -> bool:
+        """Wait up to `timeout_s` for a run's task to end; whether it has."""
+        task = self._tasks.get(run_id)
+        if task is None:
+            return True
+        done, _ = await asyncio.wait({task}, timeout=timeout_s)
+        return bool(done)
+
     async def _run(self, engine: Engine) -> RunStatus:
         try:
             return await engine.run()
-        except asyncio.CancelledError:
-            raise
         except StorageError as e:
             # An outage, not a bug: its message says what failed, a traceback adds nothing.
             log.error("run %s failed: %s", engine.run_id, e)
@@ -129,18 +214,31 @@ class EngineManager:
         except Exception:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
+        finally:
+            self._forget(engine)
+
+    def _forget(self, engine: Engine) -> None:
+        """Let an ended run's engine go, unless its final status is not in storage."""
+        run_id = engine.run_id
+        if self._engines.get(run_id) is engine and engine.end_stored:
+            del self._engines[run_id]
+            self._tasks.pop(run_id, None)
 
     def interrupt_all(self) -> None:
         """Ask every run to end at its next tick boundary, as interrupted (resumable).
 
         Its event streams end with it, with a last status event; those of a run that is not
-        ticking (created, finished) end at once.
+        ticking end at once.
         """
         for run_id, engine in self._engines.items():
             engine.interrupt()
             task = self._tasks.get(run_id)
             if task is None or task.done():
                 engine.close_subscriptions()
+        for subs in self._waiting.values():
+            for sub in subs:
+                sub.close()
+        self._waiting.clear()
 
     async def shutdown(self, grace_s: float = 5.0) -> None:
         """Interrupt every run, wait for them, cancel stragglers (runs stay resumable)."""

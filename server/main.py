@@ -27,7 +27,6 @@ from core.errors import (
     UnknownNameError,
     UnknownRunError,
 )
-from core.ports import RunStatus
 from core.setup import Setup
 from server.api import api_router
 from server.api.deps import AppState
@@ -133,7 +132,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         sessions = make_sessionmaker(engine)
         store = SqlAlchemyRunStore(sessions)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
-        manager = EngineManager(store, catalog, settings.max_runs)
+        manager = EngineManager(
+            store,
+            catalog,
+            settings.max_runs,
+            max_streams=settings.max_streams,
+            max_streams_per_run=settings.max_streams_per_run,
+        )
         # Load the sensing kernel's machine code now, not in the first run's first tick.
         from starlette.concurrency import run_in_threadpool
 
@@ -149,10 +154,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
         # them short (tests/reliability/test_load.py).
         anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
-        for run in store.list_runs():
-            if run.status in (RunStatus.RUNNING, RunStatus.PAUSED):
-                # Its process died: it can be resumed from its checkpoint and log.
-                store.set_status(run.id, RunStatus.INTERRUPTED, run.error)
+        # A run stored as running or paused lost its process: it can be resumed from its
+        # checkpoint and log.
+        store.interrupt_active()
         rewards_limiter = RateLimiter(settings.reward_rate_per_s, settings.reward_burst)
         viewer = None
         if settings.viser:

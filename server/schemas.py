@@ -10,6 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue, field_validator
 
 from core.brain.catalog import Source, load_catalog, sensor_definitions
 from core.conditions import CONDITIONS
+from core.engine import HZ_MAX, HZ_MIN
 from core.worlds import world_names
 
 EngineCondition = Literal[
@@ -116,7 +117,9 @@ class RunCreate(Strict):
     seed: int = Field(0, ge=0, le=2**31 - 1)
     episodes: int | None = Field(None, ge=1, le=1_000_000, description="None: until stopped")
     mode: Literal["fast", "realtime"] = "fast"
-    hz: float = Field(10.0, gt=0.0, le=1000.0, description="realtime tick rate")
+    hz: float = Field(
+        10.0, ge=HZ_MIN, le=HZ_MAX, description="realtime tick rate (ticks per second)"
+    )
     network: str | None = Field(
         None,
         max_length=100,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import logging
 import socket
 
@@ -49,6 +50,9 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     settings.check()
     upgrade(settings.database_url)
     configure_process()
+    # A fault SQLite cannot report (SIGBUS from a truncated WAL index it has mapped, see
+    # `SqliteFileGuard`) then leaves a traceback in the log instead of a silent death.
+    faulthandler.enable()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     app = create_app(settings)
     # One worker: the runs' state lives in this process.

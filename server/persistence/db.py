@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import threading
+import urllib.parse
+import weakref
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
@@ -63,6 +66,85 @@ def _sqlite_file(url: URL) -> Path | None:
     return Path(database)
 
 
+WAL_INDEX_MIN_BYTES = 32768
+"""A WAL index (-shm) in use is at least one 32 KiB region: SQLite never shrinks it."""
+
+
+class DatabaseIdentityError(StorageError):
+    """The SQLite file the service opened is gone, or another file took its place."""
+
+
+class SqliteFileGuard:
+    """Keeps a SQLite engine on the file it first opened, by the file's device and inode.
+
+    A connection holds its file open, so after the file is deleted (or replaced by a
+    rename) it would go on reading and committing to a file no one can open again: acks for
+    writes that a restart loses. `check` compares the path's identity with the pinned one;
+    the engine calls it before every transaction and before every new connection, and new
+    connections open the file read-write without creating it (an empty file in its place
+    would fail later with "no such table").
+
+    The WAL index (-shm) is memory-mapped: if it is truncated, SQLite's next access to the
+    mapping raises SIGBUS, which SQLite cannot turn into an error. `check` refuses a
+    transaction while the index is shorter than SQLite ever leaves it, so the common fault
+    (the file truncated, or replaced by an empty one) is a `StorageError` instead of a
+    dead process; a truncation in the microseconds between the check and the access still
+    kills the process (`srlab serve` logs it with faulthandler).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path.resolve()
+        self.shm = self.path.with_name(self.path.name + "-shm")
+        self.identity: tuple[int, int] | None = None
+        self._lock = threading.Lock()
+
+    def pin(self) -> None:
+        """Remember the file's identity, the first time a connection opened it."""
+        with self._lock:
+            if self.identity is None:
+                st = self.path.stat()
+                self.identity = (st.st_dev, st.st_ino)
+
+    def check(self) -> None:
+        """`DatabaseIdentityError` if the pinned file is gone or replaced, or its index cut."""
+        if self.identity is None:
+            return
+        try:
+            st = os.stat(self.path)
+        except FileNotFoundError:
+            raise DatabaseIdentityError(
+                f"the database file {self.path} was deleted while the service had it open: "
+                "nothing more is stored (restore the file and restart the service)"
+            ) from None
+        if (st.st_dev, st.st_ino) != self.identity:
+            raise DatabaseIdentityError(
+                f"the database file {self.path} was replaced by another file (device, inode "
+                f"{self.identity} became {(st.st_dev, st.st_ino)}) while the service had it "
+                "open: nothing more is stored (restart the service to use the new file)"
+            )
+        try:
+            shm = os.stat(self.shm).st_size
+        except FileNotFoundError:
+            return  # no connection has the index open: SQLite makes a new one
+        if shm < WAL_INDEX_MIN_BYTES:
+            raise DatabaseIdentityError(
+                f"the WAL index {self.shm} was truncated to {shm} bytes while the service "
+                "had it mapped: nothing more is stored (restart the service)"
+            )
+
+    def read_write_uri(self) -> str:
+        """The file as a SQLite URI that opens it read-write and never creates it."""
+        return f"file:{urllib.parse.quote(str(self.path))}?mode=rw"
+
+
+_GUARDS: weakref.WeakKeyDictionary[Engine, SqliteFileGuard] = weakref.WeakKeyDictionary()
+
+
+def sqlite_guard(engine: Engine) -> SqliteFileGuard | None:
+    """The file guard of an engine `make_engine` made for a SQLite file, else None."""
+    return _GUARDS.get(engine)
+
+
 def make_engine(
     url: str | URL,
     *,
@@ -95,12 +177,25 @@ def make_engine(
     else:
         path.parent.mkdir(parents=True, exist_ok=True)
     engine = create_engine(url, **kwargs)
+    guard = SqliteFileGuard(path) if path is not None else None
+    if guard is not None:
+        _GUARDS[engine] = guard
     pragmas = (
         "PRAGMA journal_mode=WAL",
         f"PRAGMA foreign_keys={'ON' if foreign_keys else 'OFF'}",
         f"PRAGMA busy_timeout={int(busy_timeout_ms)}",
         "PRAGMA synchronous=NORMAL",
     )
+
+    @event.listens_for(engine, "do_connect")
+    def _on_do_connect(
+        _dialect: Any, _record: Any, cargs: list[Any], cparams: dict[str, Any]
+    ) -> None:
+        if guard is not None and guard.identity is not None:
+            guard.check()
+            # Once the file is pinned, a new pooled connection never creates one.
+            cargs[:1] = [guard.read_write_uri()]
+            cparams["uri"] = True
 
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_connection: Any, _record: Any) -> None:
@@ -111,9 +206,13 @@ def make_engine(
                 cursor.execute(pragma)
         finally:
             cursor.close()
+        if guard is not None:
+            guard.pin()
 
     @event.listens_for(engine, "begin")
     def _on_begin(connection: Connection) -> None:
+        if guard is not None:
+            guard.check()
         immediate = connection.get_execution_options().get(IMMEDIATE, False)
         connection.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
 
@@ -141,6 +240,10 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
             session.connection(execution_options={IMMEDIATE: True})
         yield session
         session.commit()
+    except DatabaseIdentityError as e:
+        with suppress(*_DB_ERRORS, DatabaseIdentityError):
+            session.rollback()
+        raise DatabaseIdentityError(f"storage failed while {what}: {e}") from e
     except _DB_ERRORS as e:
         with suppress(*_DB_ERRORS):
             session.rollback()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import AbstractContextManager
+from dataclasses import replace
 from typing import Any, TypeVar
 
 from sqlalchemy import bindparam, delete, func, insert, select
@@ -477,25 +478,11 @@ class SqlAlchemyRunStore:
             .where(RunCommandRow.run_id == run.id, RunCommandRow.tick > after)
             .order_by(RunCommandRow.id)
         )
-        return StoredRun(
-            id=run.id,
-            spec=RunSpec(
-                condition=run.condition,
-                seed=run.seed,
-                episodes=run.episodes,
-                mode=Mode(run.mode),
-                hz=run.hz,
-                network=run.network,
-                params=dict(run.params),
-                world=run.world,
-                sensors=run.sensors,
-            ),
-            status=RunStatus(run.status),
-            totals=RunTotals(run.episodes_done, run.successes, run.ticks),
+        return replace(
+            _summary(run),
             checkpoint=checkpoint,
             rewards_after=tuple(_reward(r) for r in rewards),
             commands_after=tuple(_command(c) for c in commands),
-            error=run.error,
         )
 
     def _pairs(self, s: Session, table: type[_Row], run_id: int) -> dict[_Pair, float]:
@@ -625,6 +612,76 @@ class SqlAlchemyRunStore:
         """Every run, by id."""
         with self._transaction("listing runs", write=False) as s:
             return [self._stored(s, r) for r in s.scalars(select(RunRow).order_by(RunRow.id))]
+
+    def episode_summaries_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[EpisodeRecord], int]:
+        """A page of the run's episodes by number, without traces, and how many it has.
+
+        It reads the page's rows only (by the episodes' primary key): never a trace.
+        """
+        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
+            self._require_run(s, run_id)
+            e = EpisodeRow
+            total = s.scalar(select(func.count()).select_from(e).where(e.run_id == run_id))
+            rows = s.execute(
+                select(e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards)
+                .where(e.run_id == run_id)
+                .order_by(e.episode)
+                .offset(offset)
+                .limit(limit)
+            )
+            return [EpisodeRecord(*row, trace=b"") for row in rows], int(total or 0)
+
+    def run_summary(self, run_id: int) -> StoredRun:
+        """A run's spec, status and totals, without its checkpoint or log (`UnknownRunError`)."""
+        with self._transaction(f"reading run {run_id}", write=False) as s:
+            return _summary(self._run_row(s, run_id))
+
+    def run_summaries(self, offset: int = 0, limit: int = 100) -> tuple[list[StoredRun], int]:
+        """A page of runs by id, as `run_summary`, and how many runs are stored."""
+        with self._transaction("listing runs", write=False) as s:
+            total = s.scalar(select(func.count()).select_from(RunRow))
+            rows = s.scalars(select(RunRow).order_by(RunRow.id).offset(offset).limit(limit))
+            return [_summary(r) for r in rows], int(total or 0)
+
+    def interrupt_active(self) -> int:
+        """Mark every run stored as running or paused interrupted (its process died)."""
+        active = (RunStatus.RUNNING.value, RunStatus.PAUSED.value)
+        with self._transaction("marking runs interrupted", write=True) as s:
+            result = s.execute(
+                sql_update(RunRow)
+                .where(RunRow.status.in_(active))
+                .values(status=RunStatus.INTERRUPTED.value)
+            )
+            return int(getattr(result, "rowcount", 0) or 0)
+
+
+def _summary(run: RunRow) -> StoredRun:
+    return StoredRun(
+        id=run.id,
+        spec=_spec(run),
+        status=RunStatus(run.status),
+        totals=RunTotals(run.episodes_done, run.successes, run.ticks),
+        checkpoint=None,
+        rewards_after=(),
+        commands_after=(),
+        error=run.error,
+    )
+
+
+def _spec(run: RunRow) -> RunSpec:
+    return RunSpec(
+        condition=run.condition,
+        seed=run.seed,
+        episodes=run.episodes,
+        mode=Mode(run.mode),
+        hz=run.hz,
+        network=run.network,
+        params=dict(run.params),
+        world=run.world,
+        sensors=run.sensors,
+    )
 
 
 def _reward(r: RewardRow) -> StoredReward:

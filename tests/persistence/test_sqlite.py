@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import sqlite3
+import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -24,6 +26,7 @@ from server.persistence import (
     make_sessionmaker,
     seed_catalog,
 )
+from server.persistence.db import DatabaseIdentityError, transaction
 from server.persistence.orm import (
     AssociationRow,
     BehaviourRow,
@@ -354,3 +357,71 @@ def test_seeding_refreshes_an_unedited_network_but_never_an_edited_one(
     assert strengths["dp"] == [0.25]
     assert 0.5 in strengths["innate"]
     assert not seed_catalog(sessions, changed_knowledge(catalog)).changed
+
+
+def _table(engine: Engine) -> sessionmaker[Session]:
+    sessions = make_sessionmaker(engine)
+    with transaction(sessions, "creating a table", write=True) as s:
+        s.execute(text("CREATE TABLE t (x INTEGER)"))
+    return sessions
+
+
+def _execute(sessions: sessionmaker[Session], what: str, sql: str, *, write: bool) -> None:
+    with transaction(sessions, what, write=write) as s:
+        s.execute(text(sql))
+
+
+def test_a_deleted_file_fails_every_transaction_and_is_not_recreated(tmp_path: Path) -> None:
+    path = tmp_path / "srlab.db"
+    engine = make_engine(f"sqlite:///{path}")
+    sessions = _table(engine)
+    path.unlink()
+    for write in (True, False):
+        with pytest.raises(DatabaseIdentityError, match=f"while inserting: .*{path}.*deleted"):
+            _execute(sessions, "inserting", "INSERT INTO t VALUES (1)", write=write)
+    engine.dispose()  # a new pooled connection would have made an empty file
+    with pytest.raises(DatabaseIdentityError, match="deleted"):
+        _execute(sessions, "reading", "SELECT 1", write=False)
+    assert not path.exists()
+    engine.dispose()
+
+
+def test_a_replaced_file_fails_every_transaction(tmp_path: Path) -> None:
+    path = tmp_path / "srlab.db"
+    engine = make_engine(f"sqlite:///{path}")
+    sessions = _table(engine)
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as c:
+        c.execute("CREATE TABLE t (x INTEGER)")
+    other.replace(path)
+    with pytest.raises(DatabaseIdentityError, match="replaced by another file"):
+        _execute(sessions, "inserting", "INSERT INTO t VALUES (1)", write=True)
+    engine.dispose()
+    with sqlite3.connect(path) as c:
+        assert c.execute("SELECT count(*) FROM t").fetchone() == (0,)  # nothing went there
+
+
+def test_a_truncated_wal_index_is_a_storage_error_not_sigbus(tmp_path: Path) -> None:
+    # In a child: the truncated index stays mapped, and closing the connection would fault.
+    script = f"""
+import os, sys
+from sqlalchemy import text
+from server.persistence.db import DatabaseIdentityError, make_engine, make_sessionmaker, transaction
+sessions = make_sessionmaker(make_engine("sqlite:///{tmp_path / "srlab.db"}"))
+with transaction(sessions, "creating", write=True) as s:
+    s.execute(text("CREATE TABLE t (x INTEGER)"))
+os.truncate("{tmp_path / "srlab.db-shm"}", 0)
+try:
+    with transaction(sessions, "inserting", write=True) as s:
+        s.execute(text("INSERT INTO t VALUES (1)"))
+except DatabaseIdentityError as e:
+    sys.stdout.write(str(e))
+    sys.stdout.flush()
+    os._exit(0)
+os._exit(3)
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    assert "WAL index" in done.stdout and "truncated to 0 bytes" in done.stdout

@@ -38,6 +38,8 @@ FULL = {
     "SRLAB_SIGTERMS": "20",
     "SRLAB_LOAD_SECONDS": "60",
     "SRLAB_FUZZ_EXAMPLES": "1000",
+    "SRLAB_DAY_EPISODES": "10000",
+    "SRLAB_DAY_RUNS": "400",
 }
 """The full sizes; the tests' own defaults are CI's."""
 TESTS = ["tests/reliability", "tests/server/test_schemathesis.py"]

@@ -24,11 +24,16 @@ STIMULI = {s.name for s in load_catalog().stimuli}
 
 async def test_create_run_with_a_world_and_sensors_keeps_their_names(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, app):
-        run = await create(client, condition="dp", world=OTHER_WORLD, sensors=OTHER_SENSORS)
+        run = await create(
+            client, condition="dp", world=OTHER_WORLD, sensors=OTHER_SENSORS, mode="realtime"
+        )
         assert (run["world"], run["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
+        assert app.state.srlab.engines.get(run["id"]) is None  # created: in storage only
+        assert (await client.post(f"/api/runs/{run['id']}/start")).status_code == 200
         engine = app.state.srlab.engines.get(run["id"])
         assert engine.sim.brain.catalog.definition == OTHER_SENSORS
         assert engine.sim.world.config == load_world(OTHER_WORLD).config
+        await client.post(f"/api/runs/{run['id']}/stop")
         listed = (await client.get("/api/runs")).json()["data"]
         assert (listed[0]["world"], listed[0]["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
         stored = app.state.srlab.store.load_run(run["id"]).spec
@@ -119,10 +124,16 @@ async def test_a_run_counts_its_ticks_by_origin_and_its_trace_says_each_ones(
     tmp_path: Path,
 ) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
-        run = await create(client, condition="kp", seed=2, episodes=2)
+        # Realtime, so that it is still running (with its live figures) after an episode.
+        run = await create(client, condition="kp", seed=2, mode="realtime", hz=1000)
         await client.post(f"/api/runs/{run['id']}/start")
-        done = await until(client, run["id"], "finished")
-        await asyncio.sleep(0.2)  # the episodes are committed a moment after
+        async with asyncio.timeout(60):
+            while (done := (await client.get(f"/api/runs/{run['id']}")).json())[
+                "episodes_done"
+            ] < 1:
+                await asyncio.sleep(0.05)
+        await client.post(f"/api/runs/{run['id']}/stop")
+        await until(client, run["id"], "stopped")  # its episodes are committed by then
         detail = (await client.get(f"/api/runs/{run['id']}/episodes/0")).json()
     counts = done["live"]["ticks_by_origin"]
     assert sum(counts.values()) == done["ticks"] > 0

@@ -48,6 +48,9 @@ async def test_create_run_and_run_it_in_fast_mode(tmp_path: Path) -> None:
         ({"condition": "kp", "episodes": 0}, "episodes"),
         ({"condition": "kp", "mode": "warp"}, "mode"),
         ({"condition": "kp", "hz": 0}, "hz"),
+        ({"condition": "kp", "hz": 1e-300}, "hz"),
+        ({"condition": "kp", "hz": 0.05}, "hz"),
+        ({"condition": "kp", "hz": 1000.5}, "hz"),
         ({"condition": "kp", "params": {"eta": 2}}, "eta"),
         ({"condition": "kp", "colour": "red"}, "colour"),
         ({}, "condition"),
@@ -145,6 +148,44 @@ async def test_too_many_runs_is_429(tmp_path: Path) -> None:
         again = await client.post(f"/api/runs/{a['id']}/start")
         assert again.status_code == 409
         await client.post(f"/api/runs/{a['id']}/stop")
+
+
+async def test_a_start_refused_with_429_leaves_a_stopped_run_as_it_was(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path, max_runs=1)) as (client, app):
+        a = await create(client, condition="delayed", mode="realtime", hz=50)
+        b = await create(client, condition="delayed", mode="realtime", hz=50)
+        assert (await client.post(f"/api/runs/{b['id']}/start")).status_code == 200
+        assert (await client.post(f"/api/runs/{b['id']}/stop")).status_code == 200
+        await until(client, b["id"], "stopped")
+        assert (await client.post(f"/api/runs/{a['id']}/start")).status_code == 200
+        refused = await client.post(f"/api/runs/{b['id']}/start")
+        assert refused.status_code == 429
+        assert app.state.srlab.engines.get(b["id"]) is None  # nothing rebuilt and left behind
+        assert (await client.get(f"/api/runs/{b['id']}")).json()["status"] == "stopped"
+        assert (await client.post(f"/api/runs/{b['id']}/stop")).status_code == 409
+        reward = await client.post(f"/api/runs/{b['id']}/rewards", json={"value": 1})
+        assert reward.status_code == 409  # answered at once, never held for a later start
+        await client.post(f"/api/runs/{a['id']}/stop")
+        await until(client, a["id"], "stopped")
+        assert (await client.post(f"/api/runs/{b['id']}/start")).status_code == 200
+        await client.post(f"/api/runs/{b['id']}/stop")
+        await until(client, b["id"], "stopped")
+        log = (await client.get(f"/api/runs/{b['id']}/rewards")).json()
+        assert [r for r in log["data"] if r["source"] == "trainer"] == []
+
+
+async def test_only_ticking_runs_keep_an_engine_in_memory(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        engines = app.state.srlab.engines
+        created = [await create(client, condition="innate", episodes=1) for _ in range(5)]
+        assert list(engines.engines()) == []
+        run = created[0]["id"]
+        assert (await client.post(f"/api/runs/{run}/start")).status_code == 200
+        done = await until(client, run, "finished")
+        assert done["episodes_done"] == 1 and done["live"] is None
+        assert list(engines.engines()) == []  # its state is in storage: the engine is gone
+        episodes = (await client.get(f"/api/runs/{run}/episodes")).json()
+        assert episodes["count"] == 1
 
 
 async def test_a_stopped_run_starts_again_from_its_checkpoint(tmp_path: Path) -> None:

@@ -260,8 +260,9 @@ async def test_each_run_is_drawn_in_its_own_world_live_and_replayed(tmp_path: Pa
         viewer = viewer_of(app)
         c, r = viewer.controller, viewer.renderer
         stored = await start_run(client, condition="kp", episodes=1, seed=2, world=other)
+        ended = app.state.srlab.engines.get(stored)
         await until(
-            lambda: app.state.srlab.engines.get(stored).status is RunStatus.FINISHED,
+            lambda: ended.status is RunStatus.FINISHED,
             what="the run in the other world to finish",
         )
         await asyncio.sleep(0.2)  # its episode is committed a moment later

@@ -89,3 +89,13 @@ export const del = (path, query) => api("DELETE", path, { query });
 
 /** A path segment, escaped. */
 export const seg = (s) => encodeURIComponent(s);
+
+/** Every item of a paged list (`{data, count}`), a page of `limit` at a time. */
+export async function getAll(path, limit = 1000) {
+  const data = [];
+  for (;;) {
+    const page = await get(path, { limit, offset: data.length });
+    data.push(...page.data);
+    if (!page.data.length || data.length >= page.count) return { data, count: page.count };
+  }
+}

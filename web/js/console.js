@@ -1,7 +1,7 @@
 // The trainer console: a run's live state, its reliabilities as a live Table III, rewards
 // by button or key with the credit they gave, run control and the learning curve.
 
-import { get, post } from "./api.js";
+import { get, getAll, post } from "./api.js";
 import { learningCurve } from "./chart.js";
 import { columns, key, render, rows } from "./matrix.js";
 import { $, $$, attempt, el, fmt, heat, throttle, toast, typing } from "./ui.js";
@@ -129,7 +129,7 @@ function origins(counts) {
 }
 
 async function loadRuns() {
-  const list = await attempt(() => get("/runs"), "Loading the runs");
+  const list = await attempt(() => getAll("/runs"), "Loading the runs");
   if (!list) return;
   state.runs = list.data;
   const select = $("#run-select");
@@ -414,7 +414,7 @@ function drawHeat() {
 async function loadEpisodes() {
   const run = state.run;
   if (!run) return;
-  const list = await attempt(() => get(`/runs/${run.id}/episodes`));
+  const list = await attempt(() => getAll(`/runs/${run.id}/episodes`));
   if (!list || !state.run || state.run.id !== run.id) return;
   state.episodes = list.data;
   drawCurve();

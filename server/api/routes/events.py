@@ -15,11 +15,15 @@ from core.brain.catalog import Catalog
 from core.brain.selection import Selector
 from core.engine import StatusChanged, SubscriptionClosed, TickPublished
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
+from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
+from server.engines import TooManyStreamsError
 
 router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
 HEARTBEAT_S = 15.0
+STREAM_RETRY_AFTER_S = 5
+"""What a client refused a stream (503) is told to wait."""
 COMPETITORS = 8
 
 
@@ -123,18 +127,35 @@ async def stream_events(
     """Follow a run live: ticks (throttled), rewards, episode ends, network changes, status.
 
     Server-sent events; each has an `event:` name (tick, reward, episode, association,
-    status) and JSON `data:`. The stream ends when the run does.
+    status) and JSON `data:`. The stream ends when the run does. A run that is not running
+    (created, stopped, interrupted, failed) is followed from its next start; a finished
+    one cannot start again (409).
+
+    At most `SRLAB_MAX_STREAMS` streams are open at once, `SRLAB_MAX_STREAMS_PER_RUN` to
+    one run: past either, 503 with `Retry-After` (checked first, before any database read).
     """
-    await run_in_threadpool(store.load_run, run_id)
-    engine = engines.get(run_id)
-    if engine is None:
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
-    sub = engine.subscribe(maxsize=512, tick_hz=tick_hz)
-    brain = engine.sim.brain
+    try:
+        sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
+    except TooManyStreamsError as e:
+        raise HTTPException(
+            status.HTTP_503_SERVICE_UNAVAILABLE,
+            str(e),
+            headers={"Retry-After": str(STREAM_RETRY_AFTER_S)},
+        ) from None
+    try:
+        stored = await run_in_threadpool(store.run_summary, run_id)
+        if engines.get(run_id) is None and stored.status is RunStatus.FINISHED:
+            raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is finished")
+    except BaseException:
+        engines.unsubscribe(run_id, sub)
+        raise
+    live = engines.get(run_id)
+    now = live.status if live is not None else stored.status
 
     async def events() -> AsyncIterator[bytes]:
+        engine = live
         try:
-            first = {"status": engine.status.value, "run": run_id}
+            first = {"status": now.value, "run": run_id}
             yield f"event: status\ndata: {json.dumps(first)}\n\n".encode()
             while True:
                 try:
@@ -147,13 +168,17 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
+                engine = engine or engines.get(run_id)  # fed from the run's start on
+                if engine is None:
+                    continue
+                brain = engine.sim.brain
                 # The brain's catalogue of now: it grows when KP synthesises a behaviour.
                 encoded = encode(event, brain.catalog, brain.selector)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()
         finally:
-            engine.unsubscribe(sub)
+            engines.unsubscribe(run_id, sub)
 
     return StreamingResponse(
         events(),

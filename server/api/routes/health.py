@@ -16,7 +16,11 @@ router = APIRouter(tags=["health"])
 
 @router.get("/health")
 def health(state: StateDep) -> Health:
-    """Whether the service answers and its database does (503 when it does not)."""
+    """Whether the service answers and its database does (503 when it does not).
+
+    A SQLite file deleted or replaced since the service opened it, or its WAL index cut,
+    is a 503 that says which: the runs fail with the same error, and no write is taken.
+    """
     with transaction(state.sessions, "checking the database", write=False) as s:
         s.execute(text("select 1"))
     return Health(

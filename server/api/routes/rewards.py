@@ -38,7 +38,7 @@ async def inject_reward(
         )
     engine = engines.get(run_id)
     if engine is None:
-        run = await run_in_threadpool(store.load_run, run_id)  # 404 for an unknown run
+        run = await run_in_threadpool(store.run_summary, run_id)  # 404 for an unknown run
         raise HTTPException(
             status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
         )

@@ -6,11 +6,11 @@ import math
 from collections.abc import Callable
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Request, status
+from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
 from fastapi.responses import RedirectResponse
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import Engine, EngineStats
+from core.engine import Engine
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.trace import unpack
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -31,6 +31,10 @@ from server.schemas import (
 
 router = APIRouter(prefix="/runs", tags=["runs"])
 RunId = Annotated[int, Path(ge=1, le=2**62, description="a run's id")]
+MAX_PAGE = 1000
+"""The longest page a list answers: a read's cost never grows with a run's age."""
+Offset = Annotated[int, Query(ge=0, le=2**62, description="items to skip")]
+Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items to answer at most")]
 
 
 def _ms(x: float) -> float | None:
@@ -39,16 +43,15 @@ def _ms(x: float) -> float | None:
 
 def _live_state(engine: Engine) -> LiveState:
     stats = engine.stats
-    pct = EngineStats.percentile
     return LiveState(
         tick=engine.sim.tick_count,
         episode=max(engine.sim.episode, 0),
         hz=engine.hz,
         ticks_run=stats.ticks,
-        lateness_p99_ms=_ms(pct(stats.lateness_s, 99)),
-        lateness_max_ms=_ms(max(stats.lateness_s, default=math.nan)),
+        lateness_p99_ms=_ms(stats.lateness_s.percentile(99)),
+        lateness_max_ms=_ms(stats.lateness_s.max),
         overruns=stats.overruns,
-        reward_ack_p99_ms=_ms(pct(stats.reward_ack_s, 99)),
+        reward_ack_p99_ms=_ms(stats.reward_ack_s.percentile(99)),
         ticks_by_origin=dict(engine.sim.ticks_by_origin),
     )
 
@@ -103,7 +106,7 @@ async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
     if engine is not None:
         return _of_engine(engine)
     # Database work runs in a thread: the event loop also paces realtime ticks.
-    return _of_stored(await io(store.load_run, run_id))
+    return _of_stored(await io(store.run_summary, run_id))
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteGuard])
@@ -128,18 +131,21 @@ async def create_run(
         sensors=body.sensors or "",
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
-    engine = await io(engines.create, spec, network)
-    return await _run(store, engines, engine.run_id)
+    run_id = await io(engines.create, spec, network)
+    return await _run(store, engines, run_id)
 
 
 @router.get("")
-async def list_runs(store: StoreDep, engines: EnginesDep) -> RunsPublic:
-    """Every stored run, oldest first."""
+async def list_runs(
+    store: StoreDep, engines: EnginesDep, offset: Offset = 0, limit: Limit = 100
+) -> RunsPublic:
+    """The stored runs, oldest first, a page at a time (`count` is how many are stored)."""
+    page, total = await io(store.run_summaries, offset, limit)
     data = []
-    for r in await io(store.list_runs):
+    for r in page:
         engine = engines.get(r.id)
         data.append(_of_engine(engine) if engine is not None else _of_stored(r))
-    return RunsPublic(data=data, count=len(data))
+    return RunsPublic(data=data, count=total)
 
 
 @router.get("/{run_id}")
@@ -150,12 +156,12 @@ async def get_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPub
 
 @router.post("/{run_id}/start", dependencies=[WriteGuard])
 async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
-    """Start a created run, or resume a stopped or interrupted one from its checkpoint."""
-    await io(store.load_run, run_id)
-    engine = engines.get(run_id)
-    if engine is None or engine.status.value != "created":
-        await io(engines.prepare, run_id)  # from its checkpoint and log
-    engines.start(run_id)
+    """Start a created run, or resume a stopped or interrupted one from its checkpoint.
+
+    429 when `SRLAB_MAX_RUNS` runs are running: the run stays as it was.
+    """
+    await io(store.run_summary, run_id)
+    await engines.start(run_id)  # from its checkpoint and log
     await engines.started(run_id)
     return await _run(store, engines, run_id)
 
@@ -175,7 +181,7 @@ async def _control(
     action: Callable[[Engine], None],
 ) -> RunPublic:
     """Apply `action` to a live run whose status is one of `allowed` (409 otherwise)."""
-    await io(store.load_run, run_id)
+    await io(store.run_summary, run_id)
     engine = _live(engines, run_id)
     if engine.status.value not in allowed:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
@@ -195,10 +201,29 @@ async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> Run
     return await _control(run_id, store, engines, ("paused",), Engine.resume)
 
 
-@router.post("/{run_id}/stop", dependencies=[WriteGuard])
-async def stop_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
-    """End the run at the next tick boundary (it can be started again to go on)."""
-    return await _control(run_id, store, engines, ("running", "paused"), Engine.stop)
+STOP_WAIT_S = 10.0
+"""How long `POST .../stop` waits for the run to end before answering 202."""
+
+
+@router.post(
+    "/{run_id}/stop",
+    dependencies=[WriteGuard],
+    responses={202: {"model": RunPublic, "description": "stopping: not ended yet"}},
+)
+async def stop_run(
+    run_id: RunId, store: StoreDep, engines: EnginesDep, response: Response
+) -> RunPublic:
+    """End the run at the next tick boundary (it can be started again to go on).
+
+    Answered once the run has ended and its end is stored: 200 with its final status
+    (`stopped`, or `finished`/`failed` if it ended otherwise first). A run that has not
+    ended within 10 s (storage slow to take its last writes) gets 202 with its status as
+    now; it ends all the same, and GET /api/runs/{id} says when.
+    """
+    await _control(run_id, store, engines, ("running", "paused"), Engine.stop)
+    if not await engines.ended(run_id, STOP_WAIT_S):
+        response.status_code = status.HTTP_202_ACCEPTED
+    return await _run(store, engines, run_id)
 
 
 def _memory(values: dict[tuple[str, str], float]) -> MemoryPublic:
@@ -235,16 +260,22 @@ def get_run_network(run_id: RunId, store: StoreDep) -> RunNetworkPublic:
 
 
 @router.get("/{run_id}/episodes")
-def list_episodes(run_id: RunId, store: StoreDep) -> EpisodesPublic:
-    """The run's episodes (summaries)."""
+def list_episodes(
+    run_id: RunId, store: StoreDep, offset: Offset = 0, limit: Limit = 100
+) -> EpisodesPublic:
+    """The run's episodes by number, a page of summaries at a time (`count`: all of them).
+
+    It reads the page only, never a trace (GET .../episodes/{n} has one episode's).
+    """
+    page, total = store.episode_summaries_page(run_id, offset, limit)
     data = [
         EpisodePublic(
             episode=e.episode, outcome=e.outcome, cause=e.cause, ticks=e.ticks,
             start_tick=e.start_tick, rewards=e.rewards,
         )
-        for e in store.episodes(run_id)
+        for e in page
     ]  # fmt: skip
-    return EpisodesPublic(data=data, count=len(data))
+    return EpisodesPublic(data=data, count=total)
 
 
 @router.get("/{run_id}/episodes/{episode}")
@@ -259,7 +290,7 @@ def get_episode(
     Each row says what made the behaviour run (`origin`: the releasing association's
     source, explored, default or commanded) and the stimulus it answered (`released_by`).
     """
-    found = next((e for e in store.episodes(run_id) if e.episode == episode), None)
+    found = store.episode(run_id, episode)  # that episode's row only
     if found is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no episode {episode}")
     stimuli = [s.name for s in state.catalog.stimuli]
@@ -299,7 +330,7 @@ async def view_run(
     The console's "3D view" link: the view shows one run to everyone watching, and this
     chooses it, as its run dropdown does; it then no longer jumps to the newest run.
     """
-    await io(store.load_run, run_id)
+    await io(store.run_summary, run_id)
     viewer = state.viewer
     if viewer is None:
         raise HTTPException(

@@ -1,0 +1,51 @@
+"""Live event streams capped per run and in total: past a cap, 503 with Retry-After."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+from apphelpers import client_for, create, settings_for
+
+pytestmark = pytest.mark.anyio
+
+
+async def test_event_streams_past_the_caps_are_503_with_retry_after(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, max_streams=3, max_streams_per_run=2)
+    async with client_for(settings) as (client, app):
+        engines = app.state.srlab.engines
+        a = await create(client, condition="expert", episodes=1, seed=1)
+        b = await create(client, condition="expert", episodes=1, seed=2)
+        subs = [engines.subscribe(a["id"], 8, 0.0) for _ in range(2)]
+        per_run = await client.get(f"/api/runs/{a['id']}/events")
+        assert per_run.status_code == 503 and per_run.headers["retry-after"] == "5"
+        assert "SRLAB_MAX_STREAMS_PER_RUN" in per_run.json()["detail"]
+        subs.append(engines.subscribe(b["id"], 8, 0.0))
+        total = await client.get(f"/api/runs/{b['id']}/events")
+        assert total.status_code == 503 and "SRLAB_MAX_STREAMS" in total.json()["detail"]
+        assert engines.streams() == 3  # the refused ones took nothing
+        unknown = await client.get("/api/runs/99/events")
+        assert unknown.status_code == 503  # the cap is checked before any database read
+        engines.unsubscribe(b["id"], subs.pop())
+        assert (await client.get("/api/runs/99/events")).status_code == 404
+        assert engines.streams() == 2  # the 404 gave its slot back
+        # A slot freed is taken again: this stream follows b from its start to its end.
+        lines: list[str] = []
+
+        async def follow() -> None:
+            async with client.stream("GET", f"/api/runs/{b['id']}/events?tick_hz=0") as r:
+                assert r.status_code == 200
+                lines.extend([x async for x in r.aiter_lines() if x.startswith("data: ")])
+
+        async with asyncio.timeout(30):
+            follower = asyncio.create_task(follow())
+            while engines.streams() < 3:
+                await asyncio.sleep(0.01)
+            await client.post(f"/api/runs/{b['id']}/start")
+            await follower
+        assert '"finished"' in lines[-1]
+        assert engines.streams() == 2  # the stream's end gave its slot back
+        for sub in subs:
+            engines.unsubscribe(a["id"], sub)
+        assert engines.streams() == 0
