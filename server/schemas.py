@@ -182,6 +182,13 @@ class RunPublic(BaseModel):
     live: LiveState | None = None
 
 
+class ViewChosen(BaseModel):
+    """The run the 3D view now shows, and where the view is."""
+
+    run: int
+    url: str = Field(description="the 3D view's page, on the host the request was sent to")
+
+
 class RunsPublic(BaseModel):
     data: list[RunPublic]
     count: int

@@ -13,6 +13,13 @@ class ErrorPublic(BaseModel):
     detail: str
 
 
+class StalePublic(ErrorPublic):
+    """A write refused because it was based on a version that is no longer current."""
+
+    version: int
+    etag: str
+
+
 ERRORS: dict[int | str, dict[str, Any]] = {
     400: {"model": ErrorPublic, "description": "a request the service cannot take (bad Host)"},
     401: {"model": ErrorPublic, "description": "a write without the bearer token"},
