@@ -4,14 +4,21 @@ from __future__ import annotations
 
 import json
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 
 async def send_error(
-    send: Send, status: int, detail: str, headers: list[tuple[bytes, bytes]] | None = None
+    send: Send,
+    status: int,
+    detail: str | list[dict[str, Any]],
+    headers: list[tuple[bytes, bytes]] | None = None,
 ) -> None:
-    """Answer `{"detail": detail}` with `status` (and `headers`)."""
+    """Answer `{"detail": detail}` with `status` (and `headers`).
+
+    `detail` is a sentence, or for 422 FastAPI's list of field errors.
+    """
     body = json.dumps({"detail": detail}).encode()
     await send(
         {

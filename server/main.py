@@ -29,9 +29,11 @@ from core.errors import (
 )
 from core.ports import RunStatus
 from core.setup import Setup
-from server.api import api_router
+from server.api import api_router, contract
+from server.api.contract import operation_id
 from server.api.deps import AppState
 from server.api.methods import ApiMethods
+from server.api.strictjson import StrictJson
 from server.asgi import cut_off, send_error
 from server.config import Settings
 from server.engines import EngineManager, TooManyRunsError
@@ -170,8 +172,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Behaviour-based control and learning with knowledge propagation",
         version=version("srlab"),
         lifespan=lifespan,
+        generate_unique_id_function=operation_id,
     )
     app.include_router(api_router)
+    contract.install(app, token_needed=settings.writes_need_token)
 
     async def core_error(request: Request, exc: Exception) -> JSONResponse:
         if isinstance(exc, StaleVersionError):
@@ -191,6 +195,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     hosts = settings.host_names()
     editor = f"http://{settings.host}:{settings.port}"
+    app.add_middleware(StrictJson)
     app.add_middleware(ApiMethods, schema=app.openapi)
     app.add_middleware(
         CORSMiddleware,

@@ -15,6 +15,7 @@ import pytest
 import viser
 from apphelpers import client_for, create, settings_for, until
 from liveserver import free_port
+from reliability_report import record
 
 from server.guard import SitePolicy, host_name
 from server.ratelimit import RateLimiter, client_key
@@ -135,7 +136,15 @@ async def test_the_3d_views_socket_refuses_other_sites_and_foreign_host_names(
         # Another origin on this very machine is another site.
         assert b" 403 " in await _handshake(port, own, "http://127.0.0.1:9999")
         assert b" 403 " in await _handshake(port, own, "null")
-        assert app.state.srlab.viewer.gate.refused == 4
+        refused = app.state.srlab.viewer.gate.refused
+        record(
+            "the 3D view's gate",
+            "Host: evil.example on its page and socket (DNS rebinding); websocket handshakes "
+            "from http://127.0.0.1:9999 and Origin: null",
+            f"{refused} of 4 refused (400, 400, 403, 403); its own page and the editor's "
+            "origin still open it (101)",
+        )
+        assert refused == 4
         # The view's own page, and the editor that links to it, may open it.
         assert b" 200 " in await _get(port, own)
         assert b" 101 " in await _handshake(port, own, f"http://{own}")

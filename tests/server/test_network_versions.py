@@ -11,6 +11,7 @@ from pathlib import Path
 import httpx
 import pytest
 from apphelpers import client_for, settings_for
+from reliability_report import record
 
 pytestmark = pytest.mark.anyio
 CELL = "/api/networks/mine/associations/Red/goforward1"
@@ -69,6 +70,12 @@ async def test_a_write_based_on_a_stale_version_gets_412_and_changes_nothing(
             if (x["stimulus"], x["behaviour"]) == ("Red", "goforward1")
         )
         assert red_go["strength"] == 0.3
+        record(
+            "lost updates between editors",
+            "6 writes (put, delete, add, revert, delete network) based on version 1 after "
+            "another editor made version 2",
+            "all 412 with the current version; version 2 kept as it was",
+        )
         # Without a precondition a write goes through as before; "*" matches any version.
         assert (
             await client.put(CELL, json={"strength": 0.4}, headers={"If-Match": "*"})

@@ -15,6 +15,7 @@ import pytest
 import viser
 from liveserver import LiveServer, free_port, wait_status
 from playwright.sync_api import Browser
+from reliability_report import record
 
 ATTACK = """<!doctype html><html><body>
 <iframe name="sink"></iframe>
@@ -106,6 +107,14 @@ def test_a_page_of_another_origin_can_change_nothing(
     context.close()
 
     run = server.client.get(f"/api/runs/{run_id}").json()
+    rewards = server.client.get(f"/api/runs/{run_id}/rewards").json()["count"]
+    record(
+        "a page of another origin (Chromium)",
+        "from http://localhost:<other port>, no token: no-cors POSTs to stop, pause, view, "
+        "reward and create, a form POST to stop, and the 3D view's websocket",
+        f"run {run['status']}, {rewards} rewards stored, socket {outcome['socket']}, "
+        "the form answered 403",
+    )
     assert run["status"] == "running"
     assert server.client.get(f"/api/runs/{run_id}/rewards").json()["count"] == 0
     assert server.client.get("/api/runs").json()["count"] == runs_before
