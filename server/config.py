@@ -29,7 +29,12 @@ class Settings(BaseSettings):
         max_streams_per_run: live event streams one run may have open at once.
         reward_rate_per_s: rewards a client may inject per second (a token bucket).
         reward_burst: how many rewards it may inject at once.
+        reward_run_rate_per_s: rewards one run takes per second from all its trainers
+            together (a token bucket per run, beside each trainer's).
+        reward_run_burst: how many rewards one run takes at once.
         max_body_bytes: larger request bodies get 413 before they are read.
+        request_timeout_s: a request's head, and then its body, must arrive within this
+            (slow clients: the connection is closed, a late body gets 408).
         cors_origins: origins allowed to call the API from a browser (besides the editor
             served by the service itself).
         allowed_hosts: Host headers accepted besides loopback names and `host`.
@@ -52,7 +57,10 @@ class Settings(BaseSettings):
     max_streams_per_run: int = Field(16, ge=1)
     reward_rate_per_s: float = Field(20.0, gt=0)
     reward_burst: int = Field(40, ge=1)
+    reward_run_rate_per_s: float = Field(40.0, gt=0)
+    reward_run_burst: int = Field(80, ge=1)
     max_body_bytes: int = Field(64 * 1024, ge=1024)
+    request_timeout_s: float = Field(10.0, gt=0, le=600)
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     viser: bool = True
@@ -113,6 +121,17 @@ class Settings(BaseSettings):
             return ipaddress.ip_address(self.host).is_loopback
         except ValueError:
             return False
+
+    def host_names(self) -> set[str]:
+        """The Host names the API and the 3D view answer to ("*": any)."""
+        if self.host in ("0.0.0.0", "::") and not self.allowed_hosts:
+            return {"*"}  # every interface: the names it is reached by are unknown
+        return {"127.0.0.1", "localhost", "[::1]", self.host, *self.allowed_hosts}
+
+    def editor_origins(self) -> list[str]:
+        """The origins the editor is served from, and the extra ones allowed to write."""
+        names = sorted(h for h in self.host_names() if h != "*")
+        return [*(f"http://{h}:{self.port}" for h in names), *self.cors_origins]
 
     @property
     def writes_need_token(self) -> bool:

@@ -28,13 +28,19 @@ from core.errors import (
     UnknownRunError,
 )
 from core.setup import Setup
-from server.api import api_router
+from server.api import api_router, contract
+from server.api.contract import operation_id
 from server.api.deps import AppState
+from server.api.methods import ApiMethods
+from server.api.strictjson import StrictJson
+from server.asgi import cut_off, send_error
 from server.config import Settings
 from server.engines import EngineManager, TooManyRunsError
+from server.guard import CrossSiteGuard, SitePolicy
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
-from server.persistence.networks import SqlAlchemyNetworkRepository
+from server.persistence.networks import SqlAlchemyNetworkRepository, StaleVersionError
 from server.ratelimit import RateLimiter
+from server.timeouts import BodyTimeout
 
 log = logging.getLogger("srlab.server")
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
@@ -70,51 +76,21 @@ class BodyLimit:
             await self._reject(send)
             return
         seen = 0
-        started = False
-        over = False
 
         async def counted() -> Message:
-            nonlocal seen, over
+            nonlocal seen
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > self.limit:
-                    over = True
                     raise _TooLarge
             return message
 
-        async def tracking_send(message: Message) -> None:
-            nonlocal started
-            if over:
-                # The app made an answer of its own out of the cut-off read (FastAPI's is
-                # 400 "error parsing the body"): the client gets the 413 instead.
-                if message["type"] == "http.response.start" and not started:
-                    started = True
-                    await self._reject(send)
-                return
-            started = started or message["type"] == "http.response.start"
-            await send(message)
-
-        try:
-            await self.app(scope, counted, tracking_send)
-        except _TooLarge:
-            if not started:
-                await self._reject(send)
+        await cut_off(self.app, scope, counted, send, _TooLarge, self._reject)
 
     async def _reject(self, send: Send) -> None:
-        body = b'{"detail":"the request body is larger than the limit (SRLAB_MAX_BODY_BYTES)"}'
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 413,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                    (b"connection", b"close"),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        detail = "the request body is larger than the limit (SRLAB_MAX_BODY_BYTES)"
+        await send_error(send, 413, detail, [(b"connection", b"close")])
 
 
 class _TooLarge(Exception):
@@ -157,7 +133,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # A run stored as running or paused lost its process: it can be resumed from its
         # checkpoint and log.
         store.interrupt_active()
-        rewards_limiter = RateLimiter(settings.reward_rate_per_s, settings.reward_burst)
+        rewards_limiter = RateLimiter(
+            settings.reward_rate_per_s,
+            settings.reward_burst,
+            run_rate=settings.reward_run_rate_per_s,
+            run_burst=settings.reward_run_burst,
+        )
         viewer = None
         if settings.viser:
             from server.viewer import Viewer
@@ -170,6 +151,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 catalog=catalog,
                 limiter=rewards_limiter,
                 writable=not settings.writes_need_token,
+                policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
             )
         app.state.srlab = AppState(
             settings=settings,
@@ -194,10 +176,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Behaviour-based control and learning with knowledge propagation",
         version=version("srlab"),
         lifespan=lifespan,
+        generate_unique_id_function=operation_id,
     )
     app.include_router(api_router)
+    contract.install(app, token_needed=settings.writes_need_token)
 
     async def core_error(request: Request, exc: Exception) -> JSONResponse:
+        if isinstance(exc, StaleVersionError):
+            body = {"detail": str(exc), "version": exc.current, "etag": exc.etag}
+            return JSONResponse(body, status_code=412, headers={"ETag": exc.etag})
         for kind, code in _STATUS:
             if isinstance(exc, kind):
                 return JSONResponse({"detail": str(exc)}, status_code=code)
@@ -210,18 +197,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(ValueError, value_error)
     _ = RequestValidationError  # FastAPI answers invalid bodies with 422 naming the field
 
-    hosts = {"127.0.0.1", "localhost", "[::1]", settings.host, *settings.allowed_hosts}
-    if settings.host in ("0.0.0.0", "::") and not settings.allowed_hosts:
-        hosts = {"*"}  # every interface: the names it is reached by are unknown
+    hosts = settings.host_names()
     editor = f"http://{settings.host}:{settings.port}"
+    app.add_middleware(StrictJson)
+    app.add_middleware(ApiMethods, schema=app.openapi)
     app.add_middleware(
         CORSMiddleware,
         allow_origins=[editor, *settings.cors_origins],
         allow_methods=["GET", "POST", "PUT", "DELETE"],
         allow_headers=["Authorization", "Content-Type"],
     )
+    # Inside the Host check, so a request is refused for its Host first (DNS rebinding).
+    app.add_middleware(CrossSiteGuard, policy=SitePolicy.of(hosts, settings.cors_origins))
     app.add_middleware(TrustedHostMiddleware, allowed_hosts=sorted(hosts))
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes)
+    app.add_middleware(BodyTimeout, limit_s=settings.request_timeout_s)
     if WEB.is_dir() and (WEB / "index.html").exists():
         from fastapi.staticfiles import StaticFiles
 

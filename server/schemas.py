@@ -4,9 +4,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Literal
+from typing import Literal, get_args, get_origin
 
-from pydantic import BaseModel, ConfigDict, Field, JsonValue, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    JsonValue,
+    ValidationInfo,
+    field_validator,
+)
 
 from core.brain.catalog import Source, load_catalog, sensor_definitions
 from core.conditions import CONDITIONS
@@ -21,10 +28,34 @@ assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
 }
 
 
-class Strict(BaseModel):
-    """Unknown fields are an error, not silently ignored."""
+def _kinds(annotation: object) -> set[type]:
+    """The plain types among an annotation's (`float | None` -> {float, NoneType})."""
+    args = get_args(annotation)
+    if not args:
+        return {annotation} if isinstance(annotation, type) else set()
+    return {t for a in args for t in _kinds(a)} if get_origin(annotation) is not Literal else set()
 
-    model_config = ConfigDict(extra="forbid")
+
+class Strict(BaseModel):
+    """A request body: unknown fields are an error, and values are not coerced.
+
+    `"hz": "10"` is a string, not a number, `true` is a boolean, not 1, and `1` is not
+    `true`: as JSON Schema reads the document (where 10.0 is an integer, and an integer is
+    a number). Floats are finite.
+    """
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _as_json_schema_reads_it(cls, value: object, info: ValidationInfo) -> object:
+        assert info.field_name is not None
+        kinds = _kinds(cls.model_fields[info.field_name].annotation)
+        if kinds & {int, float} and isinstance(value, bool | str):
+            raise ValueError(f"a number is needed, not {type(value).__name__} {value!r}")
+        if bool in kinds and value is not None and not isinstance(value, bool):
+            raise ValueError(f"true or false is needed, not {value!r}")
+        return value
 
 
 class Health(BaseModel):
@@ -166,23 +197,38 @@ class LiveState(BaseModel):
     )
 
 
+RunStatusName = Literal[
+    "created", "running", "paused", "finished", "stopped", "interrupted", "failed"
+]
+OutcomeName = Literal["success", "failure"]
+CauseName = Literal["wall_collision", "obstacle_collision", "signal_violation", "timeout"]
+HowName = Literal["released", "default", "explored", "continued", "commanded"]
+
+
 class RunPublic(BaseModel):
     id: int
     condition: str
     seed: int
     episodes: int | None
-    mode: str
+    mode: Literal["fast", "realtime"]
     hz: float
     network: str | None
     params: dict[str, float | bool]
     world: str = Field(description="its world preset ('' if stored before runs kept it)")
     sensors: str = Field(description="its sensor definition ('' if stored before runs kept it)")
-    status: str
+    status: RunStatusName
     error: str | None
     episodes_done: int
     successes: int
     ticks: int
     live: LiveState | None = None
+
+
+class ViewChosen(BaseModel):
+    """The run the 3D view now shows, and where the view is."""
+
+    run: int
+    url: str = Field(description="the 3D view's page, on the host the request was sent to")
 
 
 class RunsPublic(BaseModel):
@@ -233,7 +279,7 @@ class AssociationPublic(BaseModel):
     stimulus: str
     behaviour: str
     strength: float
-    source: str
+    source: Source
     locked: bool
 
 
@@ -244,8 +290,8 @@ class RunNetworkPublic(BaseModel):
 
 class EpisodePublic(BaseModel):
     episode: int
-    outcome: str
-    cause: str | None
+    outcome: OutcomeName
+    cause: CauseName | None
     ticks: int
     start_tick: int
     rewards: int
@@ -262,7 +308,7 @@ class TraceRowPublic(BaseModel):
     y: float
     heading_rad: float
     behaviour: str | None
-    how: str
+    how: HowName
     origin: str = Field(
         description="what made the behaviour run: an association's source, explored, "
         "default or commanded ('' in a trace stored before traces kept it)"
@@ -279,7 +325,7 @@ class EpisodeDetail(EpisodePublic):
 # --- networks: the DP S-R editor ------------------------------------------------------
 
 NETWORK_NAME = r"^[A-Za-z0-9_-]{1,64}$"
-NETWORK_FORMAT = "srlab-network/1"
+NETWORK_FORMAT: Literal["srlab-network/1"] = "srlab-network/1"
 _SHIPPED = load_catalog()
 STIMULUS_NAMES: list[JsonValue] = [s.name for s in _SHIPPED.stimuli]
 """The stimuli the service knows (its catalogue), listed in /openapi.json."""
@@ -443,3 +489,94 @@ class NetworkDocument(Strict):
     associations: list[AssociationCreate] = Field(
         max_length=2000, description="in order, each replacing any earlier one of its pair"
     )
+
+
+# --- the event stream (GET /api/runs/{id}/events) -------------------------------------
+
+
+class CompetitorEvent(BaseModel):
+    behaviour: str | None
+    stimulus: str
+    value: float
+
+
+class CompetitionEvent(BaseModel):
+    threshold: float
+    strategy: str
+    values: list[CompetitorEvent] = Field(description="strongest first, at most 8")
+
+
+class TickEvent(BaseModel):
+    """`event: tick`: a snapshot (throttled to tick_hz)."""
+
+    episode: int
+    tick: int
+    episode_tick: int
+    x: float
+    y: float
+    heading_rad: float
+    stimuli: list[str]
+    behaviour: str | None
+    how: HowName
+    origin: str
+    released_by: str | None
+    lamp: Literal["none", "red", "yellow", "green"]
+    progress_m: float
+    competition: CompetitionEvent | None = None
+
+
+class CreditEvent(BaseModel):
+    tick: int
+    stimulus: str
+    behaviour: str | None
+    d_k: int
+    before: float
+    after: float
+
+
+class RewardEvent(BaseModel):
+    """`event: reward`: a reward applied, with the STM records it credited (at most 200)."""
+
+    tick: int
+    episode: int
+    value: float
+    source: str
+    note: str
+    credits: list[CreditEvent]
+    credited: int
+
+
+class EpisodeEvent(BaseModel):
+    """`event: episode`: an episode ended."""
+
+    episode: int
+    outcome: OutcomeName
+    cause: CauseName | None
+    ticks: int
+
+
+class AssociationEvent(BaseModel):
+    """`event: association`: an association joined or left the behaviour network."""
+
+    change: Literal["promoted", "demoted"]
+    stimulus: str
+    behaviour: str | None
+    reliability: float
+
+
+class StatusEvent(BaseModel):
+    """`event: status`: the run's status (first event; the stream ends after the last)."""
+
+    status: RunStatusName
+    error: str | None = None
+    run: int | None = Field(None, description="in the first event only")
+
+
+STREAM_EVENTS: dict[str, type[BaseModel]] = {
+    "tick": TickEvent,
+    "reward": RewardEvent,
+    "episode": EpisodeEvent,
+    "association": AssociationEvent,
+    "status": StatusEvent,
+}
+"""The event stream's events by name, described in /openapi.json."""

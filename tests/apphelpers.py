@@ -34,7 +34,8 @@ async def client_for(
 ) -> AsyncIterator[tuple[httpx.AsyncClient, FastAPI]]:
     """An httpx client on the app with its lifespan running (ASGITransport skips it)."""
     app = create_app(settings)
-    async with LifespanManager(app) as manager:
+    # Hang guards, not timings: a cold start on a busy machine takes more than 5 s.
+    async with LifespanManager(app, startup_timeout=60, shutdown_timeout=60) as manager:
         transport = httpx.ASGITransport(app=manager.app)
         async with httpx.AsyncClient(
             transport=transport, base_url="http://127.0.0.1", headers=headers or {}

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import hmac
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Annotated
 
 from fastapi import Depends, HTTPException, Request, status
@@ -32,6 +33,9 @@ class AppState:
     engines: EngineManager
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
+    run_networks: dict[int, int | None] = field(default_factory=dict)
+    """The id of the stored network each run created here was started from (None: deleted)."""
+    started_at: datetime = field(default_factory=lambda: datetime.now(UTC))
 
 
 def _state(request: Request) -> AppState:
@@ -59,15 +63,20 @@ NetworksDep = Annotated[SqlAlchemyNetworkRepository, Depends(_networks)]
 StoreDep = Annotated[SqlAlchemyRunStore, Depends(_store)]
 
 
+def bearer(request: Request) -> str | None:
+    """The bearer token the request carries, if any (checked or not)."""
+    scheme, _, given = request.headers.get("authorization", "").partition(" ")
+    return (given.strip() or None) if scheme.lower() == "bearer" else None
+
+
 def require_write(request: Request, state: StateDep) -> None:
     """Writes need `Authorization: Bearer $SRLAB_TOKEN` when the service is reachable."""
     settings = state.settings
     if not settings.writes_need_token:
         return
-    header = request.headers.get("authorization", "")
-    scheme, _, given = header.partition(" ")
+    given = bearer(request) or ""
     token = settings.token or ""
-    if scheme.lower() != "bearer" or not hmac.compare_digest(given.encode(), token.encode()):
+    if not given or not hmac.compare_digest(given.encode(), token.encode()):
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
             "this write needs `Authorization: Bearer <SRLAB_TOKEN>`",

@@ -8,6 +8,7 @@ edit it. A locked association changes only when the caller forces it.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 from collections.abc import Callable, Iterable, Mapping
@@ -23,6 +24,7 @@ from sqlalchemy.orm import Session
 from core.brain.catalog import SOURCES
 from core.errors import (
     CatalogError,
+    CoreError,
     LockedAssociationError,
     RunStateError,
     UnknownNameError,
@@ -65,6 +67,55 @@ class UnknownVersionError(UnknownNameError):
     """A version a network's history does not have."""
 
 
+class StaleVersionError(CoreError):
+    """A write based on a version of the network that is no longer current (HTTP 412)."""
+
+    def __init__(self, message: str, current: int, etag: str) -> None:
+        super().__init__(message)
+        self.current = current
+        self.etag = etag
+
+
+def etag_of(row: NetworkRow, state: Mapping[_Key, NetworkPair]) -> str:
+    """The entity tag of one version of one network, as HTTP's `ETag`.
+
+    The version, and a digest of what makes it this network's version: its row (SQLite
+    gives a deleted network's id to the next one), its creation time and its content.
+    """
+    content = sorted(
+        (p.stimulus, p.behaviour, p.strength, p.source, p.locked) for p in state.values()
+    )
+    identity = [row.id, str(row.created_at), row.version, row.description, content]
+    digest = hashlib.sha256(repr(identity).encode()).hexdigest()[:12]
+    return f'"v{row.version}-{digest}"'
+
+
+@dataclass(frozen=True, slots=True)
+class Precondition:
+    """What a write expects of the network: a version, or one of some entity tags."""
+
+    version: int | None = None
+    etags: tuple[str, ...] | None = None
+    """From If-Match: the tags any of which may be current ("*": any)."""
+
+    def check(self, name: str, version: int, tag: str) -> None:
+        """`StaleVersionError` unless the network (at `version`, tagged `tag`) is expected."""
+        if self.version is not None and self.version != version:
+            raise StaleVersionError(
+                f"network {name!r} is at version {version}, not {self.version}: another "
+                "write came first; read it again (GET) and reapply the change",
+                version,
+                tag,
+            )
+        if self.etags is not None and "*" not in self.etags and tag not in self.etags:
+            raise StaleVersionError(
+                f"network {name!r} is at version {version} ({tag}), which If-Match does not "
+                "name: another write came first; read it again (GET) and reapply the change",
+                version,
+                tag,
+            )
+
+
 @dataclass(frozen=True, slots=True)
 class NetworkSummary:
     """A stored network without its associations."""
@@ -89,6 +140,10 @@ class StoredNetwork:
     created_at: datetime
     updated_at: datetime
     associations: tuple[NetworkPair, ...]
+    id: int = 0
+    """Its row's id (SQLite may give a deleted network's id to a new one)."""
+    etag: str = ""
+    """The entity tag of this version of this network (HTTP `ETag`, see `etag_of`)."""
 
     @property
     def summary(self) -> NetworkSummary:
@@ -356,16 +411,23 @@ class SqlAlchemyNetworkRepository:
             self._record(s, row, state, note or default)
             return self._stored(s, row, state, cat)
 
-    def delete(self, name: str) -> None:
+    def delete(self, name: str, *, expected: Precondition | None = None) -> None:
         """Delete a network and its history (runs started from it keep their own copy)."""
         with self._transaction(f"deleting network {name!r}", write=True) as s:
-            row = self._writable(s, name, "deleted")
+            row = self._writable(s, name, "deleted", expected)
             s.delete(row)
 
-    def add_association(self, name: str, pair: NetworkPair, *, note: str = "") -> NetworkEdit:
+    def add_association(
+        self,
+        name: str,
+        pair: NetworkPair,
+        *,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
         """Add a new association; `AssociationExistsError` if the pair is there already."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name)
+            row = self._writable(s, name, expected=expected)
             cat = _Catalogue(s)
             pair = next(iter(self._checked(cat, [pair], None).values()))
             state = self._state(s, row.id)
@@ -388,6 +450,7 @@ class SqlAlchemyNetworkRepository:
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
+        expected: Precondition | None = None,
     ) -> NetworkEdit:
         """Set an association (insert or update); None keeps a value (new: 1.0, dp, unlocked).
 
@@ -395,7 +458,7 @@ class SqlAlchemyNetworkRepository:
         changes nothing is no change and makes no version.
         """
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name)
+            row = self._writable(s, name, expected=expected)
             cat = _Catalogue(s)
             cat.ids(stimulus, behaviour)
             state = self._state(s, row.id)
@@ -414,11 +477,18 @@ class SqlAlchemyNetworkRepository:
             return self._commit(s, row, cat, state, target, note or default, force=force)
 
     def remove_association(
-        self, name: str, stimulus: str, behaviour: str, *, force: bool = False, note: str = ""
+        self,
+        name: str,
+        stimulus: str,
+        behaviour: str,
+        *,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
     ) -> NetworkEdit:
         """Remove an association (a locked one only with `force`); unknown pair: 404's error."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name)
+            row = self._writable(s, name, expected=expected)
             cat = _Catalogue(s)
             cat.ids(stimulus, behaviour)
             state = self._state(s, row.id)
@@ -476,14 +546,20 @@ class SqlAlchemyNetworkRepository:
             return changes_between(before, after)
 
     def revert(
-        self, name: str, version: int, *, force: bool = False, note: str = ""
+        self,
+        name: str,
+        version: int,
+        *,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
     ) -> NetworkEdit:
         """Make the network what it was at `version`, as a new version.
 
         Changing or removing a locked association needs `force`, as any edit does.
         """
         with self._transaction(f"reverting network {name!r}", write=True) as s:
-            row = self._writable(s, name)
+            row = self._writable(s, name, expected=expected)
             self._ensure_history(s, row)
             snapshot = self._version_row(s, row, version).snapshot
             cat = _Catalogue(s)
@@ -509,10 +585,12 @@ class SqlAlchemyNetworkRepository:
         replace: bool = False,
         force: bool = False,
         note: str = "",
+        expected: Precondition | None = None,
     ) -> NetworkEdit:
         """Store an imported network: a new one, or with `replace` a new version of one.
 
-        Replacing needs an editable network and, to change its locked associations, `force`.
+        Replacing needs an editable network and, to change its locked associations, `force`;
+        `expected` applies to the network replaced.
         """
         check_name(name)
         items = list(associations)
@@ -537,7 +615,7 @@ class SqlAlchemyNetworkRepository:
                     f"network {name!r} exists already: import it under another name, "
                     "or replace it (replace=true) to make a new version of it"
                 )
-            row = self._writable(s, name, "replaced")
+            row = self._writable(s, name, "replaced", expected)
             self._ensure_history(s, row)
             state = self._state(s, row.id)
             return self._commit(
@@ -566,8 +644,12 @@ class SqlAlchemyNetworkRepository:
             raise UnknownNameError(f"unknown network {name!r}")
         return row
 
-    def _writable(self, s: Session, name: str, what: str = "edited") -> NetworkRow:
+    def _writable(
+        self, s: Session, name: str, what: str = "edited", expected: Precondition | None = None
+    ) -> NetworkRow:
         row = self._row(s, name, lock=True)
+        if expected is not None:
+            expected.check(name, row.version, etag_of(row, self._state(s, row.id)))
         if row.builtin:
             raise ReadOnlyNetworkError(
                 f"network {name!r} is built in and cannot be {what}: copy it first with "
@@ -626,6 +708,8 @@ class SqlAlchemyNetworkRepository:
             _utc(row.created_at),
             _utc(row.updated_at),
             cat.order(state.values()),
+            row.id,
+            etag_of(row, state),
         )
 
     @staticmethod

@@ -12,9 +12,11 @@ from core.brain.catalog import Catalog
 from core.sim.world import WorldConfig
 from core.worlds import load_world
 from server.engines import EngineManager
+from server.guard import SitePolicy
 from server.persistence import SqlAlchemyRunStore
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
+from server.viewer.gate import Gate
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox
@@ -36,8 +38,10 @@ class Viewer:
         renderer: Renderer,
         controller: Controller,
         inbox: Inbox,
+        gate: Gate,
     ) -> None:
         self.server = server
+        self.gate = gate
         self.renderer = renderer
         self.controller = controller
         self.inbox = inbox
@@ -45,8 +49,8 @@ class Viewer:
 
     @property
     def port(self) -> int:
-        """The port viser listens on."""
-        return self.server.get_port()
+        """The 3D view's port (its gate's: viser itself listens on loopback behind it)."""
+        return self.gate.port
 
     @classmethod
     async def start(
@@ -59,28 +63,34 @@ class Viewer:
         catalog: Catalog,
         limiter: RateLimiter,
         writable: bool,
+        policy: SitePolicy | None = None,
         world: WorldConfig | None = None,
     ) -> Viewer:
         """Listen on `host`:`port` and show the runs of `manager` and `store`.
 
         Each run is drawn in its own world preset; `world` replaces them all (tests).
         A busy port is an error here (viser itself would silently take the next one, and
-        the editor's link would point at someone else's server).
+        the editor's link would point at someone else's server). `policy` says which Host
+        names and origins the view accepts (default: loopback names, no other origin).
         """
+        policy = policy or SitePolicy.of(["127.0.0.1", "localhost", "[::1]", host], [])
         inbox = Inbox()
         controller = Controller(
             inbox, manager, store, catalog, limiter, writable=writable, world=world
         )
         first = world or load_world().config  # until a run is shown
-        server = await asyncio.to_thread(_listen, host, port)
+        server = await asyncio.to_thread(_listen)
+        gate = Gate(host, port, server.get_port(), policy)
         try:
+            await asyncio.to_thread(_open, gate)
             renderer = await asyncio.to_thread(
                 Renderer, server, static_scene(first), first, controller.post, fixed=world
             )
         except BaseException:
+            await asyncio.to_thread(gate.stop)
             await asyncio.to_thread(server.stop)
             raise
-        viewer = cls(server, renderer, controller, inbox)
+        viewer = cls(server, renderer, controller, inbox, gate)
 
         def clients_changed(_: viser.ClientHandle) -> None:
             controller.post(ClientsChanged(len(server.get_clients())))
@@ -100,16 +110,20 @@ class Viewer:
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         await asyncio.to_thread(self.renderer.stop, self.inbox)
+        await asyncio.to_thread(self.gate.stop)
         await asyncio.to_thread(self.server.stop)
 
 
-def _listen(host: str, port: int) -> viser.ViserServer:
-    server = viser.ViserServer(host=host, port=port, label="srlab", verbose=False)
-    bound = server.get_port()
-    if bound != port:
-        server.stop()
+def _listen() -> viser.ViserServer:
+    """The viser server, on an ephemeral loopback port reached only through the gate."""
+    return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
+
+
+def _open(gate: Gate) -> None:
+    try:
+        gate.start()
+    except OSError as e:
         raise OSError(
-            f"the 3D view's port {port} on {host} is taken: set SRLAB_VISER_PORT to a free "
-            "one, or SRLAB_VISER=false to run without the 3D view"
-        )
-    return server
+            f"the 3D view's port {gate.port} on {gate.host} is taken: set SRLAB_VISER_PORT "
+            f"to a free one, or SRLAB_VISER=false to run without the 3D view ({e})"
+        ) from None

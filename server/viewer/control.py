@@ -53,7 +53,7 @@ ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
 WATCH_S = 1.0
 """How often, while someone watches, the controller looks for runs started or ended."""
 LIMITER_KEY = "3d-view"
-"""The rate limiter's client name for rewards given from the panel."""
+"""The rate limiter's client name for rewards given from the panel, with the viewer's id."""
 
 
 def tick_view(engine: Engine, snap: Snapshot) -> TickView:
@@ -215,7 +215,7 @@ class Controller:
         elif isinstance(command, ChangeRate):
             self._change_rate(command.hz)
         elif isinstance(command, GiveReward):
-            self._spawn(self._reward(command.value))
+            self._spawn(self._reward(command.value, command.client))
 
     def _spawn(self, coro: object) -> None:
         task: asyncio.Task[None] = asyncio.create_task(coro)  # type: ignore[arg-type]
@@ -421,7 +421,7 @@ class Controller:
         engine.set_rate(hz)  # ValueError (shown) out of HZ_MIN..HZ_MAX
         self._publish(live=self._live_info(st.run_id), notice=f"Tick rate set to {hz:g} Hz")
 
-    async def _reward(self, value: float) -> None:
+    async def _reward(self, value: float, client: int | None = None) -> None:
         st = self.state
         sign = f"{value:+g}"
         try:
@@ -430,7 +430,7 @@ class Controller:
             engine = self.manager.get(st.run_id) if st.run_id is not None else None
             if engine is None or engine.status is not RunStatus.RUNNING:
                 raise ValueError("the selected run is not running")
-            wait = self.limiter.allow(LIMITER_KEY)
+            wait = self.limiter.allow(f"{LIMITER_KEY}:{client}", run=engine.run_id)
             if wait > 0:
                 raise ValueError(f"too many rewards: wait {wait:.1f} s")
             ack = await engine.reward(value, note=REWARD_NOTE, source="trainer")

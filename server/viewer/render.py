@@ -89,6 +89,16 @@ def run_label(run_id: int, condition: str, mode: str) -> str:
     return f"#{run_id} {condition} {mode}"
 
 
+def _number(value: object) -> float:
+    """A panel control's value as a finite float (ValueError otherwise, TypeError for bools)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise TypeError(f"not a number: {value!r}")
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"not a finite number: {value!r}")
+    return x
+
+
 def run_of_label(label: str) -> int | None:
     """The run id of a dropdown entry, None for the placeholder."""
     head = label.split(" ", 1)[0]
@@ -335,50 +345,68 @@ class Renderer:
         self._notice = gui.add_markdown("")
         post = self.post
 
+        def command(make: Callable[[viser.GuiEvent[Any]], ViewerCommand | None]) -> Any:
+            """A callback that posts `make(event)`: a value it cannot read is ignored.
+
+            A client can send any value for any control over the socket; a bad one must not
+            leave a failed task ("Task exception was never retrieved") in viser's loop.
+            """
+
+            async def callback(event: viser.GuiEvent[Any]) -> None:
+                try:
+                    made = make(event)
+                except (TypeError, ValueError, AttributeError, OverflowError) as e:
+                    log.warning("the 3D view ignored a malformed panel value: %s", e)
+                    return
+                if made is not None:
+                    post(made)
+
+            return callback
+
+        def from_client(event: viser.GuiEvent[Any]) -> bool:
+            return event.client_id is not None
+
         # Callbacks run on viser's event loop: they only hand commands on. Assignments
         # made here by the renderer call them too, without a client: those are ignored.
-        @self._runs.on_update
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            run = run_of_label(self._runs.value)
-            if event.client_id is not None and run is not None:
-                post(SelectRun(run))
-
-        @self._mode.on_click
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            post(SetMode("replay" if self._mode.value == "Replay" else "live"))
-
-        @self._rate.on_update
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            if event.client_id is not None:
-                post(ChangeRate(float(self._rate.value)))
-
-        @self._plus.on_click
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            post(GiveReward(1.0))
-
-        @self._minus.on_click
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            post(GiveReward(-1.0))
-
-        @self._episode.on_update
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            n = episode_of_label(self._episode.value)
-            if event.client_id is not None and n is not None:
-                post(SelectEpisode(n))
-
-        @self._play.on_click
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            post(TogglePlay())
-
-        @self._scrub.on_update
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            if event.client_id is not None:
-                post(Seek(int(self._scrub.value)))
-
-        @self._speed.on_update
-        async def _(event: viser.GuiEvent[Any]) -> None:
-            if event.client_id is not None:
-                post(SetSpeed(float(self._speed.value.rstrip("x"))))
+        self._runs.on_update(
+            command(
+                lambda e: (
+                    SelectRun(run)
+                    if from_client(e) and (run := run_of_label(self._runs.value)) is not None
+                    else None
+                )
+            )
+        )
+        self._mode.on_click(
+            command(lambda e: SetMode("replay" if self._mode.value == "Replay" else "live"))
+        )
+        self._rate.on_update(
+            command(lambda e: ChangeRate(_number(self._rate.value)) if from_client(e) else None)
+        )
+        self._plus.on_click(command(lambda e: GiveReward(1.0, e.client_id)))
+        self._minus.on_click(command(lambda e: GiveReward(-1.0, e.client_id)))
+        self._episode.on_update(
+            command(
+                lambda e: (
+                    SelectEpisode(n)
+                    if from_client(e) and (n := episode_of_label(self._episode.value)) is not None
+                    else None
+                )
+            )
+        )
+        self._play.on_click(command(lambda e: TogglePlay()))
+        self._scrub.on_update(
+            command(lambda e: Seek(int(_number(self._scrub.value))) if from_client(e) else None)
+        )
+        self._speed.on_update(
+            command(
+                lambda e: (
+                    SetSpeed(_number(str(self._speed.value).rstrip("x")))
+                    if from_client(e)
+                    else None
+                )
+            )
+        )
 
     # --- the thread -----------------------------------------------------------------
 

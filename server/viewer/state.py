@@ -111,9 +111,13 @@ class ChangeRate:
 
 @dataclass(frozen=True, slots=True)
 class GiveReward:
-    """A trainer's reward to the selected run (the engine's own `reward`, as over HTTP)."""
+    """A trainer's reward to the selected run (the engine's own `reward`, as over HTTP).
+
+    `client` is the viewer (viser's client id) it came from: each has its own rate limit.
+    """
 
     value: float
+    client: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

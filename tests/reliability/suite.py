@@ -40,9 +40,18 @@ FULL = {
     "SRLAB_FUZZ_EXAMPLES": "1000",
     "SRLAB_DAY_EPISODES": "10000",
     "SRLAB_DAY_RUNS": "400",
+    "SRLAB_STATEFUL_EXAMPLES": "100",
 }
 """The full sizes; the tests' own defaults are CI's."""
-TESTS = ["tests/reliability", "tests/server/test_schemathesis.py"]
+TESTS = [
+    "tests/reliability",
+    "tests/server/test_schemathesis.py",
+    "tests/server/test_cross_site.py",
+    "tests/web/test_attack_page.py",
+    "tests/server/test_slow_clients.py",
+    "tests/server/test_network_versions.py",
+    "tests/server/test_strict_bodies.py",
+]
 TABLE_START = "<!-- reliability-table:start -->"
 TABLE_END = "<!-- reliability-table:end -->"
 

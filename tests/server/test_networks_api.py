@@ -24,7 +24,7 @@ A = "/api/networks"
 async def client(migrated_sqlite: Path, tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
     path = tmp_path / "api.db"
     shutil.copyfile(migrated_sqlite, path)  # faster than migrating for every test
-    async with client_for(Settings(database_url=f"sqlite:///{path}")) as (c, _):
+    async with client_for(Settings(database_url=f"sqlite:///{path}", viser=False)) as (c, _):
         yield c
 
 

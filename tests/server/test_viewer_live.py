@@ -130,19 +130,21 @@ async def test_the_view_link_chooses_the_run_and_it_stays_chosen(tmp_path: Path)
         await until(lambda: viewer.controller.state.run_id == newest, what="the newest followed")
         viewer.controller.post(SetMode("replay"))
 
-        r = await client.get(f"/api/runs/{chosen}/view")
-        assert r.status_code == 303
-        assert r.headers["location"] == f"http://127.0.0.1:{port}/"
+        # A GET (an <img> on any page) chooses nothing.
+        assert (await client.get(f"/api/runs/{chosen}/view")).status_code == 405
+        r = await client.post(f"/api/runs/{chosen}/view")
+        assert r.status_code == 200, r.text
+        assert r.json() == {"run": chosen, "url": f"http://127.0.0.1:{port}/"}
         await until(lambda: viewer.controller.state.run_id == chosen, what="the chosen run")
         assert viewer.controller.state.mode == "live"
         await asyncio.sleep(2.5)  # the view looks for runs every second: it stays put
         assert viewer.controller.state.run_id == chosen
 
-        missing = await client.get("/api/runs/999/view")
+        missing = await client.post("/api/runs/999/view")
         assert missing.status_code == 404 and "999" in missing.json()["detail"]
         await client.post(f"/api/runs/{newest}/stop")
     async with client_for(settings_for(tmp_path)) as (client, _):
-        off = await client.get(f"/api/runs/{chosen}/view")
+        off = await client.post(f"/api/runs/{chosen}/view")
         assert off.status_code == 409 and "SRLAB_VISER" in off.json()["detail"]
 
 

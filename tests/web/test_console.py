@@ -121,11 +121,11 @@ def test_the_3d_link_opens_the_view_on_that_run_not_the_newest(
     try:
         open_view(page, server, f"console/{chosen}")
         link = page.locator("#view3d")
-        expect(link).to_have_attribute("href", f"/api/runs/{chosen}/view")
-        with page.context.expect_page() as opened:
-            link.click()
-        view = opened.value
         port = server.client.get("/api/health").json()["viser_port"]
+        expect(link).to_have_attribute("href", f"http://127.0.0.1:{port}/")
+        with page.context.expect_page() as opened:
+            link.click()  # POST /api/runs/{chosen}/view, then the view opens
+        view = opened.value
         view.wait_for_url(f"http://127.0.0.1:{port}/")
         view.get_by_text(shows(chosen)).first.wait_for(timeout=30_000)
         for _ in range(10):  # the view looks for new runs every second: it stays put

@@ -4,9 +4,10 @@ const TOKEN_KEY = "srlab.token";
 
 /** An API call that failed: `status` 0 means the service did not answer. */
 export class ApiError extends Error {
-  constructor(status, message) {
+  constructor(status, message, body = null) {
     super(message);
     this.status = status;
+    this.body = body;
   }
 }
 
@@ -78,7 +79,7 @@ export async function api(method, path, { body, query, raw = false } = {}) {
   } catch {
     parsed = null;
   }
-  if (!response.ok) throw new ApiError(response.status, describe(response.status, parsed));
+  if (!response.ok) throw new ApiError(response.status, describe(response.status, parsed), parsed);
   return parsed;
 }
 

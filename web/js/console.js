@@ -42,6 +42,7 @@ export function init(catalog) {
   $("#run-stop").addEventListener("click", () => control("stop"));
   $("#reward-plus").addEventListener("click", () => reward(1));
   $("#reward-minus").addEventListener("click", () => reward(-1));
+  $("#view3d").addEventListener("click", openView);
   $("#new-run-form").addEventListener("submit", onCreate);
   for (const radio of $$('input[name="memory"]')) radio.addEventListener("change", () => loadMemory());
   document.addEventListener("keydown", onKey);
@@ -173,6 +174,15 @@ async function select(id) {
   if (LIVE.has(run.status)) follow();
 }
 
+/** Choose the run in the 3D view (a write: a POST), then open the view where it answers. */
+async function openView(event) {
+  event.preventDefault();
+  const link = event.currentTarget;
+  if (link.getAttribute("aria-disabled") === "true" || !link.dataset.run) return;
+  const chosen = await attempt(() => post(`/runs/${link.dataset.run}/view`), "Opening the 3D view");
+  if (chosen) window.open(chosen.url, "_blank", "noopener");
+}
+
 function showRun(run) {
   state.run = run;
   const status = run ? run.status : "—";
@@ -189,8 +199,10 @@ function showRun(run) {
   $("#reward-minus").disabled = !canReward;
   const link = $("#view3d");
   if (run && state.viserPort) {
-    // Through the API: it chooses the run in the view, then sends the browser there.
-    link.href = `/api/runs/${run.id}/view`;
+    // The click chooses the run in the view (a POST: it changes what every viewer sees),
+    // and the link opens the view.
+    link.href = `${location.protocol}//${location.hostname.includes(":") ? `[${location.hostname}]` : location.hostname}:${state.viserPort}/`;
+    link.dataset.run = String(run.id);
     link.setAttribute("aria-disabled", "false");
     link.title = `Open run #${run.id} in the 3D view`;
   } else {

@@ -316,7 +316,10 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
   state.pending = true;
   const name = state.net.name;
   const live = $("#live-edits").checked;
-  const query = { force: force || undefined, live: live || undefined, note: note || undefined };
+  // The version this change is based on: the server refuses it (412) if another tab or
+  // editor saved meanwhile, instead of silently overwriting what they did.
+  const based = state.net.version;
+  const query = { force: force || undefined, live: live || undefined, note: note || undefined, expected_version: based };
   try {
     let version;
     if (after === null) {
@@ -338,6 +341,10 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
     refreshVersions();
     return true;
   } catch (error) {
+    if (error instanceof ApiError && error.status === 412 && error.body) {
+      state.pending = false;
+      return await conflict(s, b, after, { force, note }, based, error.body.version);
+    }
     const message = error instanceof ApiError && error.status === 409 && /lock/i.test(error.message)
       ? `${s} → ${b} is locked on the server: unlock it first.` : error.message;
     toast(`Saving ${s} → ${b}: ${message}`, "error");
@@ -346,6 +353,36 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
   } finally {
     state.pending = false;
   }
+}
+
+/** One line per association that changed between two versions (the diff's answer). */
+function describeDiff(d) {
+  const show = (a) => `${fmt(a.strength)} ${a.source}${a.locked ? " locked" : ""}`;
+  return [
+    ...d.added.map((a) => `+ ${a.stimulus} → ${a.behaviour} (${show(a)})`),
+    ...d.removed.map((a) => `− ${a.stimulus} → ${a.behaviour}`),
+    ...d.changed.map((c) => `~ ${c.stimulus} → ${c.behaviour}: ${show(c.before)} → ${show(c.after)}`),
+  ];
+}
+
+/**
+ * The network changed under a change of ours (412): show what the other writer did, show
+ * the network as it is now, and reapply ours on top only if the user says so.
+ */
+async function conflict(s, b, after, options, based, current) {
+  const name = state.net.name;
+  const diff = await attempt(() => get(`/networks/${seg(name)}/diff`, { from: based, to: current }), "Comparing versions");
+  await open(name, { keepSelection: true });
+  const lines = diff ? describeDiff(diff) : [];
+  const yours = after === null ? "remove it" : `set it to ${fmt(after.strength)} ${after.source}${after.locked ? " locked" : ""}`;
+  const question = `${name} was saved elsewhere meanwhile (version ${based} → ${current}):\n` +
+    `${lines.join("\n") || "(no association changed)"}\n\n` +
+    `Reapply your change to ${s} → ${b} (${yours}) on top of version ${current}?`;
+  if (!confirm(question)) {
+    toast(`Your change to ${s} → ${b} was not saved: the editor shows version ${current}.`, "error");
+    return false;
+  }
+  return send(s, b, after, options);
 }
 
 function undo() {
@@ -430,7 +467,8 @@ async function onRevert() {
   const [version] = checkedVersions();
   if (!confirm(`Make ${state.net.name} what it was at version ${version}? (A new version; the history is kept.)`)) return;
   const live = $("#live-edits").checked;
-  const net = await attempt(() => post(`/networks/${seg(state.net.name)}/revert`, { version }, { force: true, live: live || undefined, note: `revert to v${version}` }), "Reverting");
+  const net = await attempt(() => post(`/networks/${seg(state.net.name)}/revert`, { version }, { force: true, live: live || undefined, note: `revert to v${version}`, expected_version: state.net.version }), "Reverting");
+  if (!net) await open(state.net.name, { keepSelection: true }); // e.g. 412: show what is there now
   if (!net) return;
   state.undo = [];
   state.redo = [];
@@ -498,7 +536,7 @@ async function onDelete() {
   if (!state.net || state.net.builtin) return;
   const name = state.net.name;
   if (!confirm(`Delete network ${name} and its history? Runs started from it keep their copy.`)) return;
-  const done = await attempt(() => del(`/networks/${seg(name)}`), `Deleting ${name}`);
+  const done = await attempt(() => del(`/networks/${seg(name)}`, { expected_version: state.net.version }), `Deleting ${name}`);
   if (done === undefined) return;
   state.net = null;
   toast(`Deleted ${name}.`, "ok");

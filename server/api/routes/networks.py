@@ -16,7 +16,7 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Annotated, Any, TypeVar, cast
 
-from fastapi import APIRouter, Path, Query, Response, status
+from fastapi import APIRouter, Depends, Header, Path, Query, Response, status
 from fastapi.exceptions import RequestValidationError
 from starlette.concurrency import run_in_threadpool
 
@@ -25,12 +25,12 @@ from core.commands import EditAssociation
 from core.engine import Engine
 from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunStatus
-from server.api.deps import EnginesDep, NetworksDep, StateDep, WriteGuard
-from server.api.errors import ErrorPublic
-from server.engines import EngineManager
+from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, WriteGuard
+from server.api.errors import ErrorPublic, StalePublic
 from server.persistence.networks import (
     AssociationChange,
     NetworkEdit,
+    Precondition,
     StoredNetwork,
 )
 from server.schemas import (
@@ -82,6 +82,53 @@ _CONFLICT: _E = {
 }
 LIVE_RUNS_HEADER = "Srlab-Live-Runs"
 VERSION_HEADER = "Srlab-Network-Version"
+_STALE: _E = {
+    412: {
+        "model": StalePublic,
+        "description": "If-Match or expected_version names a version that is no longer "
+        "current: read the network again and reapply the change",
+    }
+}
+_ETAG = {
+    "ETag": {
+        "description": "the network's version as an entity tag, for If-Match",
+        "schema": {"type": "string"},
+    }
+}
+
+
+def _precondition(
+    if_match: Annotated[
+        str | None,
+        Header(
+            max_length=1000,
+            description="write only if the network is still at this ETag (from a read); "
+            "412 otherwise",
+        ),
+    ] = None,
+    expected_version: Annotated[
+        int | None,
+        Query(
+            ge=1,
+            le=2**31 - 1,
+            description="write only if the network is still at this version; 412 otherwise",
+        ),
+    ] = None,
+) -> Precondition | None:
+    """What a write expects of the network: If-Match's tags and/or a version."""
+    if if_match is None and expected_version is None:
+        return None
+    tags = None
+    if if_match is not None:
+        tags = tuple(t.strip().removeprefix("W/") for t in if_match.split(",") if t.strip())
+    return Precondition(version=expected_version, etags=tags)
+
+
+Expected = Annotated[Precondition | None, Depends(_precondition)]
+
+
+def _tag(response: Response, network: StoredNetwork) -> None:
+    response.headers["ETag"] = network.etag
 
 
 async def _call(fn: Callable[..., _T], *args: Any, **kwargs: Any) -> _T:
@@ -166,17 +213,32 @@ async def _push(engine: Engine, edits: Sequence[EditAssociation]) -> bool:
     return not failed
 
 
+def started_from(state: AppState, engine: Engine, network: StoredNetwork) -> bool:
+    """Whether a run was started from this very network (not an earlier one of its name).
+
+    A run created by this process knows its network's id, and deleting the network
+    forgets it (SQLite may give the id to the next network). A run created before this
+    process started (resumed since) knows only the name: it is this network's unless the
+    network was made after this process started, so after the run.
+    """
+    if engine.spec.network != network.name:
+        return False
+    if engine.run_id in state.run_networks:
+        return state.run_networks[engine.run_id] == network.id
+    return network.created_at <= state.started_at
+
+
 async def _live(
-    engines: EngineManager, name: str, changes: Iterable[AssociationChange], live: bool
+    state: AppState, network: StoredNetwork, changes: Iterable[AssociationChange], live: bool
 ) -> list[int]:
-    """Give every running run started from network `name` the same changes."""
+    """Give every running run started from `network` the same changes."""
     edits = [_edit(c) for c in changes]
     if not live or not edits:
         return []
     targets = [
         e
-        for e in engines.engines()
-        if e.spec.network == name and e.status in (RunStatus.RUNNING, RunStatus.PAUSED)
+        for e in state.engines.engines()
+        if e.status in (RunStatus.RUNNING, RunStatus.PAUSED) and started_from(state, e, network)
     ]
     reached = await asyncio.gather(*(_push(e, edits) for e in targets))
     return sorted(e.run_id for e, ok in zip(targets, reached, strict=True) if ok)
@@ -239,6 +301,7 @@ async def create_network(
             "description": "the name is taken (import under another ?name= or ?replace=true), "
             "a built-in network, or a locked association without force",
         },
+        **_STALE,
     },
 )
 async def import_network(
@@ -247,6 +310,7 @@ async def import_network(
     networks: NetworksDep,
     engines: EnginesDep,
     state: StateDep,
+    expected: Expected,
     name: Annotated[
         str | None,
         Query(pattern=NETWORK_NAME, description="store it under this name, not the document's"),
@@ -269,17 +333,21 @@ async def import_network(
         replace=replace,
         force=force,
         note=note,
+        expected=expected,
     )
     if not edit.created:
         response.status_code = status.HTTP_200_OK
-    live_runs = await _live(engines, target, () if edit.created else edit.changes, live)
+    _tag(response, edit.network)
+    live_runs = await _live(state, edit.network, () if edit.created else edit.changes, live)
     return _written(edit.network, live_runs)
 
 
-@router.get("/{name}", responses=_NOT_FOUND)
-def get_network(name: NetworkName, networks: NetworksDep) -> NetworkPublic:
-    """A network with its associations and version."""
-    return _public(networks.get(name))
+@router.get("/{name}", responses={**_NOT_FOUND, 200: {"headers": _ETAG}})
+def get_network(name: NetworkName, networks: NetworksDep, response: Response) -> NetworkPublic:
+    """A network with its associations and version (its `ETag`, for If-Match)."""
+    n = networks.get(name)
+    _tag(response, n)
+    return _public(n)
 
 
 @router.delete(
@@ -287,21 +355,34 @@ def get_network(name: NetworkName, networks: NetworksDep) -> NetworkPublic:
     status_code=status.HTTP_204_NO_CONTENT,
     response_class=Response,
     dependencies=[WriteGuard],
-    responses={**_NOT_FOUND, 409: {"model": ErrorPublic, "description": "a built-in network"}},
+    responses={
+        **_NOT_FOUND,
+        409: {"model": ErrorPublic, "description": "a built-in network"},
+        **_STALE,
+    },
 )
-async def delete_network(name: NetworkName, networks: NetworksDep) -> Response:
+async def delete_network(
+    name: NetworkName, networks: NetworksDep, state: StateDep, expected: Expected
+) -> Response:
     """Delete a network and its history; built-in networks cannot be deleted.
 
-    Runs started from it keep the copy they started with.
+    Runs started from it keep the copy they started with; live edits no longer reach them.
     """
-    await _call(networks.delete, name)
+    network = await _call(networks.get, name)
+    await _call(networks.delete, name, expected=expected)
+    for engine in state.engines.engines():
+        if started_from(state, engine, network):
+            state.run_networks[engine.run_id] = None  # its network is gone
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
-@router.get("/{name}/associations", responses=_NOT_FOUND)
-def list_associations(name: NetworkName, networks: NetworksDep) -> NetworkAssociationsPublic:
-    """A network's associations, in catalogue order."""
+@router.get("/{name}/associations", responses={**_NOT_FOUND, 200: {"headers": _ETAG}})
+def list_associations(
+    name: NetworkName, networks: NetworksDep, response: Response
+) -> NetworkAssociationsPublic:
+    """A network's associations, in catalogue order (its `ETag`, for If-Match)."""
     n = networks.get(name)
+    _tag(response, n)
     data = [_association(p) for p in n.associations]
     return NetworkAssociationsPublic(data=data, count=len(data), version=n.version)
 
@@ -327,21 +408,24 @@ def _association_written(
             "description": "the network has this pair already (PUT changes it), "
             "or it is built in (read-only)",
         },
+        **_STALE,
     },
 )
 async def add_association(
     name: NetworkName,
     body: AssociationCreate,
     networks: NetworksDep,
-    engines: EnginesDep,
     state: StateDep,
+    response: Response,
+    expected: Expected,
     live: Live = False,
     note: Note = "",
 ) -> AssociationWritten:
     """Add an association the network does not have yet (PUT changes one it has)."""
     _check_names(state.catalog, [body], ("body",), many=False)
-    edit = await _call(networks.add_association, name, _pair(body), note=note)
-    live_runs = await _live(engines, name, edit.changes, live)
+    edit = await _call(networks.add_association, name, _pair(body), note=note, expected=expected)
+    _tag(response, edit.network)
+    live_runs = await _live(state, edit.network, edit.changes, live)
     return _association_written(edit, body.stimulus, body.behaviour, live_runs)
 
 
@@ -351,6 +435,7 @@ async def add_association(
     responses={
         404: {"model": ErrorPublic, "description": "no such network, stimulus or behaviour"},
         **_CONFLICT,
+        **_STALE,
     },
 )
 async def put_association(
@@ -359,7 +444,9 @@ async def put_association(
     behaviour: BehaviourName,
     body: AssociationUpdate,
     networks: NetworksDep,
-    engines: EnginesDep,
+    state: StateDep,
+    response: Response,
+    expected: Expected,
     force: Force = False,
     live: Live = False,
     note: Note = "",
@@ -380,12 +467,14 @@ async def put_association(
         locked=body.locked,
         force=force,
         note=note,
+        expected=expected,
     )
+    _tag(response, edit.network)
     pair = next(
         p for p in edit.network.associations if (p.stimulus, p.behaviour) == (stimulus, behaviour)
     )
     current = AssociationChange(stimulus, behaviour, None, pair)
-    live_runs = await _live(engines, name, [current], live)
+    live_runs = await _live(state, edit.network, [current], live)
     return _association_written(edit, stimulus, behaviour, live_runs)
 
 
@@ -411,6 +500,7 @@ async def put_association(
         },
         404: {"model": ErrorPublic, "description": "no such network or association"},
         **_CONFLICT,
+        **_STALE,
     },
 )
 async def remove_association(
@@ -418,17 +508,25 @@ async def remove_association(
     stimulus: StimulusName,
     behaviour: BehaviourName,
     networks: NetworksDep,
-    engines: EnginesDep,
+    state: StateDep,
+    expected: Expected,
     force: Force = False,
     live: Live = False,
     note: Note = "",
 ) -> Response:
     """Remove an association; a locked one only with `force=true`."""
     edit = await _call(
-        networks.remove_association, name, stimulus, behaviour, force=force, note=note
+        networks.remove_association,
+        name,
+        stimulus,
+        behaviour,
+        force=force,
+        note=note,
+        expected=expected,
     )
-    live_runs = await _live(engines, name, edit.changes, live)
+    live_runs = await _live(state, edit.network, edit.changes, live)
     headers = {
+        "ETag": edit.network.etag,
         VERSION_HEADER: str(edit.network.version),
         LIVE_RUNS_HEADER: ",".join(map(str, live_runs)),
     }
@@ -517,13 +615,16 @@ def diff_versions(
     responses={
         404: {"model": ErrorPublic, "description": "no such network or version"},
         **_CONFLICT,
+        **_STALE,
     },
 )
 async def revert_network(
     name: NetworkName,
     body: NetworkRevert,
     networks: NetworksDep,
-    engines: EnginesDep,
+    state: StateDep,
+    response: Response,
+    expected: Expected,
     force: Force = False,
     live: Live = False,
     note: Note = "",
@@ -532,14 +633,18 @@ async def revert_network(
 
     Changing or removing locked associations needs `force=true`.
     """
-    edit = await _call(networks.revert, name, body.version, force=force, note=note)
-    return _written(edit.network, await _live(engines, name, edit.changes, live))
+    edit = await _call(
+        networks.revert, name, body.version, force=force, note=note, expected=expected
+    )
+    _tag(response, edit.network)
+    return _written(edit.network, await _live(state, edit.network, edit.changes, live))
 
 
 @router.get("/{name}/export", responses=_NOT_FOUND)
 def export_network(name: NetworkName, networks: NetworksDep, response: Response) -> NetworkDocument:
     """The network as a document POST /api/networks/import takes, as a file to save."""
     n = networks.get(name)
+    _tag(response, n)
     filename = re.sub(r"[^A-Za-z0-9_-]", "_", n.name) or "network"
     response.headers["Content-Disposition"] = f'attachment; filename="{filename}.json"'
     return NetworkDocument(

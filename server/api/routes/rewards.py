@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
-from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard
+from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
 from server.api.routes.runs import RunId
+from server.ratelimit import client_key
 from server.schemas import RewardAccepted, RewardCreate, RewardPublic, RewardsPublic
 
 router = APIRouter(prefix="/runs/{run_id}/rewards", tags=["rewards"])
@@ -28,13 +30,24 @@ async def inject_reward(
 
     It is stamped with the next tick boundary and credits the STM records before it.
     """
-    client = request.client.host if request.client else "unknown"
-    wait = state.rewards_limiter.allow(client)
+    limiter = state.rewards_limiter
+    token = bearer(request) if state.settings.writes_need_token else None  # checked: a write
+    address = request.client.host if request.client else None
+    client = client_key(address, token)
+    wait = limiter.allow(client, run=run_id)
     if wait > 0:
+        settings = state.settings
+        why = (
+            f"too many rewards to run {run_id}: at most {settings.reward_run_rate_per_s:g}/s "
+            "from all trainers (SRLAB_REWARD_RUN_RATE_PER_S)"
+            if limiter.limited_by_run(run_id)
+            else f"too many rewards from {address} (as client {client}): at most "
+            f"{settings.reward_rate_per_s:g}/s (SRLAB_REWARD_RATE_PER_S)"
+        )
         raise HTTPException(
             status.HTTP_429_TOO_MANY_REQUESTS,
-            f"too many rewards from {client}: at most {state.settings.reward_rate_per_s:g}/s",
-            headers={"Retry-After": str(max(1, round(wait)))},
+            why,
+            headers={"Retry-After": str(max(1, math.ceil(wait)))},
         )
     engine = engines.get(run_id)
     if engine is None:

@@ -7,13 +7,13 @@ from collections.abc import Callable
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
-from fastapi.responses import RedirectResponse
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import Engine
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.trace import unpack
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
+from server.api.errors import ErrorPublic
 from server.schemas import (
     AssociationPublic,
     EpisodeDetail,
@@ -27,6 +27,7 @@ from server.schemas import (
     RunPublic,
     RunsPublic,
     TraceRowPublic,
+    ViewChosen,
 )
 
 router = APIRouter(prefix="/runs", tags=["runs"])
@@ -111,7 +112,7 @@ async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
 
 @router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteGuard])
 async def create_run(
-    body: RunCreate, store: StoreDep, engines: EnginesDep, networks: NetworksDep
+    body: RunCreate, store: StoreDep, engines: EnginesDep, networks: NetworksDep, state: StateDep
 ) -> RunPublic:
     """Create a run (status created); start it with POST /api/runs/{id}/start.
 
@@ -132,6 +133,8 @@ async def create_run(
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
     run_id = await io(engines.create, spec, network)
+    if body.network is not None:  # live edits reach it by the network's id, not its name
+        state.run_networks[run_id] = (await io(networks.get, body.network)).id
     return await _run(store, engines, run_id)
 
 
@@ -313,22 +316,18 @@ def get_episode(
     )  # fmt: skip
 
 
-@router.get(
+@router.post(
     "/{run_id}/view",
-    status_code=status.HTTP_303_SEE_OTHER,
-    response_class=RedirectResponse,
-    responses={
-        303: {"description": "the 3D view, showing the run"},
-        409: {"description": "the 3D view is off on this service"},
-    },
+    dependencies=[WriteGuard],
+    responses={409: {"model": ErrorPublic, "description": "the 3D view is off on this service"}},
 )
-async def view_run(
-    run_id: RunId, request: Request, state: StateDep, store: StoreDep
-) -> RedirectResponse:
-    """Show the run in the 3D view (live, or where it stopped), then go there.
+async def view_run(run_id: RunId, request: Request, state: StateDep, store: StoreDep) -> ViewChosen:
+    """Show the run in the 3D view (live, or where it stopped); answers the view's URL.
 
-    The console's "3D view" link: the view shows one run to everyone watching, and this
-    chooses it, as its run dropdown does; it then no longer jumps to the newest run.
+    The console's "3D view" button: the view shows one run to everyone watching, and this
+    chooses it, as its run dropdown does; it then no longer jumps to the newest run. It
+    changes what every viewer sees, so it is a write (a POST, with the token when one is
+    configured), not a link an `<img>` on any page could follow.
     """
     await io(store.run_summary, run_id)
     viewer = state.viewer
@@ -343,6 +342,4 @@ async def view_run(
     host = request.url.hostname or "127.0.0.1"
     if ":" in host:  # an IPv6 address
         host = f"[{host}]"
-    return RedirectResponse(
-        f"{request.url.scheme}://{host}:{viewer.port}/", status.HTTP_303_SEE_OTHER
-    )
+    return ViewChosen(run=run_id, url=f"{request.url.scheme}://{host}:{viewer.port}/")
