@@ -13,7 +13,7 @@ import pytest
 from browser import chromium
 from fakes import InMemoryRunStore, InspectableRunStore
 from liveserver import LiveServer, live_server
-from playwright.sync_api import Browser, ConsoleMessage, Error, Page
+from playwright.sync_api import Browser, ConsoleMessage, Error, Page, expect
 from sqlalchemy import Engine, create_engine, text
 from sqlalchemy.engine import make_url
 
@@ -180,6 +180,12 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
         yield s
 
 
+BROWSER_WAIT_MS = 90_000
+"""How long a page's waits and `expect` may take: a bound for a hung page, not a speed test
+(on a 2-core machine under load a page's first render took over 30 s)."""
+expect.set_options(timeout=BROWSER_WAIT_MS)
+
+
 @pytest.fixture
 def page(browser: Browser) -> Iterator[Page]:
     """A fresh 1280x800 page; a JavaScript error in it fails the test."""
@@ -197,7 +203,7 @@ def page(browser: Browser) -> Iterator[Page]:
 
     page.on("pageerror", on_error)
     page.on("console", on_console)
-    page.set_default_timeout(15_000)
+    page.set_default_timeout(BROWSER_WAIT_MS)
     try:
         yield page
     finally:

@@ -140,6 +140,10 @@ class Gate:
             pass
         except TimeoutError:
             pass
+        except asyncio.CancelledError:
+            # The gate is closing. End quietly: asyncio's stream callback asks a handler
+            # task for its exception and would log a cancelled one as an error.
+            pass
         finally:
             self._relays.discard(task)
             writer.close()

@@ -127,7 +127,7 @@ def test_the_3d_link_opens_the_view_on_that_run_not_the_newest(
             link.click()  # POST /api/runs/{chosen}/view, then the view opens
         view = opened.value
         view.wait_for_url(f"http://127.0.0.1:{port}/")
-        view.get_by_text(shows(chosen)).first.wait_for(timeout=30_000)
+        view.get_by_text(shows(chosen)).first.wait_for(timeout=90_000)
         for _ in range(10):  # the view looks for new runs every second: it stays put
             view.wait_for_timeout(300)
             text = view.inner_text("body")
@@ -160,7 +160,7 @@ def test_the_page_recovers_when_the_server_restarts(
     context = browser.new_context(viewport={"width": 1280, "height": 800})
     try:
         page = context.new_page()
-        page.set_default_timeout(20_000)
+        page.set_default_timeout(90_000)
         assert first.client.post("/api/networks", json={"name": "kept"}).status_code == 201
         run_id = create_run(first, condition="expert", episodes=1)
         open_view(page, first, "editor/kept" if view == "editor" else f"console/{run_id}")
@@ -237,7 +237,7 @@ def test_the_live_state_says_what_made_the_behaviour_run_and_tallies_the_origins
         how = page.locator("#st-behaviour .how")
         expect(how).to_have_text(
             re.compile(r"^· released by \w+ \((innate|designed|dp|learned|kp|expert)\)"),
-            timeout=30_000,
+            timeout=90_000,
         )
         # The run's ticks by origin, from its live state: "designed 70% · default 20% ...".
         origins = page.locator("#st-origins")

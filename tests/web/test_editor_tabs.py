@@ -29,7 +29,7 @@ def tabs(browser: Browser, server: LiveServer) -> Iterator[tuple[Page, Page]]:
     context = browser.new_context(viewport={"width": 1280, "height": 800})
     pages = (context.new_page(), context.new_page())
     for page in pages:
-        page.set_default_timeout(15_000)
+        page.set_default_timeout(90_000)
         open_view(page, server, "editor/tabs")
     try:
         yield pages

@@ -53,13 +53,13 @@ def open_view(browser: Browser, server: LiveServer) -> Page:
     assert isinstance(port, int)
     page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
     page.goto(f"http://127.0.0.1:{port}/")
-    page.get_by_text("srlab 3D view").wait_for(timeout=30_000)
+    page.get_by_text("srlab 3D view").wait_for(timeout=90_000)
     # The notice that WebGL runs in software covers a corner of the scene: hide it.
     page.add_style_tag(content=".mantine-Notification-root { display: none !important; }")
     return page
 
 
-def wait_for_robot(page: Page, timeout: float = 30.0) -> tuple[bytes, np.ndarray]:
+def wait_for_robot(page: Page, timeout: float = 90.0) -> tuple[bytes, np.ndarray]:
     deadline = time.monotonic() + timeout
     while True:
         png = page.screenshot()
@@ -87,12 +87,12 @@ def test_the_view_shows_the_live_robot_and_its_panel_rewards_it(
     assert api.post(f"/api/runs/{run_id}/start").status_code == 200
     page = open_view(browser, server)
     try:
-        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
         png, first = wait_for_robot(page)
         artifact("viewer.png").write_bytes(png)
         # The panel tells the decision of the tick shown.
-        page.get_by_text("Behaviour:").wait_for(timeout=10_000)
-        page.get_by_text("Stimuli:").wait_for(timeout=10_000)
+        page.get_by_text("Behaviour:").wait_for(timeout=90_000)
+        page.get_by_text("Stimuli:").wait_for(timeout=90_000)
         time.sleep(1.5)
         _, later = wait_for_robot(page)
         moved = np.abs(later.mean(axis=0) - first.mean(axis=0)).max()
@@ -107,7 +107,7 @@ def test_the_view_shows_the_live_robot_and_its_panel_rewards_it(
         assert len(mine) == 1, log
         assert mine[0]["value"] == 1.0 and mine[0]["source"] == "trainer"
         assert mine[0]["applied"] and mine[0]["credited"] > 0
-        page.get_by_text(f"stored as #{mine[0]['id']}").wait_for(timeout=10_000)
+        page.get_by_text(f"stored as #{mine[0]['id']}").wait_for(timeout=90_000)
     finally:
         page.close()
         api.post(f"/api/runs/{run_id}/stop")
@@ -124,13 +124,13 @@ def test_a_stored_episode_replays_in_the_view(server: LiveServer, browser: Brows
         # Pick the run in the dropdown, then the replay view.
         page.get_by_role("combobox", name="Run").click()
         page.get_by_role("option", name=f"#{run_id} kp fast").click()
-        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
         page.get_by_role("button", name="Replay", exact=True).click()
-        page.get_by_text(f"of run {run_id}, episode 1").first.wait_for(timeout=30_000)
+        page.get_by_text(f"of run {run_id}, episode 1").first.wait_for(timeout=90_000)
         page.get_by_role("button", name="Pause", exact=True).click()
-        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=10_000)
+        page.get_by_role("button", name="Play", exact=True).wait_for(timeout=90_000)
         png, _ = wait_for_robot(page)
         artifact("viewer-replay.png").write_bytes(png)
-        page.get_by_text("Replay of a stored episode").wait_for(timeout=10_000)
+        page.get_by_text("Replay of a stored episode").wait_for(timeout=90_000)
     finally:
         page.close()

@@ -23,7 +23,7 @@ def cell(page: Page, stimulus: str, behaviour: str, where: str = "#matrix") -> s
     return f'{where} td.c[data-s="{stimulus}"][data-b="{behaviour}"]'
 
 
-def eventually(check: Callable[[], T | None], timeout: float = 15.0, what: str = "") -> T:
+def eventually(check: Callable[[], T | None], timeout: float = 90.0, what: str = "") -> T:
     """Poll `check` until it returns something truthy."""
     deadline = time.monotonic() + timeout
     while True:
