@@ -48,6 +48,19 @@ def _report(title: str, results: Sequence[TaskResult], elapsed: float, jobs: int
         print(f"  FAILED tasks: {len(failed)}")
 
 
+def _both_signals(
+    conditions: Sequence[str], seeds: Sequence[int], episodes: int, jobs: int
+) -> list[TaskResult]:
+    """`conditions` tuned, with held-out evaluation, under both signal settings."""
+    results: list[TaskResult] = []
+    for signal in SIGNALS:
+        results += run_experiment(
+            conditions, seeds, episodes, jobs, setup=Setup(signal=signal),
+            eval_episodes=EVAL_EPISODES, tuned=True,
+        )  # fmt: skip
+    return results
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
@@ -71,12 +84,7 @@ def main() -> None:
         )  # fmt: skip
     if args.only in (None, "headline"):
         started = time.perf_counter()
-        results = []
-        for signal in SIGNALS:
-            results += run_experiment(
-                HEADLINE, seeds, args.episodes, args.jobs, setup=Setup(signal=signal),
-                eval_episodes=EVAL_EPISODES, tuned=True,
-            )  # fmt: skip
+        results = _both_signals(HEADLINE, seeds, args.episodes, args.jobs)
         probed = time.perf_counter()
         probe(Setup())
         elapsed = time.perf_counter() - started
@@ -92,12 +100,7 @@ def main() -> None:
             print(f"deep baselines: skipped, the extra is not installed ({baselines.INSTALL_HINT})")
             return
         started = time.perf_counter()
-        results = []
-        for signal in SIGNALS:
-            results += run_experiment(
-                DEEP, seeds, args.episodes, args.jobs, setup=Setup(signal=signal),
-                eval_episodes=EVAL_EPISODES, tuned=True,
-            )  # fmt: skip
+        results = _both_signals(DEEP, seeds, args.episodes, args.jobs)
         elapsed = time.perf_counter() - started
         print(
             f"the deep baselines' extra time: {', '.join(DEEP)} x 2 signal settings x "
