@@ -400,6 +400,19 @@ WORKER_DIED = (
 )
 
 
+_AGENT_COST = {"brain": 1.0, "qlambda": 1.4}
+"""Relative cost of an episode per agent: measured ticks/s of one core (the Gymnasium
+learners step about 1.4x slower than the brain); the deep agents, not listed, cost most."""
+_DEEP_COST = 10.0
+
+
+def expected_cost(task: Task) -> float:
+    """A task's expected run time, in brain episodes: for ordering work, never for results."""
+    agent = get_condition(task.condition).agent
+    per_episode = _AGENT_COST.get(agent, _DEEP_COST if agent in DEEP_AGENTS else 1.0)
+    return per_episode * (task.episodes + 2 * task.eval_episodes)
+
+
 def _in_pool(
     tasks: Sequence[Task], fn: TaskFunction, workers: int
 ) -> Generator[TaskResult, None, list[Task]]:
@@ -409,7 +422,8 @@ def _in_pool(
     """
     lost: set[Task] = set()
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(fn, t): t for t in tasks}
+        # Longest first, so that no long task starts last while the other workers idle.
+        futures = {pool.submit(fn, t): t for t in sorted(tasks, key=expected_cost, reverse=True)}
         pending: set[Future[TaskResult]] = set(futures)
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -481,7 +495,21 @@ def run_experiment(
     setup = (setup or Setup()).resolved()
     if eval_episodes < 0:
         raise ValueError("eval_episodes must be >= 0")
-    tasks = [
+    tasks = experiment_tasks(conditions, seeds, episodes, setup, eval_episodes, tuned)
+    return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
+
+
+def experiment_tasks(
+    conditions: Sequence[str],
+    seeds: Sequence[int],
+    episodes: int,
+    setup: Setup,
+    eval_episodes: int = 0,
+    tuned: bool = False,
+) -> list[Task]:
+    """The (condition, seed) tasks of an experiment, in that order (see `run_experiment`)."""
+    setup = setup.resolved()
+    return [
         Task(
             c, s, episodes, tuned_params(c) if tuned else (), setup=setup,
             eval_episodes=eval_episodes,
@@ -489,7 +517,6 @@ def run_experiment(
         for c in conditions
         for s in seeds
     ]  # fmt: skip
-    return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
 
 
 __all__ = [
@@ -503,6 +530,8 @@ __all__ = [
     "TaskFunction",
     "TaskResult",
     "episodes_to_criterion",
+    "expected_cost",
+    "experiment_tasks",
     "mean_ci",
     "paired_against",
     "parse_conditions",

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,8 +37,7 @@ class TickInputs:
 NO_INPUTS = TickInputs()
 
 
-@dataclass(frozen=True, slots=True)
-class Snapshot:
+class Snapshot(NamedTuple):
     """The state after a tick: what the robot sensed and did, and where the episode stands."""
 
     episode: int
@@ -65,12 +65,11 @@ class Snapshot:
         return self.outcome is not None
 
 
-@dataclass(frozen=True, slots=True)
-class TickResult:
+class TickResult(NamedTuple):
     """A tick's new snapshot and the events it produced."""
 
     snapshot: Snapshot
-    events: tuple[Event, ...] = field(default=())
+    events: tuple[Event, ...] = ()
 
 
 class Simulation:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
+from typing import NamedTuple
 
 import numpy as np
 
@@ -91,8 +92,7 @@ class SelectionConfig:
             raise ValueError("threshold must be in [0, 1]")
 
 
-@dataclass(frozen=True, slots=True)
-class Decision:
+class Decision(NamedTuple):
     """The behaviour chosen for a tick and the stimulus credited with it (-1: none).
 
     `origin` says what made it run: the releasing association's source, ``explored``,

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Any, Literal, Protocol
+from typing import Any, Literal, NamedTuple, Protocol, cast
 
 import numpy as np
 import pymunk
@@ -49,8 +50,7 @@ class WorldConfig:
             raise ValueError("dt_s and max_ticks must be positive")
 
 
-@dataclass(frozen=True, slots=True)
-class MotorCommand:
+class MotorCommand(NamedTuple):
     """Wheel command for one tick: forward speed and turning rate (+ = left)."""
 
     speed_mps: float
@@ -67,8 +67,7 @@ class EpisodeLayout:
     """The lamp's cycle as (colour, ticks), repeated if the episode outlasts it."""
 
 
-@dataclass(frozen=True, slots=True)
-class SensorFrame:
+class SensorFrame(NamedTuple):
     """All physical readings after a step, plus what the world itself judged.
 
     `channels` is indexed by `core.sim.channels.Channel`. `collision` and `violation` are the
@@ -180,6 +179,24 @@ def _along(geometry: TrackGeometry, leg: int, point: tuple[float, float]) -> flo
     return float(np.dot(np.asarray(point) - start, geometry.directions[leg]))
 
 
+# pymunk's Body properties, called directly on the tick path: the same C calls without
+# pymunk's attribute-checking `__setattr__` frame (a few microseconds a tick).
+def _body_property(name: str) -> property:
+    found = vars(pymunk.Body)[name]
+    assert isinstance(found, property)
+    return found
+
+
+_get_angle = cast(Callable[[pymunk.Body], float], _body_property("angle").fget)
+_get_position = cast(Callable[[pymunk.Body], pymunk.Vec2d], _body_property("position").fget)
+_set_velocity = cast(
+    Callable[[pymunk.Body, tuple[float, float]], None], _body_property("velocity").fset
+)
+_set_angular_velocity = cast(
+    Callable[[pymunk.Body, float], None], _body_property("angular_velocity").fset
+)
+
+
 class PymunkWorld:
     """The world simulated with pymunk: rigid body contacts, analytic sensing.
 
@@ -245,6 +262,10 @@ class PymunkWorld:
         self._lamp = LampColor.RED
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
         self._front_to_line = k.UNSEEN
+        # Constants of the tick path, read once (the config is frozen).
+        self._v_max = robot.max_speed_mps
+        self._w_max = robot.max_turn_rad_s
+        self._dt = self.config.dt_s
 
     @property
     def layout(self) -> EpisodeLayout:
@@ -327,17 +348,17 @@ class PymunkWorld:
 
     def step(self) -> SensorFrame:
         """Advance one tick: drive, step the physics, cycle the lamp, referee, sense."""
-        robot = self.config.robot
         cmd = self._command
-        v = min(max(cmd.speed_mps, -robot.max_speed_mps), robot.max_speed_mps)
-        w_max = robot.max_turn_rad_s
+        v_max = self._v_max
+        v = min(max(cmd.speed_mps, -v_max), v_max)
+        w_max = self._w_max
         w = min(max(cmd.turn_rad_s, -w_max), w_max)
         body = self._body
-        th = body.angle
-        body.velocity = (v * math.cos(th), v * math.sin(th))
-        body.angular_velocity = w
+        th = _get_angle(body)
+        _set_velocity(body, (v * math.cos(th), v * math.sin(th)))
+        _set_angular_velocity(body, w)
         self._hit = None
-        self._space.step(self.config.dt_s)
+        self._space.step(self._dt)
         self._tick += 1
         self._phase_left -= 1
         if self._phase_left <= 0:
@@ -370,8 +391,9 @@ class PymunkWorld:
             self._refill_noise()
         noise = self._noise[self._noise_at]
         self._noise_at += 1
-        pos = self._body.position
-        th = self._body.angle
+        body = self._body
+        pos = _get_position(body)
+        th = _get_angle(body)
         geo = self.geometry
         out = self._channels
         k.sense(

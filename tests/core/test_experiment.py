@@ -21,6 +21,8 @@ from core.experiment import (
     Task,
     TaskResult,
     episodes_to_criterion,
+    expected_cost,
+    experiment_tasks,
     mean_ci,
     parse_conditions,
     run_experiment,
@@ -303,3 +305,17 @@ def test_the_new_conditions_with_evaluation_are_the_same_whatever_the_jobs() -> 
             b.episodes, b.evaluation, b.transfer, b.answers,
         )  # fmt: skip
         assert len(a.evaluation) == len(a.transfer) == 2
+
+
+def test_the_pool_is_given_the_longest_tasks_first() -> None:
+    setup = Setup().resolved()
+    brain, learner = Task("kp", 0, 10, setup=setup), Task("qlambda", 0, 10, setup=setup)
+    assert expected_cost(learner) > expected_cost(brain)
+    assert expected_cost(Task("kp", 0, 10, setup=setup, eval_episodes=5)) == 20
+    assert expected_cost(Task("dqn", 0, 10, setup=setup)) > expected_cost(learner)
+
+
+def test_experiment_tasks_are_in_condition_then_seed_order() -> None:
+    tasks = experiment_tasks(["kp", "rp"], [3, 1], 5, Setup(), eval_episodes=2, tuned=True)
+    assert [(t.condition, t.seed) for t in tasks] == [("kp", 3), ("kp", 1), ("rp", 3), ("rp", 1)]
+    assert all(t.eval_episodes == 2 and t.setup == Setup().resolved() for t in tasks)
