@@ -1286,7 +1286,15 @@ async def day(args: argparse.Namespace, server: Server, episodes_run: int) -> No
         f"p99 {ms(live_ms(after, 'lateness_p99_ms'), 1)}"
     )
     await recover(control, 30)
+    await control.aclose()
+    await reads.aclose()
+    await many_runs(args, server)
 
+
+async def many_runs(args: argparse.Namespace, server: Server) -> None:
+    """D4: ``--runs`` realtime runs under mixed load (``--part runs`` runs it alone)."""
+    control = RawClient(server.port, 2, CONTROL_TIMEOUT_S)
+    await wait_healthy(control, server, args.startup_timeout)
     # D4. many realtime runs under mixed load.
     ids = [await start_run(control, args.hz) for _ in range(args.runs)]
     edits, _ = await edit_target(control, args.seed)
@@ -1296,9 +1304,15 @@ async def day(args: argparse.Namespace, server: Server, episodes_run: int) -> No
     load = await open_loop(
         client, args.rate, args.seconds, lambda i: plans[i % len(plans)](i), server.pid
     )
-    lives = [(await call(control, "GET", f"/api/runs/{r}"))["live"] for r in ids]
+    states = [await call(control, "GET", f"/api/runs/{r}") for r in ids]
+    failed = [s for s in states if s["status"] == "failed"]
+    lives = [s["live"] for s in states if s["live"] is not None]
     for r in ids:
         await stop_run(control, r)
+    if failed:
+        print(f"D4. {len(failed)} of {args.runs} runs FAILED: {failed[0]['error']}")
+    if not lives:
+        return
     p99s = [live_ms(x, "lateness_p99_ms") or 0.0 for x in lives]
     maxes = [live_ms(x, "lateness_max_ms") or 0.0 for x in lives]
     overruns = sum(int(x["overruns"]) for x in lives)
@@ -1320,7 +1334,6 @@ async def day(args: argparse.Namespace, server: Server, episodes_run: int) -> No
     if isinstance(client, RawClient):
         await client.aclose()
     await control.aclose()
-    await reads.aclose()
 
 
 def loop_runner(choice: str) -> tuple[Callable[[Coroutine[Any, Any, None]], None], str]:
@@ -1368,9 +1381,9 @@ def main() -> None:
     parser.add_argument("--server-log", type=Path, help="keep the server's log here")
     parser.add_argument(
         "--part",
-        choices=["all", "load", "day"],
+        choices=["all", "load", "day", "runs"],
         default="all",
-        help="the load figures (1-2), the long day's (D1-D4), or both (default)",
+        help="the load figures (1-2), the long day's (D1-D4), both (default), or D4 alone",
     )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")
@@ -1406,6 +1419,10 @@ def main() -> None:
                 episodes_run = store_episodes(server.url, args.episodes)
                 server.start()
                 runner(day(args, server, episodes_run))
+            if args.part == "runs":
+                server.env["SRLAB_MAX_RUNS"] = str(args.runs + 4)
+                server.start()
+                runner(many_runs(args, server))
         finally:
             code = server.stop()
             if server.proc is not None:

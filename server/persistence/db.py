@@ -96,7 +96,7 @@ class SqliteFileGuard:
         self.path = path.resolve()
         self.shm = self.path.with_name(self.path.name + "-shm")
         self.identity: tuple[int, int] | None = None
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # a nested write in one thread waits on SQLite, as before
 
     def pin(self) -> None:
         """Remember the file's identity, the first time a connection opened it."""
@@ -145,6 +145,35 @@ def sqlite_guard(engine: Engine) -> SqliteFileGuard | None:
     return _GUARDS.get(engine)
 
 
+_WRITERS: weakref.WeakKeyDictionary[Engine, _WriteLock] = weakref.WeakKeyDictionary()
+
+
+class _WriteLock:
+    """One writer at a time among this process's connections to one SQLite database.
+
+    SQLite has one write lock per database. Without this, every thread that wants it polls
+    SQLite's busy handler, which sleeps up to 100 ms between tries: under 32 realtime runs'
+    writers and the requests' edits, waiters kept missing the lock until the busy timeout
+    failed them ("database is locked") while the lock was free most of the time. Waiting
+    here instead wakes the next writer as soon as the lock is released; SQLite's own busy
+    timeout is left for other processes (a migration, the CLI).
+    """
+
+    def __init__(self, timeout_s: float) -> None:
+        self._lock = threading.RLock()  # a nested write in one thread waits on SQLite, as before
+        self.timeout_s = timeout_s
+
+    def acquire(self, what: str) -> None:
+        if not self._lock.acquire(timeout=self.timeout_s):
+            raise StorageError(
+                f"storage failed while {what}: database is locked (another writer of this "
+                f"process held it for over {self.timeout_s:g} s)"
+            )
+
+    def release(self) -> None:
+        self._lock.release()
+
+
 def make_engine(
     url: str | URL,
     *,
@@ -180,6 +209,7 @@ def make_engine(
     guard = SqliteFileGuard(path) if path is not None else None
     if guard is not None:
         _GUARDS[engine] = guard
+    _WRITERS[engine] = _WriteLock(busy_timeout_ms / 1000)
     pragmas = (
         "PRAGMA journal_mode=WAL",
         f"PRAGMA foreign_keys={'ON' if foreign_keys else 'OFF'}",
@@ -227,6 +257,11 @@ def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:
 _DB_ERRORS = (sa_exc.DBAPIError, sa_exc.TimeoutError)
 
 
+def _writer(session: Session) -> _WriteLock | None:
+    bind = session.get_bind()
+    return _WRITERS.get(bind if isinstance(bind, Engine) else bind.engine)
+
+
 @contextmanager
 def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> Iterator[Session]:
     """A session whose work is committed at the end or rolled back on any error.
@@ -235,6 +270,13 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
     out as `StorageError` naming `what`, after the rollback, so nothing half-written stays.
     """
     session = sessions()
+    writer = _writer(session) if write else None
+    if writer is not None:
+        try:
+            writer.acquire(what)
+        except StorageError:
+            session.close()
+            raise
     try:
         if write:
             session.connection(execution_options={IMMEDIATE: True})
@@ -254,3 +296,5 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
         raise
     finally:
         session.close()
+        if writer is not None:
+            writer.release()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -425,3 +426,46 @@ os._exit(3)
     )
     assert done.returncode == 0, done.stderr
     assert "WAL index" in done.stdout and "truncated to 0 bytes" in done.stdout
+
+
+def test_this_process_writers_wait_for_each_other_not_on_sqlite(
+    migrated_sqlite: Path, tmp_path: Path
+) -> None:
+    """A writer of this process waits on the process's write lock, never polling SQLite.
+
+    The lock held by one thread's write transaction makes another's wait here (and fail
+    with this message past the timeout); reads never wait; once released, writes go on.
+    """
+    shutil.copyfile(migrated_sqlite, tmp_path / "srlab.db")
+    engine = make_engine(f"sqlite:///{tmp_path / 'srlab.db'}", busy_timeout_ms=200)
+    store = SqlAlchemyRunStore(make_sessionmaker(engine))
+    run_id = store.create_run(SPEC, NETWORK)
+    sessions = make_sessionmaker(engine)
+    begins: list[str] = []
+
+    def record(_c: Any, _cursor: Any, statement: str, *_: Any) -> None:
+        if statement.startswith("BEGIN"):
+            begins.append(statement)
+
+    event.listen(engine, "before_cursor_execute", record)
+    holding, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with transaction(sessions, "holding the lock", write=True):
+            holding.set()
+            release.wait(30)
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    try:
+        assert holding.wait(30)
+        with pytest.raises(StorageError, match="another writer of this process"):
+            store.log_reward(run_id, reward(1))
+        assert begins == ["BEGIN IMMEDIATE"]  # the waiting writer never asked SQLite
+        assert store.load_run(run_id).id == run_id
+    finally:
+        release.set()
+        holder.join(30)
+    kept = store.log_reward(run_id, reward(2))
+    assert [r.id for r in store.rewards(run_id)] == [kept]
+    engine.dispose()
