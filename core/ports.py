@@ -49,6 +49,9 @@ class RunSpec:
         sensors: the sensor definition its logical sensors use (`core.brain.catalog`;
             "" for the default). A stored run keeps both resolved (see `core.setup.Setup`),
             so a later change of the defaults never changes what an old run meant.
+        network_id: the stored network's identity when `network` names one (None: a
+            knowledge set, or the network was deleted since): live edits of that network
+            reach the run by it, never by the name, which a later network may take.
     """
 
     condition: str
@@ -60,6 +63,7 @@ class RunSpec:
     params: Mapping[str, Any] = field(default_factory=dict)
     world: str = ""
     sensors: str = ""
+    network_id: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hmac
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Annotated
 
 from fastapi import Depends, HTTPException, Request, status
@@ -34,8 +33,8 @@ class AppState:
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
     run_networks: dict[int, int | None] = field(default_factory=dict)
-    """The id of the stored network each run created here was started from (None: deleted)."""
-    started_at: datetime = field(default_factory=lambda: datetime.now(UTC))
+    """Runs whose stored network was deleted while they ran here (None), overriding
+    `RunSpec.network_id` of the engine's spec."""
 
 
 def _state(request: Request) -> AppState:

@@ -197,6 +197,10 @@ class RunRow(Base):
     mode: Mapped[str] = mapped_column(String(20))
     hz: Mapped[float]
     network: Mapped[str | None] = mapped_column(NAME)
+    network_id: Mapped[int | None] = mapped_column(
+        ForeignKey("networks.id", ondelete="SET NULL"), index=True
+    )
+    """The stored network it started from (NULL: a knowledge set, or that network is gone)."""
     params: Mapped[dict[str, Any]]
     world: Mapped[str] = mapped_column(NAME, server_default=text("''"))
     """The world preset's name ('' for a run stored before runs kept it: the default)."""

@@ -151,3 +151,43 @@ def test_runs_stored_before_0002_read_with_the_defaults_unnamed(sqlite_url: str)
     assert drift(sqlite_url) == []
     downgrade(sqlite_url, "0001")
     assert drift(sqlite_url) != []  # the two columns are gone again
+
+
+def test_runs_stored_before_0003_keep_the_network_made_before_them(sqlite_url: str) -> None:
+    command.upgrade(alembic_config(sqlite_url), "0002")
+    engine = make_engine(sqlite_url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO networks (id, name, description, created_at, updated_at) VALUES "
+                    "(7, 'mine', '', '2026-01-01 00:00:00', '2026-01-01 00:00:00'), "
+                    "(8, 'later', '', '2026-06-01 00:00:00', '2026-06-01 00:00:00')"
+                )
+            )
+            connection.execute(
+                text(
+                    "INSERT INTO runs (condition, seed, mode, hz, params, status, network, "
+                    "created_at) VALUES "
+                    "('kp', 1, 'fast', 10.0, '{}', 'stopped', 'mine', '2026-02-01 00:00:00'), "
+                    "('kp', 2, 'fast', 10.0, '{}', 'stopped', 'later', '2026-02-01 00:00:00'), "
+                    "('kp', 3, 'fast', 10.0, '{}', 'stopped', 'gone', '2026-02-01 00:00:00'), "
+                    "('kp', 4, 'fast', 10.0, '{}', 'stopped', NULL, '2026-02-01 00:00:00')"
+                )
+            )
+    finally:
+        engine.dispose()
+
+    upgrade(sqlite_url, seed=False)
+
+    engine = make_engine(sqlite_url)
+    try:
+        store = SqlAlchemyRunStore(make_sessionmaker(engine))
+        # 'later' was made after its run: an unrelated network that took the name.
+        assert [r.spec.network_id for r in store.list_runs()] == [7, None, None, None]
+        with engine.begin() as connection:
+            connection.execute(text("DELETE FROM networks WHERE id = 7"))
+        assert [r.spec.network_id for r in store.list_runs()] == [None] * 4
+    finally:
+        engine.dispose()
+    assert drift(sqlite_url) == []

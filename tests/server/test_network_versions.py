@@ -125,3 +125,33 @@ async def test_live_edits_reach_runs_of_that_network_not_of_an_older_namesake(
         other = await client.put(cell, json={"strength": 0.1}, params={"live": True})
         assert other.status_code == 200 and other.json()["live_runs"] == []
         await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_a_resumed_run_is_reached_by_its_network_id_after_a_restart(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path)
+    cell = "/api/networks/same/associations/Red/goforward1"
+    async with client_for(settings) as (client, _):
+        await fresh(client, "same")
+        run = await client.post(
+            "/api/runs",
+            json={"condition": "dp", "network": "same", "mode": "realtime", "hz": 20},
+        )
+        run_id = run.json()["id"]
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+    # A new process: the run was interrupted; it knows its network only from the store.
+    async with client_for(settings) as (client, _):
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        reached = await client.put(cell, json={"strength": 0.5}, params={"live": True})
+        assert reached.json()["live_runs"] == [run_id]
+        await client.post(f"/api/runs/{run_id}/stop")
+    async with client_for(settings) as (client, _):
+        assert (await client.delete("/api/networks/same")).status_code == 204
+        await fresh(client, "same")  # unrelated, same name, perhaps the same id
+    # Made before this process started, like the run: only the stored id tells them apart.
+    async with client_for(settings) as (client, _):
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        other = await client.put(cell, json={"strength": 0.1}, params={"live": True})
+        assert other.status_code == 200 and other.json()["live_runs"] == []
+        await client.post(f"/api/runs/{run_id}/stop")

@@ -216,16 +216,14 @@ async def _push(engine: Engine, edits: Sequence[EditAssociation]) -> bool:
 def started_from(state: AppState, engine: Engine, network: StoredNetwork) -> bool:
     """Whether a run was started from this very network (not an earlier one of its name).
 
-    A run created by this process knows its network's id, and deleting the network
-    forgets it (SQLite may give the id to the next network). A run created before this
-    process started (resumed since) knows only the name: it is this network's unless the
-    network was made after this process started, so after the run.
+    A run keeps its network's id (`RunSpec.network_id`, stored with the run); deleting the
+    network clears it, in the store (its foreign key) and here for the engines running
+    (SQLite may give the id to the next network).
     """
     if engine.spec.network != network.name:
         return False
-    if engine.run_id in state.run_networks:
-        return state.run_networks[engine.run_id] == network.id
-    return network.created_at <= state.started_at
+    network_id = state.run_networks.get(engine.run_id, engine.spec.network_id)
+    return network_id is not None and network_id == network.id
 
 
 async def _live(

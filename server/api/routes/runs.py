@@ -120,6 +120,7 @@ async def create_run(
     /api/sensor-definitions), else the defaults; the run keeps their names.
     """
     params = {k: v for k, v in body.params.model_dump().items() if v not in (None, False)}
+    stored = None if body.network is None else await io(networks.get, body.network)
     spec = RunSpec(
         condition=body.condition,
         seed=body.seed,
@@ -130,11 +131,10 @@ async def create_run(
         params=params,
         world=body.world or "",
         sensors=body.sensors or "",
+        network_id=None if stored is None else stored.id,
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
     run_id = await io(engines.create, spec, network)
-    if body.network is not None:  # live edits reach it by the network's id, not its name
-        state.run_networks[run_id] = (await io(networks.get, body.network)).id
     return await _run(store, engines, run_id)
 
 
