@@ -106,17 +106,22 @@ async def test_a_network_made_again_under_its_name_has_other_etags(tmp_path: Pat
         assert r.status_code == 412
 
 
+async def started_run(client: httpx.AsyncClient, network: str) -> int:
+    """A realtime dp run started from `network`."""
+    run = await client.post(
+        "/api/runs", json={"condition": "dp", "network": network, "mode": "realtime", "hz": 20}
+    )
+    run_id: int = run.json()["id"]
+    assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+    return run_id
+
+
 async def test_live_edits_reach_runs_of_that_network_not_of_an_older_namesake(
     tmp_path: Path,
 ) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
         await fresh(client, "same")
-        run = await client.post(
-            "/api/runs",
-            json={"condition": "dp", "network": "same", "mode": "realtime", "hz": 20},
-        )
-        run_id = run.json()["id"]
-        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        run_id = await started_run(client, "same")
         cell = "/api/networks/same/associations/Red/goforward1"
         reached = await client.put(cell, json={"strength": 0.5}, params={"live": True})
         assert reached.json()["live_runs"] == [run_id]
@@ -134,12 +139,7 @@ async def test_a_resumed_run_is_reached_by_its_network_id_after_a_restart(
     cell = "/api/networks/same/associations/Red/goforward1"
     async with client_for(settings) as (client, _):
         await fresh(client, "same")
-        run = await client.post(
-            "/api/runs",
-            json={"condition": "dp", "network": "same", "mode": "realtime", "hz": 20},
-        )
-        run_id = run.json()["id"]
-        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        run_id = await started_run(client, "same")
     # A new process: the run was interrupted; it knows its network only from the store.
     async with client_for(settings) as (client, _):
         assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
