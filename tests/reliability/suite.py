@@ -25,10 +25,9 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests"))  # as pytest does: the tests' helpers are top-level
+from reliability_outcomes import OUTCOMES_VARIABLE  # noqa: E402
 from reliability_report import ROWS_VARIABLE  # noqa: E402
 
 FULL = {
@@ -58,20 +57,26 @@ TABLE_END = "<!-- reliability-table:end -->"
 
 @dataclass
 class Outcomes:
-    """A pytest plugin that keeps each test's outcome and duration, in run order."""
+    """Each test's outcome and duration, in run order, from the child's phase reports."""
 
     results: dict[str, tuple[str, float, str]] = field(default_factory=dict)
 
-    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+    def add(self, test: str, outcome: str, seconds: float, why: str) -> None:
         """Keep the worst phase's outcome; add up the phases' durations."""
-        outcome, seconds, why = self.results.get(report.nodeid, ("passed", 0.0, ""))
-        if report.outcome != "passed" and outcome == "passed":
-            outcome = report.outcome
-            text = str(report.longrepr) if report.longrepr else ""
-            if report.skipped and isinstance(report.longrepr, tuple):
-                text = str(report.longrepr[2])
-            why = text.strip().splitlines()[-1] if text.strip() else ""
-        self.results[report.nodeid] = (outcome, seconds + report.duration, why)
+        was, total, reason = self.results.get(test, ("passed", 0.0, ""))
+        if outcome != "passed" and was == "passed":
+            was, reason = outcome, why
+        self.results[test] = (was, total + seconds, reason)
+
+    @classmethod
+    def read(cls, path: Path) -> Outcomes:
+        """The outcomes the plugin wrote (none when the child wrote nothing)."""
+        outcomes = cls()
+        lines = path.read_text(encoding="utf-8").splitlines() if path.exists() else []
+        for line in lines:
+            r = json.loads(line)
+            outcomes.add(r["test"], r["outcome"], float(r["seconds"]), r["why"])
+        return outcomes
 
 
 class LoadSampler:
@@ -149,14 +154,16 @@ def main(argv: list[str] | None = None) -> int:
     started = time.monotonic()
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     load = LoadSampler()
-    outcomes = Outcomes()
     with tempfile.TemporaryDirectory(prefix="srlab-reliability-") as tmp:
         rows_file = Path(tmp) / "rows.jsonl"
-        os.environ[ROWS_VARIABLE] = str(rows_file)
-        os.chdir(ROOT)
-        status = pytest.main(
-            [*TESTS, "-q", "-p", "no:cacheprovider", *args.pytest_args], plugins=[outcomes]
-        )
+        outcomes_file = Path(tmp) / "outcomes.jsonl"
+        env = {**os.environ, ROWS_VARIABLE: str(rows_file), OUTCOMES_VARIABLE: str(outcomes_file)}
+        env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "tests"), env.get("PYTHONPATH", "")])
+        # pytest in a child: whatever ends it, the outcomes so far and the rows make the table.
+        command = [sys.executable, "-m", "pytest", *TESTS, "-q", "-p", "no:cacheprovider"]
+        command += ["-p", "reliability_outcomes", *args.pytest_args]
+        status = subprocess.run(command, cwd=ROOT, env=env, check=False).returncode
+        outcomes = Outcomes.read(outcomes_file)
         rows = (
             [json.loads(line) for line in rows_file.read_text().splitlines()]
             if rows_file.exists()
@@ -182,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         args.out.write_text(f"# Reliability\n\n{block}\n")
     sys.stdout.write(f"\nwritten to {args.out}\n")
+    if status != 0 and not outcomes.results:
+        sys.stderr.write(f"reliability: pytest ended with status {status} before any test ran\n")
     return int(status)
 
 
