@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from reliability.suite import Outcomes, table
+from suite import Outcomes, table
 
 
 def test_the_worst_phase_wins_and_durations_add_up(tmp_path: Path) -> None:
