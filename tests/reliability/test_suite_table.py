@@ -16,8 +16,8 @@ def test_the_worst_phase_wins_and_durations_add_up(tmp_path: Path) -> None:
         ("t.py::a", "passed", 0.25, ""),
         ("t.py::b", "skipped", 0.0, "needs PostgreSQL"),
     ]
-    lines = [{"test": t, "outcome": o, "seconds": s, "why": w} for t, o, s, w in phases]
-    path.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    reports = [{"test": t, "outcome": o, "seconds": s, "why": w} for t, o, s, w in phases]
+    path.write_text("".join(json.dumps(r) + "\n" for r in reports))
     outcomes = Outcomes.read(path)
     assert outcomes.results == {
         "t.py::a": ("failed", 1.75, "AssertionError: no"),
