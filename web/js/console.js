@@ -467,18 +467,24 @@ function showEffect(r, kept, previous) {
     el("p", { class: "muted small", text: `Per S-R pair${partial}: credit is the change in LTM reliability.` }), summary, raw);
 }
 
-/** Why a reward credited nothing, from what came before it. */
+/**
+ * Why a reward credited nothing, from what came before it. STM holds a record for each
+ * tick whose behaviour answered a stimulus (not the default behaviour's ticks); every
+ * reward, of any source, takes the records before it, and STM is emptied per episode.
+ */
 function whyNothing(r, previous) {
   const c = state.run ? state.conditions.get(state.run.condition) : null;
   if (c && !c.learning) return `${state.run.condition} does not learn: the reward is logged and changes nothing.`;
+  const recorded = "STM records only the ticks where a behaviour answered a stimulus (not the default behaviour's)";
   if (previous && previous.episode === r.episode) {
     const what = `${previous.id !== undefined ? `#${previous.id} ` : "the reward "}(${previous.source}, ${previous.value > 0 ? "+" : ""}${previous.value}) at tick ${previous.tick}`;
+    const took = previous.credited ? `, which took the records before it (${previous.credited})` : "";
     const program = previous.source === "program"
-      ? " A reward program rewards by itself in this condition; in trainer, only you and the task reward."
+      ? " In this condition a reward program rewards by itself; in trainer only you and the task do."
       : "";
-    return `Nothing left in STM to credit: a reward takes the responses recorded since the reward before it, and ${what} had just taken them.${program}`;
+    return `Nothing in STM to credit: ${recorded}, and none was recorded since ${what}${took}.${program}`;
   }
-  return `Nothing in STM to credit: STM is emptied when an episode starts, and the robot had not answered a stimulus yet in episode ${r.episode}.`;
+  return `Nothing in STM to credit: ${recorded}, STM is emptied when an episode starts, and none was recorded yet in episode ${r.episode}.`;
 }
 
 function onAssociation(a) {
