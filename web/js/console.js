@@ -15,6 +15,7 @@ const BACKFILL_MS = 1000;
 const TIMELINE_TICKS = 2000;
 const SOURCES = ["trainer", "program", "task"];
 const MINE_KEY = "srlab.mine";
+const KEEP_REWARDS = 3000; // the newest rewards the page holds (a fast rp run logs thousands)
 
 const state = {
   catalog: null,
@@ -25,7 +26,10 @@ const state = {
   episodes: new Map(),
   conditions: new Map(),
   rewards: [],
+  rewardIndex: new Map(),
   logCount: 0,
+  logTotal: 0,
+  contiguous: 0,
   memory: new Map(),
   network: new Map(),
   flashing: new Map(),
@@ -193,8 +197,11 @@ async function select(id) {
   closeStream();
   state.run = null;
   state.episodes = new Map();
+  state.contiguous = 0;
   state.rewards = [];
+  state.rewardIndex = new Map();
   state.logCount = 0;
+  state.logTotal = 0;
   state.memory = new Map();
   state.network = new Map();
   state.tick = null;
@@ -385,7 +392,7 @@ function drawCompetition(comp, chosen) {
 
 function onEpisode(e) {
   if (!state.episodes.has(e.episode)) {
-    state.episodes.set(e.episode, e);
+    keepEpisode(e);
     if (state.run) {
       const ok = e.outcome === "success" ? 1 : 0;
       showRun({ ...state.run, episodes_done: state.run.episodes_done + 1, successes: state.run.successes + ok });
@@ -403,20 +410,25 @@ function rewardKey(r) {
 
 function addReward(r) {
   const k = rewardKey(r);
-  const known = state.rewards.find((x) => rewardKey(x) === k && (x.id === undefined || r.id === undefined || x.id === r.id));
+  const known = state.rewardIndex.get(k);
   if (known) {
-    Object.assign(known, Object.fromEntries(Object.entries(r).filter(([, v]) => v !== undefined)));
+    for (const [name, v] of Object.entries(r)) if (v !== undefined) known[name] = v;
     return known;
   }
-  state.rewards.push(r);
-  state.rewards.sort((a, b) => a.tick - b.tick || (a.id ?? Infinity) - (b.id ?? Infinity));
+  const list = state.rewards;
+  list.push(r);
+  state.rewardIndex.set(k, r);
+  if (list.length > 1 && list[list.length - 2].tick > r.tick) list.sort((a, b) => a.tick - b.tick);
+  while (list.length > KEEP_REWARDS) state.rewardIndex.delete(rewardKey(list.shift()));
   return r;
 }
 
 function onReward(r) {
   refreshMemory();
   const previous = [...state.rewards].reverse().find((x) => x.tick < r.tick || (x.tick === r.tick && rewardKey(x) !== rewardKey(r)));
+  const seen = state.rewardIndex.has(rewardKey(r));
   const kept = addReward({ tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
+  if (!seen) state.logTotal += 1; // in the log too, not read from it yet
   redrawRewards();
   if (r.source !== "trainer") return;
   state.lastReward = r;
@@ -568,15 +580,18 @@ async function loadEpisodes() {
   if (!run) return;
   const list = await attempt(() => getAll(`/runs/${run.id}/episodes`));
   if (!list || !state.run || state.run.id !== run.id) return;
-  for (const e of list.data) state.episodes.set(e.episode, e);
+  for (const e of list.data) keepEpisode(e);
   drawCurve();
+}
+
+function keepEpisode(e) {
+  state.episodes.set(e.episode, e);
+  while (state.episodes.has(state.contiguous)) state.contiguous += 1;
 }
 
 /** The number of the first episode missing below the newest one known (null: none). */
 function firstGap() {
-  const numbers = [...state.episodes.keys()].sort((a, b) => a - b);
-  for (let i = 0; i < numbers.length; i += 1) if (numbers[i] !== i) return i;
-  return null;
+  return state.episodes.size > state.contiguous ? state.contiguous : null;
 }
 
 let backfilling = false;
@@ -591,7 +606,7 @@ async function backfillNow() {
     for (;;) {
       const page = await attempt(() => get(`/runs/${run.id}/episodes`, { limit: 1000, offset }));
       if (!page || !state.run || state.run.id !== run.id) return;
-      for (const e of page.data) state.episodes.set(e.episode, e);
+      for (const e of page.data) keepEpisode(e);
       offset += page.data.length;
       if (!page.data.length || offset >= page.count || firstGap() === null) break;
     }
@@ -611,8 +626,13 @@ const redrawCurve = throttle(drawCurve, 250);
 
 // --- the reward log: every source on a timeline, and the person's own --------------------
 
+/** The newest `KEEP_REWARDS` of the run's reward log. */
 async function loadRewards() {
-  state.logCount = 0;
+  const run = state.run;
+  if (!run) return;
+  const head = await attempt(() => get(`/runs/${run.id}/rewards`, { limit: 1 }));
+  if (!head || !state.run || state.run.id !== run.id) return;
+  state.logCount = Math.max(state.logCount, head.count - KEEP_REWARDS);
   await syncRewards();
 }
 
@@ -625,6 +645,7 @@ async function syncRewards() {
     if (!page || !state.run || state.run.id !== run.id) return;
     for (const r of page.data) addReward({ ...r });
     state.logCount += page.data.length;
+    state.logTotal = Math.max(state.logTotal, page.count);
     if (!page.data.length || state.logCount >= page.count) break;
   }
   drawRewards();
@@ -679,8 +700,10 @@ function drawTimeline() {
   const box = $("#reward-timeline");
   const counts = Object.fromEntries(SOURCES.map((src) => [src, 0]));
   for (const r of state.rewards) counts[r.source] = (counts[r.source] || 0) + 1;
+  const shown = state.rewards.length;
+  const total = Math.max(state.logTotal, shown);
   $("#reward-counts").textContent = state.run
-    ? Object.entries(counts).map(([src, n]) => `${src} ${n}`).join(" · ")
+    ? `${Object.entries(counts).map(([src, n]) => `${src} ${n}`).join(" · ")}${total > shown ? ` (the newest ${shown} of ${total})` : ""}`
     : "";
   if (!state.rewards.length) {
     box.replaceChildren(el("p", { class: "empty", text: state.run ? "No rewards yet." : "Pick or create a run." }));
@@ -767,7 +790,9 @@ async function reward(value, note) {
   if (note === undefined) input.value = "";
   rememberMine(ack.id);
   // The log's id joins the stream's copy of the same reward (the stream has none).
-  addReward({ id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: "trainer", note: text });
+  const logged = { id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: "trainer", note: text };
+  if (!state.rewardIndex.has(rewardKey(logged))) state.logTotal += 1;
+  addReward(logged);
   drawRewards();
   // The stream may have shown its credit before the acknowledgement came back.
   if (state.credited.has(`${ack.tick}:${ack.value}`)) return;
