@@ -31,6 +31,8 @@ class Condition:
         hybrid: for an outside learner (``agent`` other than ``brain``): it may defer to the
             built-in behaviour, starts by deferring, and explores per encounter, so the
             designed reflexes it starts from are kept until it has learned better.
+        interactive: meant for a person giving rewards at the keyboard (the runs API):
+            not one of the experiments' conditions, so never tuned or compared.
     """
 
     name: str
@@ -45,6 +47,7 @@ class Condition:
     agent: str = "brain"
     extra_networks: tuple[str, ...] = ()
     hybrid: bool = False
+    interactive: bool = False
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -91,6 +94,16 @@ CONDITIONS: dict[str, Condition] = {
             epsilon=0.1,
             success_reward=1.0,
             trainer="rp",
+        ),
+        Condition(
+            "trainer",
+            "For a person at the keyboard: rp's start and learning, but no reinforcement "
+            "program; the only rewards are the person's and the delayed one of a lap.",
+            network="innate",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            interactive=True,
         ),
         Condition(
             "kp",

@@ -21,7 +21,7 @@ from core.engine import HZ_MAX, HZ_MIN
 from core.worlds import world_names
 
 EngineCondition = Literal[
-    "innate", "delayed", "dp", "rp", "kp", "sonar", "expert", "reflexes", "unaware"
+    "innate", "delayed", "dp", "rp", "trainer", "kp", "sonar", "expert", "reflexes", "unaware"
 ]
 assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
     n for n, c in CONDITIONS.items() if c.agent == "brain"
@@ -74,6 +74,15 @@ class StimulusPublic(BaseModel):
     objective: str
     level: Literal["low", "high"]
     priority: int
+
+
+class ConditionPublic(BaseModel):
+    name: str
+    description: str
+    network: str = Field(description="the knowledge set it starts from by default")
+    learning: bool
+    kp: bool = Field(description="whether knowledge propagation runs")
+    trainer: str = Field(description="the reward program that runs beside it ('' for none)")
 
 
 class BehaviourPublic(BaseModel):

@@ -1,5 +1,7 @@
 // The trainer console: a run's live state, its reliabilities as a live Table III, rewards
-// by button or key with the credit they gave, run control and the learning curve.
+// by button or key with the credit they gave (summed per S-R pair), every reward of every
+// source on a timeline, the person's own rewards with an undo, run control and the
+// learning curve.
 
 import { get, getAll, post } from "./api.js";
 import { learningCurve } from "./chart.js";
@@ -9,6 +11,11 @@ import { $, $$, attempt, el, fmt, heat, throttle, toast, typing } from "./ui.js"
 const LIVE = new Set(["running", "paused"]);
 const TICK_HZ = 10;
 const POLL_MS = 2000;
+const BACKFILL_MS = 1000;
+const TIMELINE_TICKS = 2000;
+const SOURCES = ["trainer", "program", "task"];
+const MINE_KEY = "srlab.mine";
+const KEEP_REWARDS = 3000; // the newest rewards the page holds (a fast rp run logs thousands)
 
 const state = {
   catalog: null,
@@ -16,7 +23,13 @@ const state = {
   known: new Set(),
   runs: [],
   run: null,
-  episodes: [],
+  episodes: new Map(),
+  conditions: new Map(),
+  rewards: [],
+  rewardIndex: new Map(),
+  logCount: 0,
+  logTotal: 0,
+  contiguous: 0,
   memory: new Map(),
   network: new Map(),
   flashing: new Map(),
@@ -40,14 +53,24 @@ export function init(catalog) {
   $("#run-pause").addEventListener("click", () => control("pause"));
   $("#run-resume").addEventListener("click", () => control("resume"));
   $("#run-stop").addEventListener("click", () => control("stop"));
-  $("#reward-plus").addEventListener("click", () => reward(1));
-  $("#reward-minus").addEventListener("click", () => reward(-1));
+  for (const button of $$(".reward-buttons button.reward")) {
+    button.addEventListener("click", () => reward(Number(button.dataset.value)));
+  }
+  $("#reward-undo").addEventListener("click", undoLast);
   $("#view3d").addEventListener("click", openView);
-  $("#new-run-form").addEventListener("submit", onCreate);
+  const form = $("#new-run-form");
+  form.addEventListener("submit", onCreate);
+  // A field the browser refuses says why beside it, even where its bubble would not show.
+  form.addEventListener("invalid", (e) => fieldError(e.target, e.target.validationMessage), true);
+  form.addEventListener("input", (e) => clearFieldError(e.target));
+  form.condition.addEventListener("change", describeCondition);
   for (const radio of $$('input[name="memory"]')) radio.addEventListener("change", () => loadMemory());
   document.addEventListener("keydown", onKey);
   document.addEventListener("srlab:networks", (e) => fillNetworks(e.detail));
-  window.addEventListener("resize", throttle(drawCurve, 200));
+  window.addEventListener("resize", throttle(() => {
+    drawCurve();
+    drawTimeline();
+  }, 200));
 }
 
 /** Show the console for run `id` (or the newest run). */
@@ -59,6 +82,7 @@ export async function show(id, health) {
     if (list) fillNetworks(list.data);
   }
   if ($("#new-run-form").world.options.length < 2) await fillSetup();
+  if (!state.conditions.size) await fillConditions();
   await loadRuns();
   const wanted = id ? Number(id) : state.runs.length ? state.runs[state.runs.length - 1].id : null;
   await select(wanted);
@@ -95,6 +119,35 @@ async function fillSetup() {
     value: x.name, text: x.default ? `${x.name} (default)` : x.name, title: x.description }));
   if (worlds) form.world.replaceChildren(el("option", { value: "", text: "the default" }), ...options(worlds));
   if (definitions) form.sensors.replaceChildren(el("option", { value: "", text: "the default" }), ...options(definitions));
+}
+
+/** The conditions the runs API takes, each with what it means for the one rewarding. */
+async function fillConditions() {
+  const list = await attempt(() => get("/conditions"));
+  if (!list) return;
+  state.conditions = new Map(list.map((c) => [c.name, c]));
+  const select = $("#new-run-form").condition;
+  const chosen = select.value || "trainer";
+  const tag = (c) => (c.name === "trainer" ? " · you give the rewards (at the keyboard)"
+    : c.trainer ? ` · a reward program (${c.trainer}) rewards too` : c.learning ? "" : " · does not learn");
+  const ordered = [...list].sort((a, b) => (b.name === "trainer") - (a.name === "trainer"));
+  select.replaceChildren(...ordered.map((c) => el("option", { value: c.name, text: `${c.name}${tag(c)}`, title: c.description })));
+  select.value = state.conditions.has(chosen) ? chosen : "trainer";
+  describeCondition();
+  if (state.run) showRun(state.run);
+}
+
+/** What the chosen condition means: who rewards, whether it learns. */
+function describeCondition() {
+  const c = state.conditions.get($("#new-run-form").condition.value);
+  $("#condition-about").textContent = c ? aboutRewards(c) : "";
+}
+
+function aboutRewards(c) {
+  if (!c.learning) return `${c.description} Rewards are logged but change nothing.`;
+  if (c.trainer) return `${c.description} Its reward program rewards by itself: for you alone at the keyboard, use trainer.`;
+  if (c.name === "trainer") return `${c.description} Use it to train the robot yourself.`;
+  return c.description;
 }
 
 function label(r) {
@@ -143,7 +196,12 @@ async function loadRuns() {
 async function select(id) {
   closeStream();
   state.run = null;
-  state.episodes = [];
+  state.episodes = new Map();
+  state.contiguous = 0;
+  state.rewards = [];
+  state.rewardIndex = new Map();
+  state.logCount = 0;
+  state.logTotal = 0;
   state.memory = new Map();
   state.network = new Map();
   state.tick = null;
@@ -151,21 +209,24 @@ async function select(id) {
   state.credited = new Set();
   $("#reward-effect").replaceChildren(el("p", { class: "muted", text: "No reward yet." }));
   $("#assoc-feed").replaceChildren();
+  $("#my-rewards").replaceChildren();
   resetLive();
   if (id === null || Number.isNaN(id)) {
     showRun(null);
     await loadMemory();
     drawCurve();
+    drawRewards();
     return;
   }
   let run;
   try {
     run = await get(`/runs/${id}`);
   } catch (error) {
-    toast(`Run ${id}: ${error.message}`, "error");
+    toast(`Run ${id}: ${error.message}`, "error", { offline: error.status === 0 });
     showRun(null);
     await loadMemory();
     drawCurve();
+    drawRewards();
     return;
   }
   $("#run-select").value = String(id);
@@ -195,8 +256,10 @@ function showRun(run) {
   $("#run-resume").disabled = !run || status !== "paused";
   $("#run-stop").disabled = !run || !LIVE.has(status);
   const canReward = Boolean(run) && status === "running";
-  $("#reward-plus").disabled = !canReward;
-  $("#reward-minus").disabled = !canReward;
+  for (const button of $$(".reward-buttons button.reward")) button.disabled = !canReward;
+  $("#reward-undo").disabled = !canReward || !undoable();
+  const condition = run ? state.conditions.get(run.condition) : null;
+  $("#train-about").textContent = !run ? "" : condition ? `${run.condition}: ${aboutRewards(condition)}` : run.condition;
   const link = $("#view3d");
   if (run && state.viserPort) {
     // The click chooses the run in the view (a POST: it changes what every viewer sees),
@@ -256,6 +319,12 @@ function follow() {
   source.addEventListener("association", (e) => onAssociation(data(e)));
   source.addEventListener("status", (e) => {
     const d = data(e);
+    // The stream's first event: what happened between the first load and now is in the
+    // store, not in the stream, so it is fetched (the stream brings what follows).
+    if (d.run !== undefined && d.run !== null) {
+      backfillEpisodes();
+      syncRewards();
+    }
     if (state.run && state.run.id === run.id && d.status !== state.run.status) {
       const wasLive = LIVE.has(state.run.status);
       showRun({ ...state.run, status: d.status, error: d.error });
@@ -322,29 +391,112 @@ function drawCompetition(comp, chosen) {
 }
 
 function onEpisode(e) {
-  if (!state.episodes.some((x) => x.episode === e.episode)) state.episodes.push(e);
-  if (state.run) {
-    const ok = e.outcome === "success" ? 1 : 0;
-    showRun({ ...state.run, episodes_done: state.run.episodes_done + 1, successes: state.run.successes + ok });
+  if (!state.episodes.has(e.episode)) {
+    keepEpisode(e);
+    if (state.run) {
+      const ok = e.outcome === "success" ? 1 : 0;
+      showRun({ ...state.run, episodes_done: state.run.episodes_done + 1, successes: state.run.successes + ok });
+    }
   }
+  if (firstGap() !== null) backfillEpisodes();
   redrawCurve();
   refreshMemory();
 }
 
+/** A reward as the timeline keeps it, from the log or the stream. */
+function rewardKey(r) {
+  return `${r.tick}|${r.source}|${r.value}|${r.note}`;
+}
+
+function addReward(r) {
+  const k = rewardKey(r);
+  const known = state.rewardIndex.get(k);
+  if (known) {
+    for (const [name, v] of Object.entries(r)) if (v !== undefined) known[name] = v;
+    return known;
+  }
+  const list = state.rewards;
+  list.push(r);
+  state.rewardIndex.set(k, r);
+  if (list.length > 1 && list[list.length - 2].tick > r.tick) list.sort((a, b) => a.tick - b.tick);
+  while (list.length > KEEP_REWARDS) state.rewardIndex.delete(rewardKey(list.shift()));
+  return r;
+}
+
 function onReward(r) {
   refreshMemory();
+  const previous = [...state.rewards].reverse().find((x) => x.tick < r.tick || (x.tick === r.tick && rewardKey(x) !== rewardKey(r)));
+  const seen = state.rewardIndex.has(rewardKey(r));
+  const kept = addReward({ tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
+  if (!seen) state.logTotal += 1; // in the log too, not read from it yet
+  redrawRewards();
   if (r.source !== "trainer") return;
   state.lastReward = r;
   state.credited.add(`${r.tick}:${r.value}`);
-  const rows_ = r.credits.map((c) => el("tr", {},
-    el("td", { text: c.tick }), el("td", { text: `${c.stimulus} → ${c.behaviour}` }),
-    el("td", { text: c.d_k }), el("td", { text: `${fmt(c.before, 3)} → ${fmt(c.after, 3)}` })));
+  showEffect(r, kept, previous);
+}
+
+/** The credit a reward gave, summed per S-R pair; its raw STM rows one click away. */
+function showEffect(r, kept, previous) {
   const sign = r.value > 0 ? "+" : "−";
-  $("#reward-effect").replaceChildren(
-    el("div", { class: "head" }, `${sign}${Math.abs(r.value)} at tick ${r.tick} (episode ${r.episode}) credited ${r.credited} STM record${r.credited === 1 ? "" : "s"}`),
-    r.credits.length
-      ? el("table", {}, el("thead", {}, el("tr", {}, el("th", { text: "tick" }), el("th", { text: "S → R" }), el("th", { text: "d_k" }), el("th", { text: "reliability" }))), el("tbody", {}, rows_))
-      : el("p", { class: "muted", text: "Nothing in STM to credit (the robot had just started, or this condition does not learn)." }));
+  const id = kept && kept.id !== undefined ? `#${kept.id} ` : "";
+  const head = el("div", { class: "head" },
+    `${id}${sign}${Math.abs(r.value)} at tick ${r.tick} (episode ${r.episode}) credited ${r.credited} STM record${r.credited === 1 ? "" : "s"}`);
+  if (!r.credits.length) {
+    $("#reward-effect").replaceChildren(head, el("p", { class: "muted why", text: whyNothing(r, previous) }));
+    return;
+  }
+  const pairs = new Map();
+  for (const c of r.credits) {
+    const k = `${c.stimulus} → ${c.behaviour}`;
+    const p = pairs.get(k) || { pair: k, count: 0, total: 0, dmin: Infinity, dmax: 0, after: c.after };
+    p.count += 1;
+    p.total += c.after - c.before;
+    p.dmin = Math.min(p.dmin, c.d_k);
+    p.dmax = Math.max(p.dmax, c.d_k);
+    p.after = c.after;
+    pairs.set(k, p);
+  }
+  const summed = [...pairs.values()].sort((a, b) => Math.abs(b.total) - Math.abs(a.total));
+  const signed = (v) => `${v >= 0 ? "+" : "−"}${fmt(Math.abs(v), 3)}`;
+  const summary = el("table", { class: "pairs" },
+    el("thead", {}, el("tr", {}, el("th", { text: "S → R" }), el("th", { text: "records" }), el("th", { text: "credit" }))),
+    el("tbody", {}, summed.map((p) => el("tr", {
+      class: "pair",
+      title: `${p.pair}: ${p.count} STM record${p.count === 1 ? "" : "s"}, d_k ${p.dmin === p.dmax ? p.dmin : `${p.dmin}–${p.dmax}`}, reliability now ${fmt(p.after, 3)}`,
+    },
+      el("td", { text: p.pair }), el("td", { text: p.count }),
+      el("td", { class: p.total >= 0 ? "good" : "bad", text: signed(p.total) })))));
+  const partial = r.credited > r.credits.length ? ` (the first ${r.credits.length} of ${r.credited})` : "";
+  const raw = el("details", { class: "raw" },
+    el("summary", { text: `the ${r.credits.length} raw STM rows${partial}` }),
+    el("table", {},
+      el("thead", {}, el("tr", {}, el("th", { text: "tick" }), el("th", { text: "S → R" }), el("th", { text: "d_k" }), el("th", { text: "reliability" }))),
+      el("tbody", {}, r.credits.map((c) => el("tr", {},
+        el("td", { text: c.tick }), el("td", { text: `${c.stimulus} → ${c.behaviour}` }),
+        el("td", { text: c.d_k }), el("td", { text: `${fmt(c.before, 3)} → ${fmt(c.after, 3)}` }))))));
+  $("#reward-effect").replaceChildren(head,
+    el("p", { class: "muted small", text: `Per S-R pair${partial}: credit is the change in LTM reliability.` }), summary, raw);
+}
+
+/**
+ * Why a reward credited nothing, from what came before it. STM holds a record for each
+ * tick whose behaviour answered a stimulus (not the default behaviour's ticks); every
+ * reward, of any source, takes the records before it, and STM is emptied per episode.
+ */
+function whyNothing(r, previous) {
+  const c = state.run ? state.conditions.get(state.run.condition) : null;
+  if (c && !c.learning) return `${state.run.condition} does not learn: the reward is logged and changes nothing.`;
+  const recorded = "STM records only the ticks where a behaviour answered a stimulus (not the default behaviour's)";
+  if (previous && previous.episode === r.episode) {
+    const what = `${previous.id !== undefined ? `#${previous.id} ` : "the reward "}(${previous.source}, ${previous.value > 0 ? "+" : ""}${previous.value}) at tick ${previous.tick}`;
+    const took = previous.credited ? `, which took the records before it (${previous.credited})` : "";
+    const program = previous.source === "program"
+      ? " In this condition a reward program rewards by itself; in trainer only you and the task do."
+      : "";
+    return `Nothing in STM to credit: ${recorded}, and none was recorded since ${what}${took}.${program}`;
+  }
+  return `Nothing in STM to credit: ${recorded}, STM is emptied when an episode starts, and none was recorded yet in episode ${r.episode}.`;
 }
 
 function onAssociation(a) {
@@ -359,9 +511,9 @@ function onAssociation(a) {
 
 // --- reliabilities and the learning curve ---------------------------------------------
 
-/** What the store holds of the run: its episodes and its reliabilities. */
+/** What the store holds of the run: its episodes, rewards and reliabilities. */
 function loadStored() {
-  return Promise.all([loadEpisodes(), loadMemory()]);
+  return Promise.all([loadEpisodes(), loadMemory(), loadRewards()]);
 }
 
 const memoryKind = () => ($('input[name="memory"]:checked') || { value: "ltm" }).value;
@@ -428,15 +580,183 @@ async function loadEpisodes() {
   if (!run) return;
   const list = await attempt(() => getAll(`/runs/${run.id}/episodes`));
   if (!list || !state.run || state.run.id !== run.id) return;
-  state.episodes = list.data;
+  for (const e of list.data) keepEpisode(e);
   drawCurve();
 }
 
+function keepEpisode(e) {
+  state.episodes.set(e.episode, e);
+  while (state.episodes.has(state.contiguous)) state.contiguous += 1;
+}
+
+/** The number of the first episode missing below the newest one known (null: none). */
+function firstGap() {
+  return state.episodes.size > state.contiguous ? state.contiguous : null;
+}
+
+let backfilling = false;
+
+/** Fetch the stored episodes from the first gap on, a page at a time (the list is by number). */
+async function backfillNow() {
+  const run = state.run;
+  if (!run || backfilling) return;
+  backfilling = true;
+  try {
+    let offset = firstGap() ?? state.episodes.size;
+    for (;;) {
+      const page = await attempt(() => get(`/runs/${run.id}/episodes`, { limit: 1000, offset }));
+      if (!page || !state.run || state.run.id !== run.id) return;
+      for (const e of page.data) keepEpisode(e);
+      offset += page.data.length;
+      if (!page.data.length || offset >= page.count || firstGap() === null) break;
+    }
+    drawCurve();
+  } finally {
+    backfilling = false;
+  }
+}
+
+const backfillEpisodes = throttle(backfillNow, BACKFILL_MS);
+
 function drawCurve() {
-  learningCurve($("#curve"), state.episodes);
+  learningCurve($("#curve"), [...state.episodes.values()]);
 }
 
 const redrawCurve = throttle(drawCurve, 250);
+
+// --- the reward log: every source on a timeline, and the person's own --------------------
+
+/** The newest `KEEP_REWARDS` of the run's reward log. */
+async function loadRewards() {
+  const run = state.run;
+  if (!run) return;
+  const head = await attempt(() => get(`/runs/${run.id}/rewards`, { limit: 1 }));
+  if (!head || !state.run || state.run.id !== run.id) return;
+  state.logCount = Math.max(state.logCount, head.count - KEEP_REWARDS);
+  await syncRewards();
+}
+
+/** The reward log from what was read of it on (the log only grows). */
+async function syncRewards() {
+  const run = state.run;
+  if (!run) return;
+  for (;;) {
+    const page = await attempt(() => get(`/runs/${run.id}/rewards`, { limit: 1000, offset: state.logCount }));
+    if (!page || !state.run || state.run.id !== run.id) return;
+    for (const r of page.data) addReward({ ...r });
+    state.logCount += page.data.length;
+    state.logTotal = Math.max(state.logTotal, page.count);
+    if (!page.data.length || state.logCount >= page.count) break;
+  }
+  drawRewards();
+}
+
+function mine() {
+  try {
+    return new Set(JSON.parse(localStorage.getItem(`${MINE_KEY}.${state.run ? state.run.id : ""}`) || "[]"));
+  } catch {
+    return new Set();
+  }
+}
+
+function rememberMine(id) {
+  if (!state.run) return;
+  const ids = mine();
+  ids.add(id);
+  localStorage.setItem(`${MINE_KEY}.${state.run.id}`, JSON.stringify([...ids].slice(-500)));
+}
+
+const undoOf = (r) => {
+  const m = /^undo of #(\d+)$/.exec(r.note || "");
+  return m ? Number(m[1]) : null;
+};
+
+/** The latest reward sent from this browser that is not an undo and not undone yet. */
+function undoable() {
+  const ids = mine();
+  const undone = new Set(state.rewards.map(undoOf).filter((x) => x !== null));
+  return [...state.rewards].reverse().find((r) => r.source === "trainer" && r.id !== undefined
+    && ids.has(r.id) && undoOf(r) === null && !undone.has(r.id)) || null;
+}
+
+function drawRewards() {
+  drawTimeline();
+  drawMine();
+  if (state.run) $("#reward-undo").disabled = state.run.status !== "running" || !undoable();
+}
+
+const redrawRewards = throttle(drawRewards, 300);
+
+const NS = "http://www.w3.org/2000/svg";
+function svgEl(tag, attrs = {}, text) {
+  const node = document.createElementNS(NS, tag);
+  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, String(v));
+  if (text !== undefined) node.textContent = text;
+  return node;
+}
+
+/** Every reward of the last `TIMELINE_TICKS` ticks, one lane per source, up good, down bad. */
+function drawTimeline() {
+  const box = $("#reward-timeline");
+  const counts = Object.fromEntries(SOURCES.map((src) => [src, 0]));
+  for (const r of state.rewards) counts[r.source] = (counts[r.source] || 0) + 1;
+  const shown = state.rewards.length;
+  const total = Math.max(state.logTotal, shown);
+  $("#reward-counts").textContent = state.run
+    ? `${Object.entries(counts).map(([src, n]) => `${src} ${n}`).join(" · ")}${total > shown ? ` (the newest ${shown} of ${total})` : ""}`
+    : "";
+  if (!state.rewards.length) {
+    box.replaceChildren(el("p", { class: "empty", text: state.run ? "No rewards yet." : "Pick or create a run." }));
+    return;
+  }
+  const now = Math.max(state.tick ? state.tick.tick : 0, state.rewards[state.rewards.length - 1].tick);
+  const from = Math.max(0, now - TIMELINE_TICKS);
+  const width = Math.max(600, box.clientWidth || 1200);
+  const lane = 36;
+  const pad = { l: 70, r: 14, t: 4, b: 8 };
+  const height = pad.t + lane * SOURCES.length + pad.b;
+  const x = (t) => pad.l + ((t - from) / Math.max(1, now - from)) * (width - pad.l - pad.r);
+  const root = svgEl("svg", { viewBox: `0 0 ${width} ${height}`, role: "img", "aria-label": "Rewards by tick and source" });
+  SOURCES.forEach((src, i) => {
+    const mid = pad.t + lane * i + lane / 2;
+    root.append(svgEl("line", { x1: pad.l, x2: width - pad.r, y1: mid, y2: mid, stroke: "#e3e6eb" }));
+    root.append(svgEl("text", { x: pad.l - 8, y: mid + 4, "text-anchor": "end", "font-size": 11, fill: "#5d6675" }, src));
+  });
+  root.append(svgEl("text", { x: width - pad.r, y: height - 1, "text-anchor": "end", "font-size": 10, fill: "#5d6675" }, `ticks ${from}–${now}`));
+  const marks = svgEl("g", { class: "marks" });
+  for (const r of state.rewards) {
+    if (r.tick < from) continue;
+    const i = Math.max(0, SOURCES.indexOf(r.source));
+    const mid = pad.t + lane * i + lane / 2;
+    const h = Math.max(2, Math.abs(r.value) * (lane / 2 - 3));
+    const mark = svgEl("rect", {
+      x: x(r.tick) - 1.5, width: 3, y: r.value >= 0 ? mid - h : mid, height: h,
+      fill: r.value >= 0 ? "#17803d" : "#c0262d", class: `mark ${r.source}`,
+      "data-source": r.source, "data-value": r.value,
+    });
+    mark.append(svgEl("title", {}, `${r.id !== undefined ? `#${r.id} ` : ""}${r.source} ${r.value > 0 ? "+" : ""}${r.value} at tick ${r.tick}${r.note ? `: ${r.note}` : ""}${r.credited !== undefined ? ` · credited ${r.credited}` : ""}`));
+    marks.append(mark);
+  }
+  root.append(marks);
+  box.replaceChildren(root);
+}
+
+/** The trainers' rewards, newest first, with their notes; this browser's marked "you". */
+function drawMine() {
+  const ids = mine();
+  const undone = new Map(state.rewards.filter((r) => undoOf(r) !== null).map((r) => [undoOf(r), r]));
+  const items = state.rewards.filter((r) => r.source === "trainer").slice(-100).reverse();
+  $("#my-rewards").replaceChildren(...items.map((r) => {
+    const by = undone.get(r.id);
+    return el("li", { class: by ? "undone" : "", dataset: { id: r.id ?? "" } },
+      el("span", { class: `v ${r.value >= 0 ? "pos" : "neg"}`, text: `${r.value > 0 ? "+" : r.value < 0 ? "−" : ""}${Math.abs(r.value)}` }),
+      el("span", { class: "what" }, `${r.id !== undefined ? `#${r.id} · ` : ""}tick ${r.tick}`,
+        r.note ? el("span", { class: "reward-note", text: ` · ${r.note}` }) : null,
+        r.credited !== undefined ? el("span", { class: "muted", text: ` · credited ${r.credited}` }) : null),
+      by ? el("span", { class: "muted small", text: `undone by #${by.id}` }) : null,
+      r.id !== undefined && ids.has(r.id) ? el("span", { class: "muted small", text: "you" }) : null);
+  }));
+}
 
 // --- control and rewards ---------------------------------------------------------------
 
@@ -450,42 +770,128 @@ async function control(action) {
   await loadRuns();
 }
 
-async function reward(value) {
+async function reward(value, note) {
   const run = state.run;
   if (!run) return;
-  const button = value > 0 ? $("#reward-plus") : $("#reward-minus");
-  button.classList.add("pressed");
-  setTimeout(() => button.classList.remove("pressed"), 150);
+  const button = $(`.reward-buttons button[data-value="${value}"]`);
+  if (button) {
+    button.classList.add("pressed");
+    setTimeout(() => button.classList.remove("pressed"), 150);
+  }
   if (run.status !== "running") {
     toast(`Run ${run.id} is ${run.status}: rewards go to a running run.`, "error");
     return;
   }
-  const ack = await attempt(() => post(`/runs/${run.id}/rewards`, { value }), "Reward");
+  const input = $("#reward-note");
+  const text = note ?? input.value.trim();
+  const body = text ? { value, note: text } : { value };
+  const ack = await attempt(() => post(`/runs/${run.id}/rewards`, body), "Reward");
   if (!ack) return;
+  if (note === undefined) input.value = "";
+  rememberMine(ack.id);
+  // The log's id joins the stream's copy of the same reward (the stream has none).
+  const logged = { id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: "trainer", note: text };
+  if (!state.rewardIndex.has(rewardKey(logged))) state.logTotal += 1;
+  addReward(logged);
+  drawRewards();
   // The stream may have shown its credit before the acknowledgement came back.
   if (state.credited.has(`${ack.tick}:${ack.value}`)) return;
+  const sign = ack.value > 0 ? "+" : "−";
   $("#reward-effect").replaceChildren(el("div", { class: "head" },
-    `${value > 0 ? "+" : "−"}1 logged as reward #${ack.id} at tick ${ack.tick} (episode ${ack.episode}); crediting…`));
+    `${sign}${Math.abs(ack.value)} logged as reward #${ack.id} at tick ${ack.tick} (episode ${ack.episode}); crediting…`));
+}
+
+/**
+ * "Undo my last reward": a compensating reward, never an erasure. It is a new trainer
+ * reward of the opposite value noted "undo of #id", logged and applied like any other, so
+ * the log still says what was given and a replay does the same. It credits what STM holds
+ * now; the records the undone reward credited left STM with it.
+ */
+async function undoLast() {
+  const last = undoable();
+  if (!last) {
+    toast("Nothing of yours to undo on this run.", "error");
+    return;
+  }
+  await reward(-last.value, `undo of #${last.id}`);
 }
 
 function onKey(event) {
   if (!state.active || typing(event) || event.ctrlKey || event.metaKey || event.altKey) return;
-  if (event.key === "+" || event.key === "=") {
-    event.preventDefault();
-    reward(1);
-  } else if (event.key === "-" || event.key === "_") {
-    event.preventDefault();
-    reward(-1);
-  } else if (event.key === "P" && event.shiftKey && state.run) {
-    event.preventDefault();
+  // A dialog (the keyboard help, the token) has the keyboard: nothing reaches the robot.
+  if (document.querySelector("dialog[open]")) return;
+  const plus = event.key === "+" || event.key === "=";
+  const minus = event.key === "-" || event.key === "_";
+  const pause = event.key === "P" && event.shiftKey;
+  if (!(plus || minus || pause)) return;
+  event.preventDefault();
+  if (event.repeat) return; // a held key is one reward, not one per repeat
+  if (plus) reward(1);
+  else if (minus) reward(-1);
+  else if (state.run) {
     if (state.run.status === "running") control("pause");
     else if (state.run.status === "paused") control("resume");
   }
 }
 
+/** Show `message` beside the form's field `input` (and mark it) until it is changed. */
+function fieldError(input, message) {
+  if (!input || !input.closest) return;
+  const labelEl = input.closest("label");
+  if (!labelEl) return;
+  labelEl.classList.add("invalid");
+  let note = $(".field-error", labelEl);
+  if (!note) {
+    note = el("span", { class: "field-error", role: "alert" });
+    labelEl.append(note);
+  }
+  note.textContent = message;
+}
+
+function clearFieldError(input) {
+  const labelEl = input && input.closest ? input.closest("label") : null;
+  if (!labelEl) return;
+  labelEl.classList.remove("invalid");
+  const note = $(".field-error", labelEl);
+  if (note) note.remove();
+  if (input.setCustomValidity) input.setCustomValidity("");
+}
+
+function clearFormErrors(form) {
+  for (const input of form.elements) clearFieldError(input);
+  $("#new-run-error").hidden = true;
+  $("#new-run-error").textContent = "";
+}
+
+/** The API's refusal on the form: a 422 names each field; anything else goes under it. */
+function showCreateError(form, error) {
+  const detail = error.body && error.body.detail;
+  const rest = [];
+  let first = null;
+  if (Array.isArray(detail)) {
+    for (const d of detail) {
+      const name = [...(d.loc || [])].reverse().find((p) => typeof p === "string" && form.elements[p]);
+      const input = name ? form.elements[name] : null;
+      if (input && input.closest && input.closest("label")) {
+        fieldError(input, d.msg);
+        first = first || input;
+      } else {
+        rest.push(d.msg);
+      }
+    }
+  } else {
+    rest.push(error.message);
+  }
+  const box = $("#new-run-error");
+  box.textContent = rest.length ? `Not created: ${rest.join("; ")}` : "Not created: see the marked field.";
+  box.hidden = false;
+  if (first) first.focus();
+}
+
 async function onCreate(event) {
   event.preventDefault();
   const form = event.target;
+  clearFormErrors(form);
   const number = (input) => (input.value === "" ? undefined : Number(input.value));
   const params = {};
   if (form.eta.value !== "") params.eta = Number(form.eta.value);
@@ -501,8 +907,15 @@ async function onCreate(event) {
     sensors: form.sensors.value || null,
     params,
   };
-  const run = await attempt(() => post("/runs", body), "Creating the run");
-  if (!run) return; // the form stays open with what was typed
+  let run;
+  try {
+    run = await post("/runs", body);
+  } catch (error) {
+    // The form stays open with what was typed, the refusal beside the field it names.
+    showCreateError(form, error);
+    toast(`Creating the run: ${error.message}`, "error", { offline: error.status === 0 });
+    return;
+  }
   form.closest("details").open = false;
   let started = null;
   if (form.start.checked) started = await attempt(() => post(`/runs/${run.id}/start`), `Starting run ${run.id}`);

@@ -1,5 +1,7 @@
 // Small DOM helpers shared by the editor and the console.
 
+import { onReachability } from "./api.js";
+
 /** Build an element: el("div", {class: "x", onclick: fn}, child, "text", ...). */
 export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);
@@ -21,26 +23,52 @@ export function el(tag, attrs = {}, ...children) {
 export const $ = (selector, root = document) => root.querySelector(selector);
 export const $$ = (selector, root = document) => [...root.querySelectorAll(selector)];
 
-/** A message in the corner: kind is "error", "ok" or "" (info). Errors stay until closed. */
-export function toast(message, kind = "") {
+const TOAST_MS = { error: 15000, other: 4000 };
+
+/**
+ * A message in the corner: kind is "error", "ok" or "" (info). The same message again
+ * does not pile up: the one shown counts it ("×3") and its time starts over. With
+ * `offline`, it is about the service not answering and goes when the service is back.
+ */
+export function toast(message, kind = "", { offline = false } = {}) {
   const box = $("#toasts");
+  const same = [...box.children].find((t) => t.dataset.kind === kind && t.dataset.message === message);
+  if (same) {
+    same.dataset.count = String(Number(same.dataset.count || 1) + 1);
+    $(".count", same).textContent = `×${same.dataset.count}`;
+    clearTimeout(Number(same.dataset.timer));
+    same.dataset.timer = String(setTimeout(() => same.remove(), TOAST_MS[kind === "error" ? "error" : "other"]));
+    box.append(same); // the newest last
+    return same;
+  }
   const close = el("button", { type: "button", "aria-label": "Dismiss", text: "✕" });
-  const node = el("div", { class: `toast ${kind}`, role: kind === "error" ? "alert" : "status" },
-    el("span", { class: "msg", text: message }), close);
+  const node = el("div", {
+    class: `toast ${kind}${offline ? " offline" : ""}`,
+    role: kind === "error" ? "alert" : "status",
+    dataset: { kind, message },
+  }, el("span", { class: "msg", text: message }), el("span", { class: "count" }), close);
   close.addEventListener("click", () => node.remove());
   box.append(node);
   while (box.children.length > 4) box.firstElementChild.remove();
-  if (kind !== "error") setTimeout(() => node.remove(), 4000);
-  else setTimeout(() => node.remove(), 15000);
+  node.dataset.timer = String(setTimeout(() => node.remove(), TOAST_MS[kind === "error" ? "error" : "other"]));
   return node;
 }
+
+/** Take down the messages about the service not answering (it answers again). */
+export function clearOfflineToasts() {
+  for (const node of $$("#toasts .toast.offline")) node.remove();
+}
+
+onReachability((online) => {
+  if (online) clearOfflineToasts();
+});
 
 /** Run `fn`; show its ApiError as a toast and return undefined instead of throwing. */
 export async function attempt(fn, what) {
   try {
     return await fn();
   } catch (error) {
-    toast(what ? `${what}: ${error.message}` : error.message, "error");
+    toast(what ? `${what}: ${error.message}` : error.message, "error", { offline: error.status === 0 });
     return undefined;
   }
 }

@@ -8,10 +8,12 @@ from fastapi import APIRouter
 from pydantic import JsonValue
 
 from core.brain.catalog import sensor_definitions
+from core.conditions import CONDITIONS
 from core.worlds import default_world, load_world, world_names
 from server.api.deps import StateDep
 from server.schemas import (
     BehaviourPublic,
+    ConditionPublic,
     SensorDefinitionPublic,
     SensorPublic,
     StimulusPublic,
@@ -29,6 +31,23 @@ def list_stimuli(state: StateDep) -> list[StimulusPublic]:
             name=s.name, sensor=s.sensor, objective=s.objective, level=s.level, priority=s.priority
         )
         for s in state.catalog.stimuli
+    ]
+
+
+@router.get("/conditions")
+def list_conditions() -> list[ConditionPublic]:
+    """The conditions a run may name (`condition`), with what each means."""
+    return [
+        ConditionPublic(
+            name=c.name,
+            description=c.description,
+            network=c.network,
+            learning=c.learning,
+            kp=c.kp,
+            trainer=c.trainer or "",
+        )
+        for c in CONDITIONS.values()
+        if c.agent == "brain"
     ]
 
 

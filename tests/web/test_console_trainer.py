@@ -1,0 +1,375 @@
+"""The trainer console from 1024 px up, as a person training a robot by hand uses it.
+
+The new-run form inside the window with its errors beside their fields, the rewards of
+every source on a timeline, graded rewards with notes and an undo that is a new reward,
+the credit summed per S-R pair, a learning curve by episode number, keys that do not act
+behind a dialog or per key repeat, and messages that do not pile up while offline.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+from browser import artifact
+from conftest import BROWSER_WAIT_MS
+from liveserver import LiveServer, start_server, stop_server, wait_status
+from playwright.sync_api import Browser, ConsoleMessage, Error, Page, Route, expect
+from webpage import eventually, open_view
+
+WIDTHS = [1024, 1440]
+
+
+@contextmanager
+def sized_page(browser: Browser, width: int, height: int = 800) -> Iterator[Page]:
+    """A fresh page `width` px wide; a JavaScript error in it fails the test."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    page = context.new_page()
+    errors: list[str] = []
+
+    def on_error(error: Error) -> None:
+        errors.append(str(error))
+
+    def on_console(message: ConsoleMessage) -> None:
+        if message.type == "error" and "Failed to load resource" not in message.text:
+            errors.append(message.text)
+
+    page.on("pageerror", on_error)
+    page.on("console", on_console)
+    page.set_default_timeout(BROWSER_WAIT_MS)
+    try:
+        yield page
+    finally:
+        context.close()
+    assert not errors, f"JavaScript errors in the page: {errors}"
+
+
+def inside(page: Page, selector: str, vertical: bool = True) -> None:
+    """Every element matching `selector` lies inside the viewport (and the page is no wider)."""
+    size = page.viewport_size
+    assert size is not None
+    boxes = page.locator(selector)
+    assert boxes.count() > 0, selector
+    for i in range(boxes.count()):
+        box = boxes.nth(i).bounding_box()
+        assert box is not None, f"{selector} #{i} is not shown"
+        assert box["x"] >= 0 and box["x"] + box["width"] <= size["width"], (selector, i, box)
+        if vertical:
+            assert box["y"] >= 0 and box["y"] + box["height"] <= size["height"], (selector, i, box)
+    scroll = page.evaluate("document.documentElement.scrollWidth")
+    assert scroll <= size["width"], f"the page is {scroll} px wide in a {size['width']} px window"
+
+
+def create_run(server: LiveServer, **body: Any) -> int:
+    r = server.client.post("/api/runs", json=body)
+    assert r.status_code == 201, r.text
+    run_id: int = r.json()["id"]
+    return run_id
+
+
+def started(server: LiveServer, **body: Any) -> int:
+    run_id = create_run(server, **body)
+    assert server.client.post(f"/api/runs/{run_id}/start").status_code == 200
+    return run_id
+
+
+def trainer_rewards(server: LiveServer, run_id: int) -> list[dict[str, Any]]:
+    log = server.client.get(f"/api/runs/{run_id}/rewards", params={"limit": 1000}).json()
+    return [r for r in log["data"] if r["source"] == "trainer"]
+
+
+def logged(server: LiveServer, run_id: int, n: int) -> list[dict[str, Any]] | None:
+    """The run's trainer rewards once there are `n` (None before)."""
+    rewards = trainer_rewards(server, run_id)
+    return rewards if len(rewards) >= n else None
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_new_run_form_lies_inside_the_window(
+    browser: Browser, server: LiveServer, width: int
+) -> None:
+    with sized_page(browser, width) as page:
+        open_view(page, server, "console")
+        page.click("#new-run > summary")
+        form = page.locator("#new-run-form")
+        expect(form).to_be_visible()
+        inside(page, "#new-run-form")
+        inside(page, "#new-run-form label, #new-run-form button[type=submit]")
+        page.screenshot(path=artifact(f"console-new-run-{width}.png"))
+
+
+def test_the_form_names_trainer_for_the_keyboard_and_says_what_a_condition_means(
+    page: Page, server: LiveServer
+) -> None:
+    open_view(page, server, "console")
+    page.click("#new-run > summary")
+    condition = page.locator("#new-run-form select[name=condition]")
+    expect(condition).to_have_value("trainer")
+    expect(condition.locator("option[value=trainer]")).to_contain_text("keyboard")
+    about = page.locator("#condition-about")
+    expect(about).to_contain_text("no reinforcement program")
+    condition.select_option("rp")
+    expect(about).to_contain_text("reward program rewards by itself")
+    condition.select_option("innate")
+    expect(about).to_contain_text("change nothing")
+
+
+def test_a_value_the_api_refuses_is_shown_beside_its_field(
+    browser: Browser, server: LiveServer
+) -> None:
+    with sized_page(browser, 1024) as page:
+        open_view(page, server, "console")
+        page.click("#new-run > summary")
+        form = page.locator("#new-run-form")
+        form.locator("input[name=hz]").fill("5000")  # over the API's limit
+        form.evaluate("f => f.noValidate = true")  # the API judges it: its 422 names hz
+        before = server.client.get("/api/runs").json()["count"]
+        form.locator("button[type=submit]").click()
+        error = form.locator("label:has(input[name=hz]) .field-error")
+        expect(error).to_contain_text("1000")
+        expect(form.locator("#new-run-error")).to_be_visible()
+        inside(page, "#new-run-form label:has(input[name=hz]) .field-error")
+        assert server.client.get("/api/runs").json()["count"] == before
+        form.locator("input[name=hz]").fill("20")
+        expect(error).to_have_count(0)
+        # The browser's own refusal (eta past its max) also shows beside the field.
+        form.evaluate("f => f.noValidate = false")
+        form.locator("input[name=eta]").fill("2")
+        form.locator("button[type=submit]").click()
+        expect(form.locator("label:has(input[name=eta]) .field-error")).to_be_visible()
+        assert server.client.get("/api/runs").json()["count"] == before
+
+
+@pytest.mark.parametrize("width", WIDTHS)
+def test_the_reward_buttons_fit_and_graded_rewards_with_notes_and_an_undo_are_logged(
+    browser: Browser, server: LiveServer, width: int
+) -> None:
+    run_id = started(server, condition="trainer", mode="realtime", hz=20, seed=width)
+    try:
+        with sized_page(browser, width) as page:
+            open_view(page, server, f"console/{run_id}")
+            expect(page.locator("#run-status")).to_have_text("running")
+            expect(page.locator("#train-about")).to_contain_text("trainer")
+            inside(page, "#train-card .reward-buttons button, #reward-undo, #reward-note", False)
+            expect(page.locator("#reward-undo")).to_be_disabled()
+
+            page.fill("#reward-note", "kept its lane")
+            page.click("#reward-plus-half")
+            given = eventually(lambda: trainer_rewards(server, run_id), what="+0.5 logged")
+            assert [(r["value"], r["note"]) for r in given] == [(0.5, "kept its lane")]
+            mine = page.locator("#my-rewards li")
+            expect(mine.first).to_contain_text("kept its lane")
+            expect(page.locator("#reward-note")).to_have_value("")
+
+            page.click("#reward-undo")
+            first = given[0]["id"]
+            log = eventually(lambda: logged(server, run_id, 2), what="the undo logged")
+            assert [(r["value"], r["note"]) for r in log] == [
+                (0.5, "kept its lane"),
+                (-0.5, f"undo of #{first}"),
+            ]
+            expect(page.locator(f'#my-rewards li[data-id="{first}"]')).to_contain_text(
+                f"undone by #{log[1]['id']}"
+            )
+            expect(page.locator("#reward-undo")).to_be_disabled()  # the undo is not undone
+
+            page.click("#reward-minus")
+            eventually(lambda: len(trainer_rewards(server, run_id)) == 3, what="-1 logged")
+            # Every source on the timeline: the person's three rewards at least.
+            marks = page.locator('#reward-timeline rect.mark[data-source="trainer"]')
+            expect(marks).to_have_count(3)
+            expect(page.locator("#reward-counts")).to_contain_text("trainer 3")
+            page.screenshot(path=artifact(f"console-train-{width}.png"), full_page=True)
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_an_rp_runs_program_rewards_are_on_the_timeline_beside_the_persons(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = started(server, condition="rp", mode="realtime", hz=50, seed=1)
+    try:
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#train-about")).to_contain_text("use trainer")
+        program = page.locator('#reward-timeline rect.mark[data-source="program"]')
+        expect(program.first).to_be_attached()
+        expect(page.locator("#reward-counts")).to_contain_text("program")
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_the_credit_is_summed_per_pair_with_the_raw_rows_one_click_away(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = started(server, condition="trainer", mode="realtime", hz=20, seed=3)
+    try:
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("running")
+        eventually(lambda: page.locator("#st-tick").inner_text().isdigit(), what="live ticks")
+        page.wait_for_timeout(500)  # some STM to credit (its amount does not matter)
+        page.click("#reward-plus")
+        applied = eventually(
+            lambda: (r := trainer_rewards(server, run_id)) and r[0]["applied"] and r[0],
+            what="the reward applied",
+        )
+        effect = page.locator("#reward-effect")
+        expect(effect.locator(".head")).to_contain_text(f"credited {applied['credited']} STM")
+        if not applied["credited"]:
+            expect(effect.locator(".why")).to_contain_text("Nothing")
+            return
+        pairs = effect.locator("table.pairs tbody tr")
+        expect(pairs.first).to_be_visible()
+        counts = [int(t) for t in pairs.locator("td:nth-child(2)").all_inner_texts()]
+        assert sum(counts) == min(applied["credited"], 200)
+        assert len(counts) == len(set(pairs.locator("td:first-child").all_inner_texts()))
+        raw = effect.locator("details.raw tbody tr")
+        expect(raw.first).to_be_hidden()
+        effect.locator("details.raw summary").click()
+        expect(raw).to_have_count(min(applied["credited"], 200))
+        expect(raw.first).to_be_visible()
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_a_reward_to_a_condition_that_does_not_learn_says_so(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = started(server, condition="innate", mode="realtime", hz=20)
+    try:
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("running")
+        page.click("#reward-minus")
+        why = page.locator("#reward-effect .why")
+        expect(why).to_contain_text("innate does not learn")
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_keys_do_not_reach_the_robot_behind_a_dialog_and_a_held_key_is_one_reward(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = started(server, condition="trainer", mode="realtime", hz=20, seed=8)
+    try:
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("running")
+        page.keyboard.press("?")
+        expect(page.locator("#help-dialog")).to_be_visible()
+        page.keyboard.press("-")  # reads the help: no punishment
+        page.keyboard.press("Escape")
+        expect(page.locator("#help-dialog")).to_be_hidden()
+        # Held: the second and third keydown are repeats.
+        page.keyboard.down("=")
+        page.keyboard.down("=")
+        page.keyboard.down("=")
+        page.keyboard.up("=")
+        page.keyboard.press("_")  # a marker: once it is logged, so is all before it
+        log = eventually(
+            lambda: (r := trainer_rewards(server, run_id)) and r[-1]["value"] == -1.0 and r,
+            what="the marker logged",
+        )
+        assert [r["value"] for r in log] == [1.0, -1.0]
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_the_curve_puts_each_episode_at_its_number(page: Page, server: LiveServer) -> None:
+    open_view(page, server, "console")
+    # Episodes 0, 1 and 9 only: 9 sits at the right end, the gap is said, nothing shifts.
+    xs = page.evaluate(
+        """async () => {
+          const { learningCurve } = await import("/js/chart.js");
+          const box = document.querySelector("#curve");
+          learningCurve(box, [{episode: 9, outcome: "success"}, {episode: 0, outcome: "failure"},
+                              {episode: 1, outcome: "success"}]);
+          return [...box.querySelectorAll(".dots circle")].map(
+            (c) => [Number(c.dataset.episode), Number(c.getAttribute("cx"))]);
+        }"""
+    )
+    by_episode = dict(xs)
+    assert sorted(by_episode) == [0, 1, 9]
+    step = by_episode[1] - by_episode[0]
+    assert step > 0 and abs(by_episode[9] - by_episode[0] - 9 * step) < 0.01
+    expect(page.locator("#curve .summary")).to_contain_text("2/3 successes")
+    expect(page.locator("#curve .summary")).to_contain_text("7 not loaded yet")
+
+
+def test_episodes_the_first_load_missed_are_fetched_while_the_run_goes_on(
+    page: Page, server: LiveServer
+) -> None:
+    run_id = started(server, condition="expert", mode="realtime", hz=1000, seed=2)
+    try:
+        eventually(
+            lambda: server.client.get(f"/api/runs/{run_id}").json()["episodes_done"] >= 2,
+            what="two episodes stored",
+        )
+        hidden = {"done": False}
+
+        def first_load_sees_none(route: Route) -> None:
+            # As if the page had loaded before these episodes: an empty first page.
+            if hidden["done"]:
+                route.continue_()
+                return
+            hidden["done"] = True
+            route.fulfill(
+                status=200,
+                content_type="application/json",
+                body=json.dumps({"data": [], "count": 0}),
+            )
+
+        page.route(f"**/api/runs/{run_id}/episodes?*", first_load_sees_none)
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("running")
+
+        def contiguous() -> bool:
+            numbers = sorted(
+                int(n)
+                for n in page.locator("#curve .dots circle").evaluate_all(
+                    "cs => cs.map(c => c.dataset.episode)"
+                )
+            )
+            return len(numbers) >= 2 and numbers == list(range(len(numbers)))
+
+        eventually(contiguous, what="episodes 0.. on the curve with no gap")
+        assert hidden["done"]
+        assert server.client.get(f"/api/runs/{run_id}").json()["status"] == "running"
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+
+
+def test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back(
+    browser: Browser, tmp_path: Path
+) -> None:
+    first = start_server(tmp_path / "offline.db")
+    try:
+        run_id = create_run(first, condition="trainer", mode="realtime", hz=20)
+        with sized_page(browser, 1024) as page:
+            open_view(page, first, f"console/{run_id}")
+            expect(page.locator("#conn")).to_have_class("conn online")
+            stop_server(first)
+            banner = page.locator("#offline")
+            expect(banner).to_be_visible()
+            expect(banner).not_to_contain_text("kept")
+            # The console polls every 2 s: the same failure is counted, not stacked.
+            offline = page.locator(".toast.offline")
+            expect(offline.locator(".count")).to_have_text("\N{MULTIPLICATION SIGN}2")
+            expect(offline).to_have_count(1)
+            second = start_server(tmp_path / "offline.db", port=first.port)
+            try:
+                expect(banner).to_be_hidden()
+                expect(page.locator(".toast.ok")).to_contain_text("The service is back")
+                expect(page.locator(".toast.offline")).to_have_count(0)
+            finally:
+                stop_server(second)
+    finally:
+        if first.process.poll() is None:
+            stop_server(first)
