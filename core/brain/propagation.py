@@ -131,7 +131,8 @@ class KpLog:
     Attributes:
         provenances: the latest reasonings that gave S1 -> B, oldest first.
         history: the pair's RLTM reliability after each reward, oldest first.
-        runs: (first tick, last tick) spans where S1 -> B ran as a ``kp`` association.
+        runs: (first tick, last tick) spans of consecutive ticks where S1 -> B ran as a
+            ``kp`` association (released or continued).
         reasoned: how many rewards reasoned S1 -> B in all.
         ran_ticks: how many ticks it ran in all.
     """
@@ -242,6 +243,15 @@ class KnowledgePropagation:
         """The latest tick `percept` saw."""
         self._running: tuple[int, int] | None = None
 
+    @property
+    def dt_s(self) -> float:
+        """The tick length the behaviours' headings are computed with."""
+        return self._dt
+
+    def perceived(self) -> dict[str, tuple[int, int]]:
+        """Per objective, the high-level stimulus last perceived and the tick (a copy)."""
+        return dict(self._last_high)
+
     def reset_episode(self) -> None:
         """Forget what was perceived and recorded (a new episode, a new approach)."""
         self._last_high.clear()
@@ -279,12 +289,9 @@ class KnowledgePropagation:
             return
         log.ran_ticks += 1
         runs = log.runs
-        if (
-            decision.how is How.CONTINUED
-            and self._running == pair
-            and runs
-            and runs[-1][1] == tick - 1
-        ):
+        # One span per stretch of consecutive ticks: a two-tick turn released again and
+        # again while the camera keeps seeing the obstacle reads as one run, not many.
+        if self._running == pair and runs and runs[-1][1] == tick - 1:
             runs[-1] = (runs[-1][0], tick)
         else:
             runs.append((tick, tick))

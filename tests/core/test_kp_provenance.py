@@ -124,10 +124,11 @@ def test_rltm_history_grows_per_reward_and_runs_are_kept_as_tick_spans() -> None
     k.kp.percept(40, [mm], kp_run)
     for t in (41, 42):
         k.kp.percept(t, [], Decision(rt30, mm, 0.5, How.CONTINUED, "kp"))
-    k.kp.percept(43, [], Decision(k.b("goforward3"), -1, 0.0, How.DEFAULT))
+    k.kp.percept(43, [mm], kp_run)  # released again at once: the same stretch
+    k.kp.percept(44, [], Decision(k.b("goforward3"), -1, 0.0, How.DEFAULT))
     k.kp.percept(50, [mm], kp_run)
-    assert list(log.runs) == [(40, 42), (50, 50)]
-    assert log.ran_ticks == 4
+    assert list(log.runs) == [(40, 43), (50, 50)]
+    assert log.ran_ticks == 5
 
 
 def test_the_same_inputs_give_the_same_provenance() -> None:
