@@ -65,6 +65,29 @@ async def test_get_run_kp_shows_provenance_of_a_live_kp_run(tmp_path: Path) -> N
             (a["stimulus"], a["behaviour"]) == (assoc["stimulus"], assoc["behaviour"])
             for a in stored["associations"]
         )
+        # Where each ran, read back from the stored traces: the spans the engine saw.
+        live_spans = {
+            (a["stimulus"], a["behaviour"], r["first_tick"], r["last_tick"])
+            for a in body["associations"]
+            for r in a["runs"]
+        }
+        stored_spans = {
+            (a["stimulus"], a["behaviour"], r["first_tick"], r["last_tick"])
+            for a in stored["associations"]
+            for r in a["runs"]
+        }
+        assert stored_spans <= live_spans
+        # And they are the trace rows a kp association released, by GET .../episodes/{n}.
+        count = (await client.get(f"/api/runs/{run['id']}/episodes?limit=1")).json()["count"]
+        from_traces: set[tuple[str, str, int]] = set()
+        for n in range(max(0, count - 20), count):
+            trace = (await client.get(f"/api/runs/{run['id']}/episodes/{n}")).json()["trace"]
+            from_traces |= {
+                (r["released_by"], r["behaviour"], r["tick"]) for r in trace if r["origin"] == "kp"
+            }
+        assert from_traces == {
+            (st, be, t) for st, be, a, z in stored_spans for t in range(a, z + 1)
+        }
 
 
 async def test_get_run_kp_of_an_unknown_run_is_404(tmp_path: Path) -> None:

@@ -53,6 +53,10 @@ def test_the_panel_shows_a_propagated_association_and_its_provenance(
     expect(pair.locator(".kp-made")).to_be_visible()
     page.screenshot(path=artifact("kp-inspector.png"), full_page=True)
     server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")
+    # Stopped, the panel answers from storage and says what it can no longer show.
+    expect(panel.locator(".kp-reason")).to_contain_text("not running here")
+    expect(pair.locator("summary")).to_contain_text(f"{assoc['stimulus']} → {assoc['behaviour']}")
 
 
 def test_the_panel_says_why_for_a_run_without_kp(page: Page, server: LiveServer) -> None:

@@ -122,7 +122,7 @@ function provenanceBlock(p) {
         ` — reward after tick ${p.after_tick}.`)));
 }
 
-function associationBlock(a) {
+function associationBlock(a, live) {
   const key = `${a.stimulus} -> ${a.behaviour}`;
   const latest = a.provenance[a.provenance.length - 1];
   const runs = a.runs.slice(-SHOWN_RUNS).map((r) => (r.first_tick === r.last_tick ? `${r.first_tick}` : `${r.first_tick}–${r.last_tick}`));
@@ -131,9 +131,9 @@ function associationBlock(a) {
       el("strong", { text: `${a.stimulus} → ${a.behaviour}` }),
       ` RLTM ${fmt(a.reliability)}`,
       a.in_network ? el("span", { class: "badge kp-in", text: "in network" }) : el("span", { class: "badge muted", text: "below threshold" }),
-      latest ? ` · ${latest.resolution} · ${latest.sources.length} source(s)` : " · made before this engine started",
+      latest ? ` · ${latest.resolution} · ${latest.sources.length} source(s)` : live ? " · made before this engine started" : "",
       a.ran_ticks ? ` · ran ${a.ran_ticks} ticks` : ""),
-    latest ? provenanceBlock(latest) : el("p", { class: "muted small", text: "Its provenance was kept by an earlier engine only." }),
+    latest ? provenanceBlock(latest) : el("p", { class: "muted small", text: live ? "Its provenance was kept by an earlier engine only." : "Its provenance is kept while the run runs (see above)." }),
     a.provenance.length > 1 ? el("p", { class: "muted small", text: `${a.reasoned} rewards reasoned it; the latest is shown.` }) : null,
     el("h4", { text: "RLTM history" }), history(a.history),
     el("h4", { text: "Ticks where it ran" }),
@@ -150,7 +150,7 @@ function render(body) {
   if (body.kp) {
     parts.push(el("h3", { text: `Associations KP made (${body.count})` }));
     parts.push(body.associations.length
-      ? el("div", { class: "kp-assocs" }, body.associations.map(associationBlock))
+      ? el("div", { class: "kp-assocs" }, body.associations.map((a) => associationBlock(a, body.live)))
       : el("p", { class: "muted small", text: "None yet: KP reasons when a reward arrives after sonar responses to a camera stimulus." }));
   }
   box.replaceChildren(...parts);

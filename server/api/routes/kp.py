@@ -7,11 +7,14 @@ import math
 from fastapi import APIRouter
 from starlette.concurrency import run_in_threadpool as io
 
+from core.brain.catalog import Catalog
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
 from core.engine import Engine
-from server.api.deps import EnginesDep, StoreDep
+from core.trace import unpack
+from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
+from server.persistence import SqlAlchemyRunStore
 from server.schemas import (
     KpAssociationPublic,
     KpPerceptPublic,
@@ -25,6 +28,8 @@ from server.schemas import (
 )
 
 router = APIRouter(prefix="/runs", tags=["kp"])
+TRACE_EPISODES = 20
+"""A stored run's latest episodes whose traces say where its KP associations ran."""
 
 
 def _not_kp_reason(condition: str) -> str:
@@ -141,8 +146,37 @@ def _live(run_id: int, engine: Engine, kp: KnowledgePropagation) -> KpPublic:
     )
 
 
+def _stored_runs(
+    store: SqlAlchemyRunStore, run_id: int, catalog: Catalog
+) -> dict[tuple[str, str], list[tuple[int, int]]]:
+    """Spans of consecutive ticks where each kp association ran, from the latest traces."""
+    stimuli = [s.name for s in catalog.stimuli]
+    names = [b.name for b in catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
+    _, total = store.episode_summaries_page(run_id, 0, 1)
+    page, _ = store.episode_summaries_page(run_id, max(0, total - TRACE_EPISODES), TRACE_EPISODES)
+    spans: dict[tuple[str, str], list[tuple[int, int]]] = {}
+    for summary in page:
+        found = store.episode(run_id, summary.episode)
+        running: tuple[str, str] | None = None
+        for r in unpack(found.trace) if found is not None and found.trace else ():
+            ok = r.origin == "kp" and 0 <= r.released_by < len(stimuli)
+            if not ok or not 0 <= r.behaviour < len(names):
+                running = None
+                continue
+            pair = (stimuli[r.released_by], names[r.behaviour])
+            runs = spans.setdefault(pair, [])
+            if running == pair and runs and runs[-1][1] == r.tick - 1:
+                runs[-1] = (runs[-1][0], r.tick)
+            else:
+                runs.append((r.tick, r.tick))
+            running = pair
+    return spans
+
+
 @router.get("/{run_id}/kp")
-async def get_run_kp(run_id: RunId, store: StoreDep, engines: EnginesDep) -> KpPublic:
+async def get_run_kp(
+    run_id: RunId, store: StoreDep, engines: EnginesDep, state: StateDep
+) -> KpPublic:
     """The KP inspector: what the RSTM holds now and how each KP association came to be.
 
     For a running KP run: each RSTM's records (the sonar responses recorded for a camera
@@ -179,11 +213,13 @@ async def get_run_kp(run_id: RunId, store: StoreDep, engines: EnginesDep) -> KpP
     network = {
         (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"
     }
+    ran = await io(_stored_runs, store, run_id, state.catalog)
     associations = [
         KpAssociationPublic(
             stimulus=st, behaviour=be, reliability=v, in_network=(st, be) in network,
-            synthesized=be.startswith("kp_"), provenance=[], history=[], runs=[],
-            reasoned=0, ran_ticks=0,
+            synthesized=be.startswith("kp_"), provenance=[], history=[],
+            runs=[KpRunSpanPublic(first_tick=a, last_tick=z) for a, z in ran.get((st, be), [])],
+            reasoned=0, ran_ticks=sum(z - a + 1 for a, z in ran.get((st, be), [])),
         )
         for (st, be), v in sorted(rltm.items(), key=lambda kv: (-kv[1], kv[0]))
     ]  # fmt: skip
@@ -196,7 +232,8 @@ async def get_run_kp(run_id: RunId, store: StoreDep, engines: EnginesDep) -> KpP
         reason=(
             f"run {run_id} is {run.status.value}, not running here: the RSTM and each "
             "association's provenance and history are kept while it runs; these are its "
-            "RLTM reliabilities and network as last committed"
+            "RLTM reliabilities and network as last committed, and where each ran in its "
+            f"latest {TRACE_EPISODES} stored episodes"
         ),
         associations=associations,
         count=len(associations),
