@@ -31,6 +31,7 @@ install-baselines: install
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install
+	@echo "CLI: $(BIN)/srlab (or \`uv run srlab\`, or \`source $(BIN)/activate\` for plain \`srlab\`)"
 	$(BIN)/srlab serve
 
 lint: install

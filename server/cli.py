@@ -61,6 +61,28 @@ def _number(
     return parse
 
 
+ENGINE_CONDITIONS = sorted(n for n, c in CONDITIONS.items() if c.agent == "brain")
+"""The conditions `srlab run` and `srlab simulate` accept: the paper's architecture."""
+OTHER_CONDITIONS = sorted(set(CONDITIONS) - set(ENGINE_CONDITIONS))
+"""The baselines (Q(lambda), DQN, PPO...): `srlab experiment` runs them."""
+
+
+def _engine_condition(text: str) -> str:
+    """An argparse type: a condition of the paper's architecture, else where to run it."""
+    if text in ENGINE_CONDITIONS:
+        return text
+    if text in OTHER_CONDITIONS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is a baseline, not run by the engine (the paper's architecture): "
+            "run it with "
+            f"`srlab experiment --conditions {text}`"
+        )
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (choose from {', '.join(ENGINE_CONDITIONS)})"
+    )
+
+
+_CONDITION_METAVAR = "{" + ",".join(ENGINE_CONDITIONS) + "}"
 _positive_int = _number(int, 1, math.inf, True, "at least 1")
 _seed = _number(int, 0, math.inf, True, "0 or more")
 _unit = _number(float, 0.0, 1.0, True, "in [0, 1]")
@@ -83,8 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--condition",
         required=True,
-        choices=sorted(CONDITIONS),
-        help="which knowledge and learning the robot has",
+        type=_engine_condition,
+        metavar=_CONDITION_METAVAR,
+        help="which knowledge and learning the robot has (the baselines, "
+        f"{', '.join(OTHER_CONDITIONS)}, run in srlab experiment)",
     )
     sim.add_argument("--episodes", type=_positive_int, default=50, help="episodes (default 50)")
     sim.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
@@ -248,7 +272,13 @@ def build_parser() -> argparse.ArgumentParser:
         "task), storing its LTM, RLTM, network, episodes and rewards. Ctrl-C or SIGTERM "
         "stops it cleanly (status interrupted); --resume continues it.",
     )
-    runp.add_argument("--condition", choices=sorted(CONDITIONS), help="which condition")
+    runp.add_argument(
+        "--condition",
+        type=_engine_condition,
+        metavar=_CONDITION_METAVAR,
+        help="which condition (the engine runs the paper's architecture; the baselines, "
+        f"{', '.join(OTHER_CONDITIONS)}, run in srlab experiment)",
+    )
     runp.add_argument("--seed", type=_seed, default=0, help="random seed (default 0)")
     runp.add_argument(
         "--episodes", type=_positive_int, help="episodes to run (default: until stopped)"
@@ -786,6 +816,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, f"srlab: error: {e}\n")
     except KeyboardInterrupt:
         parser.exit(130, "srlab: interrupted\n")
+    except Exception as e:
+        # Anything else is a bug or an adapter's error (a database driver's, say): one line
+        # for the person at the shell, and the traceback only when asked for.
+        if os.environ.get("SRLAB_DEBUG"):
+            raise
+        first = (str(e).strip().splitlines() or [""])[0]
+        parser.exit(
+            1, f"srlab: error: {type(e).__name__}: {first} (SRLAB_DEBUG=1 shows the traceback)\n"
+        )
     parser.error(f"unknown command {args.command!r}")
     return 2  # pragma: no cover - parser.error exits
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shlex
 import sys
@@ -27,6 +28,7 @@ from core.conditions import CONDITIONS
 from core.experiment import Backend, LocalBackend, TaskResult
 from core.params import PARAMETERS
 from core.setup import Setup
+from core.stats import Estimate, pct
 from core.sweep import point_label
 
 
@@ -283,8 +285,16 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
 
 
 def _pct(stat: dict[str, float]) -> str:
-    mean = stat.get("mean")
-    if mean is None or mean != mean:
+    """A rate over seeds with its bootstrap interval, ``5% [0, 15]``.
+
+    The percentile bootstrap interval (`core.stats`) lies inside the seeds' values, so a
+    rate's stays within [0, 1]; it is clipped there all the same. (A mean +- Student's t
+    half-width, as printed before, ran past 0% and 100% with few seeds: "5% +- 64%".)
+    """
+    mean = stat.get("mean", math.nan)
+    if mean is None or math.isnan(mean):
         return "-"
-    ci = stat.get("ci95")
-    return f"{mean:.0%}" if ci is None or ci != ci else f"{mean:.0%} ± {ci:.0%}"
+    low, high = stat.get("low", math.nan), stat.get("high", math.nan)
+    if not (math.isnan(low) or math.isnan(high)):
+        low, high = max(0.0, low), min(1.0, high)
+    return pct(Estimate(mean, low, high, int(stat.get("n", 0))))

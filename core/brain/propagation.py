@@ -14,7 +14,8 @@ from __future__ import annotations
 import math
 from collections import defaultdict, deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
 
 from core.brain.catalog import Behaviour, Catalog
 from core.brain.memory import reinforce
@@ -38,6 +39,7 @@ class KpConfig:
             synthesised behaviour when no primitive is within `snap_tolerance_deg`.
         snap_tolerance_deg: how close a primitive must be to stand for B when synthesising.
         rstm_capacity: bound of each RSTM.
+        log_capacity: bound of each pair's inspection log (`KnowledgePropagation.log`).
     """
 
     enabled: bool = False
@@ -47,6 +49,7 @@ class KpConfig:
     synthesize: bool = False
     snap_tolerance_deg: float = 1.0
     rstm_capacity: int = 256
+    log_capacity: int = 256
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,9 +62,59 @@ class RstmRecord:
     behaviour: int
 
 
+Resolution = Literal["snapped", "synthesized", "reused"]
+"""How reasoningKPM turned the vector sum into a behaviour: snapped to the nearest
+primitive, synthesised a new one, or reused one it had synthesised before."""
+
+
+@dataclass(frozen=True, slots=True)
+class KpProvenance:
+    """How one reasoningKPM made B for S1: the RSTM sources, their vector sum, the snap.
+
+    Attributes:
+        stimulus: S1, the high-level stimulus.
+        sources: the RSTM records reasoned over (S0_i -> B_i, with the tick each ran).
+        sum_x: the vector sum's component along the corridor (unit vectors, one a source).
+        sum_y: its component across (+ = left).
+        angle_rad: the direction of the sum (`resultant_direction`).
+        speed_mps: the sources' mean speed.
+        nearest: the forward or turn primitive whose heading is nearest the sum.
+        nearest_angle_rad: that primitive's heading.
+        behaviour: B, the behaviour S1 was taught (`nearest` unless synthesised).
+        resolution: snapped, synthesized or reused.
+        after_tick: the last tick the KP module saw before the reward (it arrived after).
+    """
+
+    stimulus: int
+    sources: tuple[RstmRecord, ...]
+    sum_x: float
+    sum_y: float
+    angle_rad: float
+    speed_mps: float
+    nearest: int
+    nearest_angle_rad: float
+    behaviour: int
+    resolution: Resolution
+    after_tick: int
+
+
+@dataclass(frozen=True, slots=True)
+class RltmPoint:
+    """One Eq. (1) step of an RLTM pair: the reward after `after_tick` moved it."""
+
+    after_tick: int
+    reward: float
+    before: float
+    after: float
+
+
 @dataclass(frozen=True, slots=True)
 class Propagated:
-    """What one reward taught a high-level stimulus."""
+    """What one reward taught a high-level stimulus.
+
+    `provenance` says how B was made; it is left out of equality, which compares what was
+    learned (it follows from the same RSTM deterministically anyway).
+    """
 
     stimulus: int
     behaviour: int
@@ -69,6 +122,29 @@ class Propagated:
     before: float
     after: float
     synthesized: bool
+    provenance: KpProvenance | None = field(default=None, compare=False)
+
+
+class KpLog:
+    """What the KP module did to one RLTM pair S1 -> B, for inspection (bounded).
+
+    Attributes:
+        provenances: the latest reasonings that gave S1 -> B, oldest first.
+        history: the pair's RLTM reliability after each reward, oldest first.
+        runs: (first tick, last tick) spans of consecutive ticks where S1 -> B ran as a
+            ``kp`` association (released or continued).
+        reasoned: how many rewards reasoned S1 -> B in all.
+        ran_ticks: how many ticks it ran in all.
+    """
+
+    __slots__ = ("history", "provenances", "ran_ticks", "reasoned", "runs")
+
+    def __init__(self, capacity: int) -> None:
+        self.provenances: deque[KpProvenance] = deque(maxlen=min(capacity, 16))
+        self.history: deque[RltmPoint] = deque(maxlen=capacity)
+        self.runs: deque[tuple[int, int]] = deque(maxlen=capacity)
+        self.reasoned = 0
+        self.ran_ticks = 0
 
 
 def steer_angle(b: Behaviour, dt_s: float) -> float:
@@ -161,15 +237,32 @@ class KnowledgePropagation:
             lambda: deque(maxlen=config.rstm_capacity)
         )
         self.rltm: dict[tuple[int, int], float] = {}
+        self.log: dict[tuple[int, int], KpLog] = {}
+        """Per RLTM pair: its provenance, reliability history and runs (read-only use)."""
+        self.now = -1
+        """The latest tick `percept` saw."""
+        self._running: tuple[int, int] | None = None
+
+    @property
+    def dt_s(self) -> float:
+        """The tick length the behaviours' headings are computed with."""
+        return self._dt
+
+    def perceived(self) -> dict[str, tuple[int, int]]:
+        """Per objective, the high-level stimulus last perceived and the tick (a copy)."""
+        return dict(self._last_high)
 
     def reset_episode(self) -> None:
         """Forget what was perceived and recorded (a new episode, a new approach)."""
         self._last_high.clear()
+        self._running = None
         for r in self.rstm.values():
             r.clear()
 
     def percept(self, tick: int, active: Sequence[int], decision: Decision) -> None:
         """Fig. 6: if a KP percept exists, save it with the current behaviour in RSTM."""
+        self.now = tick
+        self._note_run(tick, decision)
         high = self._high
         objective = self._objective
         for s in active:
@@ -184,25 +277,56 @@ class KnowledgePropagation:
         s1 = seen[0]
         self.rstm[self._sensor[s1]].append(RstmRecord(tick, s1, low, decision.behaviour))
 
+    def _note_run(self, tick: int, decision: Decision) -> None:
+        """Keep the tick spans where a KP-made association ran (its decision's origin)."""
+        if decision.origin != "kp" or decision.stimulus < 0:
+            self._running = None
+            return
+        pair = (decision.stimulus, decision.behaviour)
+        log = self.log.get(pair)
+        if log is None:  # a kp association this module did not make (a loaded design)
+            self._running = None
+            return
+        log.ran_ticks += 1
+        runs = log.runs
+        # One span per stretch of consecutive ticks: a two-tick turn released again and
+        # again while the camera keeps seeing the obstacle reads as one run, not many.
+        if self._running == pair and runs and runs[-1][1] == tick - 1:
+            runs[-1] = (runs[-1][0], tick)
+        else:
+            runs.append((tick, tick))
+        self._running = pair
+
     def reasoning(self, behaviours: Sequence[int]) -> tuple[Behaviour, bool]:
         """reasoningKPM: B from the vector sum of B1..Bn; returns (B, whether it is new)."""
+        made = self._reason(behaviours)
+        return made[0], made[1] == "synthesized"
+
+    def _reason(
+        self, behaviours: Sequence[int]
+    ) -> tuple[Behaviour, Resolution, tuple[float, float], float, float, Behaviour]:
+        """The workings of reasoningKPM: B, how, the vector sum, angle, speed, nearest."""
         catalog = self.catalog
+        dt = self._dt
         parts = [catalog.behaviours[b] for b in behaviours]
-        angle = resultant_direction(parts, self._dt)
+        sx = sum(math.cos(steer_angle(b, dt)) for b in parts)
+        sy = sum(math.sin(steer_angle(b, dt)) for b in parts)
+        angle = resultant_direction(parts, dt)
         speed = sum(b.speed_mps for b in parts) / len(parts)
-        nearest = nearest_primitive(catalog, angle, self._dt, speed)
+        nearest = nearest_primitive(catalog, angle, dt, speed)
+        workings = ((sx, sy), angle, speed, nearest)
         if not self.config.synthesize:
-            return nearest, False
+            return (nearest, "snapped", *workings)
         tolerance = math.radians(self.config.snap_tolerance_deg)
-        if abs(steer_angle(nearest, self._dt) - angle) <= tolerance:
-            return nearest, False
-        new = synthesized_behaviour(angle, speed, self._dt)
+        if abs(steer_angle(nearest, dt) - angle) <= tolerance:
+            return (nearest, "snapped", *workings)
+        new = synthesized_behaviour(angle, speed, dt)
         for b in catalog.behaviours:
             if b.name == new.name:
-                return b, False
+                return (b, "reused", *workings)
         added = self._add_behaviour(new)
         self.catalog = self._catalog_after(added)
-        return added, True
+        return (added, "synthesized", *workings)
 
     def _catalog_after(self, added: Behaviour) -> Catalog:
         if len(self.catalog.behaviours) > added.id:
@@ -222,12 +346,30 @@ class KnowledgePropagation:
                 by_high[r.high].append(r)
             records.clear()
             for s1, recs in sorted(by_high.items()):
-                b, new = self.reasoning([r.behaviour for r in recs])
+                b, how, (sx, sy), angle, speed, nearest = self._reason([r.behaviour for r in recs])
                 before = self.rltm.get((s1, b.id), 0.0)
                 after = reinforce(before, value, cfg.eta, 1)
                 self.rltm[(s1, b.id)] = after
+                provenance = KpProvenance(
+                    s1, tuple(recs), sx, sy, angle, speed, nearest.id,
+                    steer_angle(nearest, self._dt), b.id, how, self.now,
+                )  # fmt: skip
+                log = self.log.get((s1, b.id))
+                if log is None:
+                    log = self.log[(s1, b.id)] = KpLog(cfg.log_capacity)
+                log.provenances.append(provenance)
+                log.history.append(RltmPoint(self.now, value, before, after))
+                log.reasoned += 1
                 learned.append(
-                    Propagated(s1, b.id, tuple(r.behaviour for r in recs), before, after, new)
+                    Propagated(
+                        s1,
+                        b.id,
+                        tuple(r.behaviour for r in recs),
+                        before,
+                        after,
+                        how == "synthesized",
+                        provenance,
+                    )
                 )
                 old = self.network.get(s1, b.id)
                 if after >= cfg.insert_threshold:

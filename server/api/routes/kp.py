@@ -1,0 +1,240 @@
+"""Knowledge propagation inspector: a run's RSTM and how each KP association came to be."""
+
+from __future__ import annotations
+
+import math
+
+from fastapi import APIRouter
+from starlette.concurrency import run_in_threadpool as io
+
+from core.brain.catalog import Catalog
+from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
+from core.conditions import CONDITIONS
+from core.engine import Engine
+from core.trace import unpack
+from server.api.deps import EnginesDep, StateDep, StoreDep
+from server.api.routes.runs import RunId
+from server.persistence import SqlAlchemyRunStore
+from server.schemas import (
+    KpAssociationPublic,
+    KpPerceptPublic,
+    KpProvenancePublic,
+    KpPublic,
+    KpRunSpanPublic,
+    KpSourcePublic,
+    RltmPointPublic,
+    RstmPublic,
+    RstmRecordPublic,
+)
+
+router = APIRouter(prefix="/runs", tags=["kp"])
+TRACE_EPISODES = 20
+"""A stored run's latest episodes whose traces say where its KP associations ran."""
+
+
+def _not_kp_reason(condition: str) -> str:
+    kp = ", ".join(n for n, c in CONDITIONS.items() if c.kp)
+    return (
+        f"condition {condition!r} does not run knowledge propagation: no RSTM, no RLTM "
+        f"(conditions that do: {kp})"
+    )
+
+
+def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpProvenancePublic:
+    s = [x.name for x in kp.catalog.stimuli]
+    b = kp.catalog.behaviours
+    return KpProvenancePublic(
+        after_tick=p.after_tick,
+        sources=[
+            KpSourcePublic(
+                tick=r.tick,
+                sonar_stimulus=s[r.low],
+                behaviour=b[r.behaviour].name,
+                heading_deg=math.degrees(steer_angle(b[r.behaviour], dt_s)),
+            )
+            for r in p.sources
+        ],
+        sum_x=p.sum_x,
+        sum_y=p.sum_y,
+        heading_deg=math.degrees(p.angle_rad),
+        speed_mps=p.speed_mps,
+        nearest=b[p.nearest].name,
+        nearest_heading_deg=math.degrees(p.nearest_angle_rad),
+        behaviour=b[p.behaviour].name,
+        resolution=p.resolution,
+    )
+
+
+def _live(run_id: int, engine: Engine, kp: KnowledgePropagation) -> KpPublic:
+    """Read on the event loop, between ticks: the engine mutates it only there."""
+    sim = engine.sim
+    dt_s = kp.dt_s
+    cat = kp.catalog
+    s = [x.name for x in cat.stimuli]
+    b = [x.name for x in cat.behaviours]
+    tick = sim.tick_count
+    window = kp.config.window_ticks
+    rstm = [
+        RstmPublic(
+            sensor=sensor,
+            records=[
+                RstmRecordPublic(
+                    tick=r.tick,
+                    camera_stimulus=s[r.high],
+                    sonar_stimulus=s[r.low],
+                    behaviour=b[r.behaviour],
+                )
+                for r in records
+            ],
+        )
+        for sensor, records in sorted(kp.rstm.items())
+    ]
+    percepts = [
+        KpPerceptPublic(
+            objective=objective, camera_stimulus=s[high], tick=t, open=kp.now - t <= window
+        )
+        for objective, (high, t) in sorted(kp.perceived().items())
+    ]
+    network = kp.network
+    pairs = dict.fromkeys([*kp.log, *kp.rltm])
+    for a in network:
+        if a.source == "kp":
+            pairs.setdefault((a.stimulus, a.behaviour))
+    associations = []
+    for st, be in pairs:
+        log = kp.log.get((st, be)) or KpLog(0)  # one from an earlier engine: no record
+        assoc = network.get(st, be)
+        associations.append(
+            KpAssociationPublic(
+                stimulus=s[st],
+                behaviour=b[be],
+                reliability=kp.rltm.get((st, be), 0.0),
+                in_network=assoc is not None and assoc.source == "kp",
+                synthesized=cat.behaviours[be].synthesized,
+                provenance=[_provenance(kp, p, dt_s) for p in log.provenances],
+                history=[
+                    RltmPointPublic(
+                        after_tick=h.after_tick, reward=h.reward, before=h.before, after=h.after
+                    )
+                    for h in log.history
+                ],
+                runs=[KpRunSpanPublic(first_tick=a, last_tick=z) for a, z in log.runs],
+                reasoned=log.reasoned,
+                ran_ticks=log.ran_ticks,
+            )
+        )
+    associations.sort(key=lambda x: (not x.in_network, -x.reliability, x.stimulus, x.behaviour))
+    made_before = [x for x in associations if not x.provenance]
+    reason = None
+    if made_before:
+        reason = (
+            f"{len(made_before)} association(s) predate this engine (the run was resumed): "
+            "their provenance was kept only while the earlier engine ran"
+        )
+    return KpPublic(
+        run=run_id,
+        condition=engine.spec.condition,
+        kp=True,
+        live=True,
+        reason=reason,
+        tick=tick,
+        window_ticks=window,
+        rstm=rstm,
+        percepts=percepts,
+        associations=associations,
+        count=len(associations),
+    )
+
+
+def _stored_runs(
+    store: SqlAlchemyRunStore, run_id: int, catalog: Catalog
+) -> dict[tuple[str, str], list[tuple[int, int]]]:
+    """Spans of consecutive ticks where each kp association ran, from the latest traces."""
+    stimuli = [s.name for s in catalog.stimuli]
+    names = [b.name for b in catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
+    _, total = store.episode_summaries_page(run_id, 0, 1)
+    page, _ = store.episode_summaries_page(run_id, max(0, total - TRACE_EPISODES), TRACE_EPISODES)
+    spans: dict[tuple[str, str], list[tuple[int, int]]] = {}
+    for summary in page:
+        found = store.episode(run_id, summary.episode)
+        running: tuple[str, str] | None = None
+        for r in unpack(found.trace) if found is not None and found.trace else ():
+            ok = r.origin == "kp" and 0 <= r.released_by < len(stimuli)
+            if not ok or not 0 <= r.behaviour < len(names):
+                running = None
+                continue
+            pair = (stimuli[r.released_by], names[r.behaviour])
+            runs = spans.setdefault(pair, [])
+            if running == pair and runs and runs[-1][1] == r.tick - 1:
+                runs[-1] = (runs[-1][0], r.tick)
+            else:
+                runs.append((r.tick, r.tick))
+            running = pair
+    return spans
+
+
+@router.get("/{run_id}/kp")
+async def get_run_kp(
+    run_id: RunId, store: StoreDep, engines: EnginesDep, state: StateDep
+) -> KpPublic:
+    """The KP inspector: what the RSTM holds now and how each KP association came to be.
+
+    For a running KP run: each RSTM's records (the sonar responses recorded for a camera
+    stimulus), the camera stimuli last perceived, and every pair KP reasoned with its
+    provenance (the source behaviours, their vector sum, the primitive it snapped to or
+    the one synthesised), its RLTM history and the tick spans where it ran. A run not
+    running here answers its stored RLTM and network with a `reason` (provenance is kept
+    in the running engine only); a run whose condition does not propagate answers
+    `kp: false` with a `reason`. 404 for an unknown run.
+    """
+    engine = engines.get(run_id)
+    if engine is not None:
+        kp = engine.sim.brain.kp
+        if kp is None:
+            return KpPublic(
+                run=run_id,
+                condition=engine.spec.condition,
+                kp=False,
+                live=True,
+                reason=_not_kp_reason(engine.spec.condition),
+            )
+        return _live(run_id, engine, kp)
+    run = await io(store.run_summary, run_id)
+    condition = CONDITIONS.get(run.spec.condition)
+    if condition is None or not condition.kp:
+        return KpPublic(
+            run=run_id,
+            condition=run.spec.condition,
+            kp=False,
+            live=False,
+            reason=_not_kp_reason(run.spec.condition),
+        )
+    rltm = await io(store.rltm, run_id)
+    network = {
+        (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"
+    }
+    ran = await io(_stored_runs, store, run_id, state.catalog)
+    associations = [
+        KpAssociationPublic(
+            stimulus=st, behaviour=be, reliability=v, in_network=(st, be) in network,
+            synthesized=be.startswith("kp_"), provenance=[], history=[],
+            runs=[KpRunSpanPublic(first_tick=a, last_tick=z) for a, z in ran.get((st, be), [])],
+            reasoned=0, ran_ticks=sum(z - a + 1 for a, z in ran.get((st, be), [])),
+        )
+        for (st, be), v in sorted(rltm.items(), key=lambda kv: (-kv[1], kv[0]))
+    ]  # fmt: skip
+    associations.sort(key=lambda x: not x.in_network)
+    return KpPublic(
+        run=run_id,
+        condition=run.spec.condition,
+        kp=True,
+        live=False,
+        reason=(
+            f"run {run_id} is {run.status.value}, not running here: the RSTM and each "
+            "association's provenance and history are kept while it runs; these are its "
+            "RLTM reliabilities and network as last committed, and where each ran in its "
+            f"latest {TRACE_EPISODES} stored episodes"
+        ),
+        associations=associations,
+        count=len(associations),
+    )
