@@ -47,15 +47,6 @@ PAPER_TABLE_III: dict[str, dict[str, dict[str, float]]] = {
 }
 
 
-def _fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
-    mean, ci = stat.get("mean", math.nan), stat.get("ci95", math.nan)
-    if math.isnan(mean):
-        return "-"
-    if pct:
-        return f"{mean:.0%} ± {ci:.0%}" if not math.isnan(ci) else f"{mean:.0%}"
-    return f"{mean:.{digits}f} ± {ci:.{digits}f}" if not math.isnan(ci) else f"{mean:.{digits}f}"
-
-
 def write_runs(path: Path, results: Sequence[TaskResult]) -> None:
     """Every episode of every task, one JSON object a line."""
     with path.open("w", encoding="utf-8") as f:
