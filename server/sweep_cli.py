@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import shlex
 import sys
@@ -28,8 +27,8 @@ from core.conditions import CONDITIONS
 from core.experiment import Backend, LocalBackend, TaskResult
 from core.params import PARAMETERS
 from core.setup import Setup
-from core.stats import Estimate, pct
 from core.sweep import point_label
+from server.report import _fmt
 
 
 def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
@@ -263,7 +262,10 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
             cells = [format_value(v)]
             for c in conds:
                 row = entry["conditions"][c][i]
-                cells += [_pct(row["success_rate"]), _pct(row["success_last10"])]
+                cells += [
+                    _fmt(row["success_rate"], pct=True),
+                    _fmt(row["success_last10"], pct=True),
+                ]
             table.add_row(*cells)
         console.print(table)
         if entry["ignored_by"]:
@@ -282,19 +284,3 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
             f"failed:[/] {first}"
         )
     return 1 if failed else 0
-
-
-def _pct(stat: dict[str, float]) -> str:
-    """A rate over seeds with its bootstrap interval, ``5% [0, 15]``.
-
-    The percentile bootstrap interval (`core.stats`) lies inside the seeds' values, so a
-    rate's stays within [0, 1]; it is clipped there all the same. (A mean +- Student's t
-    half-width, as printed before, ran past 0% and 100% with few seeds: "5% +- 64%".)
-    """
-    mean = stat.get("mean", math.nan)
-    if mean is None or math.isnan(mean):
-        return "-"
-    low, high = stat.get("low", math.nan), stat.get("high", math.nan)
-    if not (math.isnan(low) or math.isnan(high)):
-        low, high = max(0.0, low), min(1.0, high)
-    return pct(Estimate(mean, low, high, int(stat.get("n", 0))))

@@ -16,8 +16,8 @@ from core.conditions import CONDITIONS
 from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
 from server import run_cli
 from server.cli import ENGINE_CONDITIONS, build_parser, main
+from server.report import _fmt
 from server.schemas import EngineCondition
-from server.sweep_cli import _pct
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -113,11 +113,14 @@ def test_db_upgrade_prints_plain_lines(db_url: str, capsys: pytest.CaptureFixtur
 def test_a_rate_with_two_seeds_prints_a_bootstrap_interval_inside_0_1() -> None:
     stat = mean_ci([0.0, 0.1])  # Student's t half-width 64%: "5% +- 64%" before
     assert stat["ci95"] > 0.6
-    assert _pct(stat) == "5% [0, 10]"
+    assert _fmt(stat, pct=True) == "5% [0, 10]"
     # A malformed interval past [0, 1] is clipped, never printed as is.
-    assert _pct({"mean": 0.05, "low": -0.2, "high": 1.3, "n": 2, "ci95": 0.64}) == "5% [0, 100]"
-    assert _pct({"mean": 0.5, "low": float("nan"), "high": float("nan"), "n": 1}) == "50%"
-    assert _pct({"mean": float("nan")}) == "-"
+    assert (
+        _fmt({"mean": 0.05, "low": -0.2, "high": 1.3, "n": 2, "ci95": 0.64}, pct=True)
+        == "5% [0, 100]"
+    )
+    assert _fmt({"mean": 0.5, "low": float("nan"), "high": float("nan"), "n": 1}, pct=True) == "50%"
+    assert _fmt({"mean": float("nan")}, pct=True) == "-"
 
 
 def test_an_unexpected_error_is_one_line_without_a_traceback(
