@@ -132,8 +132,15 @@ async def create_run(
         sensors=body.sensors or "",
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
+    if body.network_version is not None:
+        if body.network is None:
+            raise HTTPException(422, "network_version needs a network")
+        snap = await io(networks.snapshot, body.network, body.network_version)
+        network = snap.associations
     run_id = await io(engines.create, spec, network)
-    if body.network is not None:  # live edits reach it by the network's id, not its name
+    if body.network_version is not None:  # a past version: live edits of today's skip it
+        state.run_networks[run_id] = None
+    elif body.network is not None:  # live edits reach it by the network's id, not its name
         state.run_networks[run_id] = (await io(networks.get, body.network)).id
     return await _run(store, engines, run_id)
 
