@@ -62,6 +62,9 @@ async def compare_runs(
     if not a:
         raise HTTPException(422, "name at least one run in a")
     b = b or []
+    bad = [i for i in (*a, *b) if not 1 <= i <= 2**62]
+    if bad:
+        raise HTTPException(422, f"run ids are from 1 to 2**62, not {bad[0]}")
     if b and len(b) != len(a):
         raise HTTPException(
             422,
