@@ -9,10 +9,11 @@ behaviour and condition says what it means; and "Run this network" runs the open
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import pytest
-from liveserver import LiveServer
+from liveserver import LiveServer, live_server
 from playwright.sync_api import Page, Route, expect
 from webpage import cell, eventually, open_view
 
@@ -200,3 +201,22 @@ def test_run_this_network_and_compare_it_with_an_earlier_version(
     rate = out.locator(".side-a .big").get_attribute("data-rate")
     successes = sum(r["successes"] for r in runs[:2])
     assert rate is not None and float(rate) == pytest.approx(successes / 4)
+
+
+def test_runs_wait_for_a_free_slot_and_say_so(page: Page, tmp_path: Path) -> None:
+    with live_server(tmp_path / "slots.db", env={"SRLAB_MAX_RUNS": "1"}) as server:
+        busy = server.client.post(
+            "/api/runs", json={"condition": "innate", "mode": "realtime", "hz": 1}
+        ).json()
+        assert server.client.post(f"/api/runs/{busy['id']}/start").status_code == 200
+        open_view(page, server, "editor/dp")  # a built-in network runs as it is
+        page.fill("#run-net-form input[name=episodes]", "1")
+        page.fill("#run-net-form input[name=seeds]", "1")
+        page.click("#run-net-start")
+        out = page.locator("#run-net-out")
+        expect(out).to_contain_text("waiting for a free run slot")
+        assert server.client.post(f"/api/runs/{busy['id']}/stop").status_code == 200
+        expect(out).to_have_attribute("data-state", "done")
+        expect(out).not_to_contain_text("waiting for a free run slot")
+        expect(out.locator(".side-a")).to_contain_text("dp")
+        page.goto("about:blank")  # no poll of the page in flight while the service stops

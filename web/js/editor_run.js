@@ -138,19 +138,24 @@ async function poll(batch) {
   const runs = batch.sides.flatMap((s) => s.runs);
   let waiting = 0;
   try {
-    for (const r of runs) {
-      if (r.status === "created") {
+    const created = runs.filter((r) => r.status === "created");
+    // After a refusal (SRLAB_MAX_RUNS, or the write rate) wait a while before asking again.
+    if (created.length && Date.now() >= (batch.retryAt || 0)) {
+      for (const r of created) {
         try {
           const started = await post(`/runs/${r.id}/start`);
           r.status = started.status;
         } catch (error) {
           if (!(error instanceof ApiError && error.status === 429)) throw error;
-          waiting += 1; // SRLAB_MAX_RUNS are running: try again at the next poll
-          batch.note = `${waiting} run${waiting > 1 ? "s" : ""} waiting for a free run slot: ${error.message}`;
+          batch.retryAt = Date.now() + 3000;
+          break;
         }
       }
     }
-    if (!waiting) batch.note = "";
+    waiting = runs.filter((r) => r.status === "created").length;
+    batch.note = waiting
+      ? `${waiting} run${waiting > 1 ? "s" : ""} waiting for a free run slot (the service runs at most SRLAB_MAX_RUNS at once); they start as others end.`
+      : "";
     await Promise.all(runs.filter((r) => r.status !== "created").map(async (r) => {
       if (ENDED.has(r.status) && r.count >= batch.episodes) return;
       const run = await get(`/runs/${r.id}`);
