@@ -74,6 +74,14 @@ class StimulusPublic(BaseModel):
     objective: str
     level: Literal["low", "high"]
     priority: int
+    description: str = Field(
+        "",
+        description="what the stimulus means, in words (e.g. the robot's lane and where "
+        "the obstacle is)",
+    )
+    rule: str = Field(
+        "", description="when the sensor emits it, as its data file's conditions (OR of ANDs)"
+    )
 
 
 class ConditionPublic(BaseModel):
@@ -165,6 +173,13 @@ class RunCreate(Strict):
         max_length=100,
         description="a stored network to start from (default: the condition's)",
     )
+    network_version: int | None = Field(
+        None,
+        ge=1,
+        le=2**31 - 1,
+        description="start from this version of `network` (GET /api/networks/{name}/versions), "
+        "not its current one; live edits do not reach such a run",
+    )
     params: LearningParams = Field(default_factory=LearningParams)
     world: str | None = Field(
         None,
@@ -189,6 +204,23 @@ class RunCreate(Strict):
     @classmethod
     def _known_sensors(cls, value: str | None) -> str | None:
         return _one_of(value, SENSOR_DEFINITIONS, "sensor definition")
+
+
+class EstimatePublic(BaseModel):
+    mean: float | None = Field(description="null without data")
+    low: float | None = Field(description="95% bootstrap interval; null with fewer than 2 seeds")
+    high: float | None
+    n: int = Field(description="seeds")
+
+
+class ComparisonPublic(BaseModel):
+    episodes: int = Field(description="the first episodes of every run the rates are over")
+    seeds: list[int]
+    a: EstimatePublic = Field(description="success rate of runs `a`, over seeds")
+    b: EstimatePublic | None = Field(description="of runs `b`, when given")
+    diff: EstimatePublic | None = Field(description="a - b, paired by seed, when `b` is given")
+    p: float | None = Field(description="two-sided sign-flip p of no difference")
+    complete: bool = Field(description="whether every run has ended")
 
 
 class LiveState(BaseModel):

@@ -180,6 +180,7 @@ def test_the_page_recovers_when_the_server_restarts(
                 )
                 page.click(cell(page, "Red", "stop"))
                 page.keyboard.press("Space")
+                page.keyboard.press("Enter")  # a cell's keystrokes are saved on commit
                 eventually(
                     lambda: second.client.get("/api/networks/kept").json()["version"] == 2,
                     what="an edit after the restart",

@@ -1,8 +1,10 @@
 """Two editor tabs on one network in real Chromium: neither overwrites the other silently.
 
-Each save carries the version it was based on; the tab that is behind gets 412, is shown
-what the other tab changed, and reapplies its change only when the user says so. Undo
-goes through the same check.
+Each page polls the network's version and redraws the matrix when another tab saved. Each
+save carries the version and the cell it was based on: a change of another cell made
+elsewhere is kept and ours goes on top; if the cell itself changed, the editor shows what
+the other tab did and reapplies only when the user says so; an undo is refused then, so it
+never deletes the other tab's write.
 """
 
 from __future__ import annotations
@@ -12,13 +14,18 @@ from typing import Any
 
 import pytest
 from liveserver import LiveServer
-from playwright.sync_api import Browser, Dialog, Page, expect
-from webpage import cell, open_view
+from playwright.sync_api import Browser, Page, expect
+from webpage import cell, eventually, open_view
 
 
 def association(server: LiveServer, stimulus: str, behaviour: str) -> Any:
     data = server.client.get("/api/networks/tabs/associations").json()["data"]
     return next((a for a in data if (a["stimulus"], a["behaviour"]) == (stimulus, behaviour)), None)
+
+
+def version(server: LiveServer) -> int:
+    out: int = server.client.get("/api/networks/tabs").json()["version"]
+    return out
 
 
 @pytest.fixture
@@ -37,48 +44,82 @@ def tabs(browser: Browser, server: LiveServer) -> Iterator[tuple[Page, Page]]:
         context.close()
 
 
-def test_the_tab_behind_is_shown_the_other_change_and_reapplies_only_if_asked(
+def edit(page: Page, stimulus: str, behaviour: str, *keys: str) -> None:
+    page.bring_to_front()  # a background tab's timers and frames are throttled
+    page.click(cell(page, stimulus, behaviour))
+    for key in keys:
+        page.keyboard.press(key)
+
+
+def test_a_tab_shows_what_another_tab_saved_without_reloading(
     server: LiveServer, tabs: tuple[Page, Page]
 ) -> None:
     a, b = tabs
-    a.bring_to_front()  # a background tab's timers and frames are throttled
-    a.click(cell(a, "Red", "goforward1"))
-    a.keyboard.press("Space")  # tab A adds Red -> goforward1: version 2
-    expect(a.locator("#net-meta")).to_contain_text("version 2")
-
-    asked: list[str] = []
-
-    def accept(dialog: Dialog) -> None:
-        asked.append(dialog.message)
-        dialog.accept()
-
-    b.once("dialog", accept)
+    edit(a, "Red", "goforward1", "Space", "Enter")
+    eventually(lambda: association(server, "Red", "goforward1"))
     b.bring_to_front()
-    b.click(cell(b, "Green", "stop"))
-    b.keyboard.press("Space")  # tab B still shows version 1
-    # Waiting through the page lets Playwright answer the dialog (a sleep would not).
-    expect(b.locator(cell(b, "Green", "stop"))).to_have_attribute("data-present", "true")
-    expect(b.locator("#net-meta")).to_contain_text("version 3")
-    assert association(server, "Green", "stop") is not None
-    assert "version 1 → 2" in asked[0] and "+ Red → goforward1" in asked[0], asked
-    # Both changes are stored, and tab B now shows A's too.
-    assert association(server, "Red", "goforward1") is not None
+    # Tab B did nothing: its poll finds version 2 and redraws.
     expect(b.locator(cell(b, "Red", "goforward1"))).to_have_attribute("data-present", "true")
-    assert server.client.get("/api/networks/tabs").json()["version"] == 3
+    expect(b.locator("#net-meta")).to_contain_text("version 2")
+    expect(b.locator("#versions li")).to_have_count(2)
+    # And B's own change then goes on top of A's, both kept.
+    edit(b, "Green", "stop", "Space", "Enter")
+    eventually(lambda: version(server) == 3)
+    assert association(server, "Red", "goforward1") and association(server, "Green", "stop")
 
-    # Tab A is behind now; its undo (remove Red -> goforward1) asks first, and "no"
-    # leaves B's version as it is.
-    declined: list[str] = []
 
-    def dismiss(dialog: Dialog) -> None:
-        declined.append(dialog.message)
-        dialog.dismiss()
+def test_a_change_to_a_cell_changed_elsewhere_asks_and_reapplies_only_if_told(
+    server: LiveServer, tabs: tuple[Page, Page]
+) -> None:
+    a, b = tabs
+    edit(a, "Green", "stop", "Space")  # a draft in tab A, not saved yet
+    expect(a.locator("#draft-note")).to_contain_text("Unsaved: Green → stop")
+    edit(b, "Green", "stop", "Space", "5", "Enter")  # tab B saves the same cell first
+    eventually(lambda: (association(server, "Green", "stop") or {}).get("strength") == 0.5)
 
-    a.once("dialog", dismiss)
     a.bring_to_front()
-    a.keyboard.press("Control+z")
+    with a.expect_event("dialog") as asked:
+        a.keyboard.press("Enter")
+    question = asked.value.message
+    asked.value.dismiss()
+    assert "Green → stop" in question and "Reapply" in question, question
     expect(a.locator(".toast.error").last).to_contain_text("was not saved")
-    assert "+ Green → stop" in declined[0], declined
-    assert server.client.get("/api/networks/tabs").json()["version"] == 3
-    assert association(server, "Red", "goforward1") is not None
-    expect(a.locator(cell(a, "Green", "stop"))).to_have_attribute("data-present", "true")
+    assert association(server, "Green", "stop")["strength"] == 0.5 and version(server) == 2
+    expect(a.locator(cell(a, "Green", "stop"))).to_have_text(".5")
+
+    # Asked again and told yes, tab A's change goes on top of the other writes.
+    edit(b, "Red", "stop", "Space", "Enter")  # B moves on: version 3
+    eventually(lambda: version(server) == 3)
+    edit(a, "Green", "stop", "8")
+    r = server.client.put("/api/networks/tabs/associations/Green/stop", json={"strength": 0.6})
+    assert r.status_code == 200  # elsewhere, again: version 4, while A's draft waits
+    with a.expect_event("dialog") as asked:
+        a.keyboard.press("Enter")
+    assert "now 0.60" in asked.value.message or "0.60" in asked.value.message
+    asked.value.accept()
+    eventually(lambda: (association(server, "Green", "stop") or {}).get("strength") == 0.8)
+    assert version(server) == 5 and association(server, "Red", "stop")
+
+
+def test_undo_never_deletes_another_tabs_write(server: LiveServer, tabs: tuple[Page, Page]) -> None:
+    a, b = tabs
+    edit(a, "Red", "goforward1", "Space", "Enter")  # A: version 2
+    eventually(lambda: association(server, "Red", "goforward1"))
+    edit(a, "Yellow", "goforward1", "Space", "Enter")  # A: version 3
+    eventually(lambda: version(server) == 3)
+    b.bring_to_front()
+    expect(b.locator(cell(b, "Yellow", "goforward1"))).to_have_attribute("data-present", "true")
+    edit(b, "Yellow", "goforward1", "3", "Enter")  # B changes A's cell: version 4
+    eventually(lambda: association(server, "Yellow", "goforward1")["strength"] == 0.3)
+
+    a.bring_to_front()
+    a.keyboard.press("Control+z")  # would remove Yellow -> goforward1, B's now
+    expect(a.locator(".toast.error").last).to_contain_text("changed elsewhere")
+    expect(a.locator(".toast.error").last).to_contain_text("not undone")
+    assert association(server, "Yellow", "goforward1")["strength"] == 0.3
+    assert version(server) == 4
+    # The undo before it touches a cell nobody else changed: it goes through.
+    a.keyboard.press("Control+z")
+    eventually(lambda: association(server, "Red", "goforward1") is None)
+    assert association(server, "Yellow", "goforward1")["strength"] == 0.3
+    expect(a.locator("#undo")).to_be_disabled()

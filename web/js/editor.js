@@ -1,10 +1,15 @@
 // The S-R editor: a network's stimulus x behaviour matrix, edited by click or keyboard.
-// Every save is a version on the server; undo and redo replay the inverse change as a new
-// version, so the history always shows what happened.
+// Keystrokes on a cell make a draft; the draft is saved, as one version, when it is
+// committed (Enter, leaving the cell, leaving the matrix). Undo and redo replay the inverse
+// change as a new version, so the history always shows what happened. Every write says
+// which version it was based on; the page polls for changes made elsewhere.
 
 import { api, del, get, post, put, seg, ApiError } from "./api.js";
 import { key, columns, neighbour, render, rows } from "./matrix.js";
 import { $, $$, attempt, el, fmt, throttle, toast, typing } from "./ui.js";
+import * as runpanel from "./editor_run.js";
+
+const POLL_MS = 2000;
 
 const SOURCE_INK = {
   innate: "#6b7a90", dp: "#245fd6", learned: "#17803d", kp: "#7b3fc4", expert: "#b35c00", designed: "#0f7f86",
@@ -21,7 +26,19 @@ const state = {
   pending: false,
   queue: Promise.resolve(),
   active: false,
+  draft: null, // {s, b, before, after, based}: keystrokes on one cell, not saved yet
+  outbox: [], // changes made while the service was away: {s, b, before, after, force, note, based}
+  poll: null,
+  sending: [], // changes queued or being saved, oldest first
+  mine: new Set(), // versions this page wrote
 };
+
+/** A strength as a cell shows it: "1", ".4", ".25", "0" (never ".00"). */
+export function short(x) {
+  if (x >= 0.995) return "1";
+  if (x < 0.005) return "0";
+  return x.toFixed(2).replace(/0+$/, "").replace(/^0/, "");
+}
 
 const same = (a, b) =>
   (a === null && b === null) ||
@@ -52,6 +69,16 @@ export function init(catalog) {
     if (e.target.closest("td.c")) toggle();
   });
   $("#matrix").addEventListener("keydown", onMatrixKey);
+  $("#matrix").addEventListener("focusout", () => {
+    // After the event: a redraw moves focus out and straight back in.
+    setTimeout(() => {
+      if (state.draft && !$("#matrix").contains(document.activeElement)) commitDraft();
+    }, 0);
+  });
+  window.addEventListener("beforeunload", (e) => {
+    if (state.draft || state.outbox.length) e.preventDefault();
+  });
+  runpanel.init(catalog, () => state.net);
   $("#diff").addEventListener("click", onDiff);
   $("#revert").addEventListener("click", onRevert);
   $("#versions").addEventListener("change", updateHistoryButtons);
@@ -72,20 +99,56 @@ export function init(catalog) {
 /** Show the editor for network `name` (or the first one). */
 export async function show(name) {
   state.active = true;
+  if (state.draft && state.net && name && name !== state.net.name) await commitDraft();
   await loadList();
   const wanted = name || (state.net && state.net.name) || firstEditable();
   if (wanted) await open(wanted);
+  if (state.outbox.length) await flushOutbox();
+  startPolling();
 }
 
 export function hide() {
+  if (state.draft) commitDraft();
   state.active = false;
+  clearTimeout(state.poll);
+  state.poll = null;
 }
 
-/** After the service comes back: reload what is shown, keep what was typed. */
+/** After the service comes back: reload what is shown, then send what was kept. */
 export async function reload() {
   if (!state.active) return;
   await loadList();
   if (state.net) await open(state.net.name, { keepSelection: true });
+  await flushOutbox();
+}
+
+/** Watch the network's version, so a change made in another tab or editor shows here. */
+function startPolling() {
+  clearTimeout(state.poll);
+  const tick = async () => {
+    if (!state.active) return;
+    if (!document.hidden && state.net && !state.pending && !state.outbox.length) {
+      await enqueue(checkElsewhere);
+    }
+    state.poll = setTimeout(tick, POLL_MS);
+  };
+  state.poll = setTimeout(tick, POLL_MS);
+}
+
+async function checkElsewhere() {
+  if (!state.net || state.outbox.length) return;
+  let list;
+  try {
+    list = await get("/networks");
+  } catch {
+    return; // the banner says so; the next poll tries again
+  }
+  const mine = list.data.find((n) => n.name === state.net.name);
+  if (!mine || mine.builtin || mine.version === state.net.version) return;
+  const was = state.net.version;
+  await open(state.net.name, { keepSelection: true });
+  await loadList();
+  toast(`${state.net.name} was changed elsewhere: v${was} → v${state.net.version}. The matrix shows it now.`);
 }
 
 function firstEditable() {
@@ -123,6 +186,7 @@ async function open(name, { keepSelection = false } = {}) {
   if (!state.net || state.net.name !== net.name) {
     state.undo = [];
     state.redo = [];
+    state.draft = null;
     if (!keepSelection) state.selected = null;
   }
   setNetwork(net);
@@ -137,38 +201,95 @@ function setNetwork(net) {
   state.cells = new Map(net.associations.map((a) => [key(a.stimulus, a.behaviour), a]));
   $("#net-title").textContent = net.name;
   $("#net-meta").textContent = `${net.builtin ? "built-in · read-only" : `version ${net.version}`} · ${net.associations.length} associations${net.description ? ` · ${net.description}` : ""}`;
+  showDraftNote();
   $("#readonly-note").hidden = !net.builtin;
   $("#delete-network").disabled = net.builtin;
   for (const b of $$("#cell-form button, #cell-form input, #cell-form select")) b.disabled = net.builtin;
   draw();
   fillInspector();
   updateUndo();
+  runpanel.networkChanged(net);
 }
+
+function showDraftNote() {
+  const d = state.draft;
+  const waiting = state.outbox.length;
+  const note = $("#draft-note");
+  if (!note) return;
+  note.hidden = !d && !waiting;
+  note.textContent = [
+    d ? `Unsaved: ${d.s} → ${d.b} (Enter or leaving the cell saves it).` : "",
+    waiting ? `${waiting} change${waiting > 1 ? "s" : ""} kept in this page, sent when the service is back.` : "",
+  ].filter(Boolean).join(" ");
+}
+
+/** The cell as the page shows it: the draft, else a change waiting to be sent, else stored. */
+function shown(s, b) {
+  const k = key(s, b);
+  if (state.draft && key(state.draft.s, state.draft.b) === k) return { a: state.draft.after, kind: "draft" };
+  for (let i = state.sending.length - 1; i >= 0; i--) {
+    const op = state.sending[i];
+    if (key(op.s, op.b) === k) return { a: op.after, kind: "draft" };
+  }
+  for (let i = state.outbox.length - 1; i >= 0; i--) {
+    const op = state.outbox[i];
+    if (key(op.s, op.b) === k) return { a: op.after, kind: "waiting" };
+  }
+  return { a: state.cells.get(k) || null, kind: "" };
+}
+
+const stored = (s, b) => (state.cells.has(key(s, b)) ? pick(state.cells.get(key(s, b))) : null);
 
 function draw() {
   const { stimuli, behaviours, sensors } = state.catalog;
   const extra = state.net.associations.map((a) => a.behaviour);
+  const stim = new Map(stimuli.map((x) => [x.name, x]));
+  const beh = new Map(behaviours.map((x) => [x.name, x]));
+  const meaning = (s) => {
+    const x = stim.get(s);
+    return x && x.description ? `${s}: ${x.description}` : s;
+  };
   render($("#matrix"), {
     groups: rows(stimuli, sensors),
     cols: columns(behaviours, extra),
     selected: state.selected,
     readonly: state.net.builtin,
     label: `Network ${state.net.name}`,
+    rowTitle: (s) => {
+      const x = stim.get(s);
+      return x ? `${meaning(s)}\n${x.sensor} sensor (${x.level} level), for ${x.objective.replaceAll("_", " ")}${x.rule ? `\nwhen ${x.rule}` : ""}` : s;
+    },
+    colTitle: (c) => {
+      const x = beh.get(c.name);
+      return x ? `${c.name}: ${motion(x)}, for ${x.ticks} tick${x.ticks > 1 ? "s" : ""} (${x.family})` : `${c.name}: a behaviour KP made`;
+    },
+    colSub: (c) => (beh.has(c.name) ? motion(beh.get(c.name), true) : ""),
     cell: (s, b) => {
-      const a = state.cells.get(key(s, b));
-      if (!a) return null;
+      const { a, kind } = shown(s, b);
+      const title = (a) => `${meaning(s)}\n→ ${b}${beh.has(b) ? ` (${motion(beh.get(b))})` : ""}\n${a ? `strength ${fmt(a.strength)}, ${a.source}${a.locked ? ", locked" : ""}` : "none"}${kind === "draft" ? "\nnot saved yet: Enter saves" : kind === "waiting" ? "\nkept in this page: sent when the service is back" : ""}`;
+      if (!a) return kind ? { empty: true, draft: kind, title: title(null) } : { empty: true, title: title(null) };
       const t = 0.15 + 0.85 * a.strength;
       const ink = SOURCE_INK[a.source] || "#245fd6";
       return {
-        text: fmt(a.strength, 1),
+        text: short(a.strength),
         bg: `color-mix(in srgb, ${ink} ${Math.round(t * 70)}%, white)`,
         ink: t > 0.6 ? "#fff" : "#1b1f27",
         source: a.source,
         locked: a.locked,
-        title: `${s} → ${b}: strength ${fmt(a.strength)}, ${a.source}${a.locked ? ", locked" : ""}`,
+        draft: kind,
+        title: title(a),
       };
     },
   });
+  showDraftNote();
+}
+
+/** A behaviour's motion: "0.45 m/s straight", "0.15 m/s, turning left 150°/s". */
+function motion(b, compact = false) {
+  const turn = b.turn_dps;
+  if (compact) return `${b.speed_mps.toFixed(2)} m/s${turn ? ` ${turn > 0 ? "↺" : "↻"}${Math.abs(turn)}°/s` : ""}`;
+  const dir = turn > 0 ? `turning left ${turn}°/s` : turn < 0 ? `turning right ${-turn}°/s` : "straight";
+  return b.speed_mps === 0 && !turn ? "standing still" : `${b.speed_mps.toFixed(2)} m/s ${b.speed_mps < 0 ? "backwards, " : ""}${dir}`;
 }
 
 function selectedCell() {
@@ -177,6 +298,7 @@ function selectedCell() {
 }
 
 function select(s, b, { focus = true } = {}) {
+  if (state.draft && (state.draft.s !== s || state.draft.b !== b)) commitDraft();
   state.selected = { s, b };
   for (const td of $$("#matrix td.c[aria-selected=true]")) {
     td.setAttribute("aria-selected", "false");
@@ -198,8 +320,10 @@ function fillInspector() {
     $("#cell-name").textContent = "Select a cell.";
     return;
   }
-  const a = state.cells.get(key(sel.s, sel.b));
+  const { a } = shown(sel.s, sel.b);
   $("#cell-name").textContent = `${sel.s} → ${sel.b}${a ? "" : " (none yet)"}`;
+  const x = state.catalog.stimuli.find((t) => t.name === sel.s);
+  $("#cell-meaning").textContent = x && x.description ? `${sel.s}: ${x.description}.` : "";
   form.strength.value = a ? a.strength : 1;
   form.strength_range.value = form.strength.value;
   form.source.value = a ? a.source : "dp";
@@ -230,27 +354,36 @@ function onMatrixKey(event) {
     toggle();
   } else if (k === "Delete" || k === "Backspace") {
     event.preventDefault();
-    change((cur) => (cur ? null : undefined));
+    stage((cur) => (cur ? null : undefined));
   } else if (/^[0-9]$/.test(k)) {
     event.preventDefault();
     const strength = k === "0" ? 1 : Number(k) / 10;
-    change((cur) => ({ strength, source: cur ? cur.source : "dp", locked: cur ? cur.locked : false }));
+    stage((cur) => ({ strength, source: cur ? cur.source : "dp", locked: cur ? cur.locked : false }));
   } else if (k === "l" || k === "L") {
     event.preventDefault();
-    change((cur) => {
+    stage((cur) => {
       if (cur) return { ...cur, locked: !cur.locked };
       toast("There is no association here to lock: add one first (Space).");
       return undefined;
     });
   } else if (k === "Enter") {
     event.preventDefault();
+    if (state.draft) {
+      commitDraft();
+      return;
+    }
     $("#cell-form").strength.focus();
     $("#cell-form").strength.select();
+  } else if (k === "Escape" && state.draft) {
+    event.preventDefault();
+    state.draft = null;
+    draw();
+    select(td.dataset.s, td.dataset.b);
   }
 }
 
 function toggle() {
-  change((cur) => (cur ? null : { strength: 1, source: "dp", locked: false }));
+  stage((cur) => (cur ? null : { strength: 1, source: "dp", locked: false }));
 }
 
 const pick = (a) => ({ strength: a.strength, source: a.source, locked: a.locked });
@@ -264,6 +397,10 @@ function onSaveCell(event) {
     form.strength.focus();
     return;
   }
+  const sel = state.selected;
+  // The side panel's values replace a draft of the same cell (it showed the draft).
+  if (state.draft && sel && state.draft.s === sel.s && state.draft.b === sel.b) state.draft = null;
+  else if (state.draft) commitDraft();
   change({ strength, source: form.source.value, locked: form.locked.checked }, { note: form.note.value });
 }
 
@@ -273,53 +410,190 @@ function enqueue(job) {
   return state.queue;
 }
 
-/**
- * Change the selected cell to `next` (null removes it), as one saved version; `next` may be
- * a function of the cell as it is when the change's turn comes (undefined: no change).
- * A locked association only changes its lock: unlock it first, so a design is not lost to
- * a slip of the keyboard.
- */
-function change(next, { note = "" } = {}) {
-  const sel = state.selected;
-  if (!sel || !state.net) return Promise.resolve();
-  return enqueue(() => changeNow(sel, next, note));
+/** The cell as the server will have it once the changes kept in this page are sent. */
+function settled(s, b) {
+  for (let i = state.sending.length - 1; i >= 0; i--) {
+    const op = state.sending[i];
+    if (op.s === s && op.b === b) return op.after;
+  }
+  for (let i = state.outbox.length - 1; i >= 0; i--) {
+    const op = state.outbox[i];
+    if (op.s === s && op.b === b) return op.after;
+  }
+  return stored(s, b);
 }
 
-async function changeNow(sel, next, note) {
-  if (!state.net) return;
-  const current = state.cells.has(key(sel.s, sel.b)) ? pick(state.cells.get(key(sel.s, sel.b))) : null;
-  const after = typeof next === "function" ? next(current) : next;
-  if (after === undefined) return;
+/** Whether `before` -> `after` may be made: a locked association only changes its lock. */
+function allowed(s, b, before, after) {
+  const unlockOnly = before && after && before.locked && !after.locked &&
+    before.strength === after.strength && before.source === after.source;
+  if (before && before.locked && !unlockOnly) {
+    toast(`${s} → ${b} is locked: unlock it first (L, or untick "locked" and Save).`, "error");
+    return false;
+  }
+  return true;
+}
+
+/**
+ * Change the selected cell's draft by `next` (a function of the cell as the page shows it;
+ * undefined: no change). Nothing is saved until the draft is committed, so "Space, 5" on a
+ * cell is one version, not two.
+ */
+function stage(next) {
+  const sel = state.selected;
+  if (!sel || !state.net) return;
   if (state.net.builtin) {
     toast(`${state.net.name} is built in and read-only: copy it to edit it.`, "error");
     return;
   }
-  const before = current;
-  if (same(before, after)) return;
-  const unlockOnly = before && after && before.locked && !after.locked &&
-    before.strength === after.strength && before.source === after.source;
-  if (before && before.locked && !unlockOnly) {
-    toast(`${sel.s} → ${sel.b} is locked: unlock it first (L, or untick "locked" and Save).`, "error");
-    return;
-  }
-  const ok = await send(sel.s, sel.b, after, { force: Boolean(unlockOnly), note });
-  if (ok) {
-    state.undo.push({ s: sel.s, b: sel.b, before, after });
-    state.redo = [];
-    updateUndo();
-    $("#cell-form").note.value = "";
-  }
+  const d = state.draft && state.draft.s === sel.s && state.draft.b === sel.b ? state.draft : null;
+  const before = d ? d.before : settled(sel.s, sel.b);
+  const current = d ? d.after : before;
+  const after = next(current);
+  if (after === undefined || same(current, after)) return;
+  if (!allowed(sel.s, sel.b, current, after)) return;
+  state.draft = same(before, after) ? null : { s: sel.s, b: sel.b, before, after, based: d ? d.based : state.net.version };
+  draw();
+  select(sel.s, sel.b);
 }
 
-/** Write one cell; true when the server stored it. The page state follows the server. */
+/** Save the draft (if any) as one version. */
+function commitDraft() {
+  const d = state.draft;
+  if (!d) return Promise.resolve();
+  state.draft = null;
+  // Its lock was undone in the draft on purpose (L): the write may change a locked one.
+  const op = { ...d, force: Boolean(d.before && d.before.locked), note: "" };
+  state.sending.push(op);
+  return enqueue(async () => {
+    try {
+      await write(op, "edit");
+    } finally {
+      state.sending.splice(state.sending.indexOf(op), 1);
+    }
+    draw();
+    if (state.selected) select(state.selected.s, state.selected.b, { focus: document.activeElement === document.body || $("#matrix").contains(document.activeElement) });
+  });
+}
+
+/**
+ * Change the selected cell to `next` (null removes it), as one saved version: the side
+ * panel's Save and Remove.
+ */
+function change(next, { note = "" } = {}) {
+  const sel = state.selected;
+  if (!sel || !state.net) return Promise.resolve();
+  return enqueue(async () => {
+    if (!state.net) return;
+    if (state.net.builtin) {
+      toast(`${state.net.name} is built in and read-only: copy it to edit it.`, "error");
+      return;
+    }
+    const before = settled(sel.s, sel.b);
+    if (same(before, next) || !allowed(sel.s, sel.b, before, next)) return;
+    const unlockOnly = Boolean(before && before.locked);
+    if (await write({ s: sel.s, b: sel.b, before, after: next, force: unlockOnly, note, based: state.net.version }, "edit") === true) {
+      $("#cell-form").note.value = "";
+    }
+  });
+}
+
+/**
+ * Store one change `op` = {s, b, before, after, force, note, based}: `before` is the cell
+ * the change was made on, `based` the network's version then. It is written only while
+ * the cell is still `before` on the server (a change of another cell elsewhere is kept
+ * and ours goes on top of it); if the cell itself changed, an edit asks first and an undo
+ * or redo is refused, so neither deletes another writer's change.
+ * Answers true (stored), "kept" (the service is away: kept in this page), "refused" or false.
+ */
+async function write(op, kind) {
+  if (!state.net) return false;
+  if (state.outbox.length && kind !== "flush") return keep(op);
+  for (let attempt = 0; attempt < 4; attempt++) {
+    const now = stored(op.s, op.b);
+    if (!same(now, op.before)) return clash(op, kind, now);
+    const result = await send(op.s, op.b, op.after, { force: op.force, note: op.note });
+    if (result === "ok") {
+      const elsewhere = [];
+      for (let v = op.based + 1; v < state.net.version; v++) if (!state.mine.has(v)) elsewhere.push(v);
+      state.mine.add(state.net.version);
+      if (elsewhere.length && kind === "edit") {
+        toast(`Saved ${op.s} → ${op.b} on top of the change${elsewhere.length > 1 ? "s" : ""} made elsewhere (v${elsewhere.join(", v")}); that cell had not changed.`);
+      }
+      if (kind === "edit" || kind === "flush") {
+        state.undo.push({ s: op.s, b: op.b, before: op.before, after: op.after });
+        state.redo = [];
+        updateUndo();
+      }
+      return true;
+    }
+    if (result === "offline") return kind === "flush" ? "offline" : keep(op);
+    if (result !== "stale") return false;
+    await open(state.net.name, { keepSelection: true }); // then look at the cell again
+  }
+  return false;
+}
+
+function keep(op) {
+  if (!state.outbox.length) toast(`The service is away: your change to ${op.s} → ${op.b} is kept in this page and sent when it is back.`);
+  state.outbox.push(op);
+  draw();
+  return "kept";
+}
+
+/** Send the changes kept while the service was away, in order, each version-checked. */
+function flushOutbox() {
+  return enqueue(async () => {
+    while (state.outbox.length && state.net) {
+      const op = state.outbox[0];
+      const result = await write(op, "flush");
+      if (result === "offline") return;
+      state.outbox.shift();
+    }
+    if (state.net) {
+      draw();
+      if (state.selected) select(state.selected.s, state.selected.b, { focus: false });
+    }
+  });
+}
+
+const describe1 = (a) => (a === null ? "none" : `${fmt(a.strength)} ${a.source}${a.locked ? " locked" : ""}`);
+
+/** The cell changed elsewhere after `op` was made on it (`now` is how it is stored). */
+async function clash(op, kind, now) {
+  const name = state.net.name;
+  if (kind === "undo" || kind === "redo") {
+    toast(`${op.s} → ${op.b} was changed elsewhere (now ${describe1(now)}): ${kind === "undo" ? "undoing" : "redoing"} would overwrite that change, so it was not ${kind === "undo" ? "undone" : "redone"}.`, "error");
+    return "refused";
+  }
+  const current = state.net.version;
+  const diff = current !== op.based
+    ? await attempt(() => get(`/networks/${seg(name)}/diff`, { from: op.based, to: current }), "Comparing versions") : null;
+  draw();
+  const lines = diff ? describeDiff(diff) : [];
+  const yours = op.after === null ? "remove it" : `set it to ${describe1(op.after)}`;
+  const question = `${name} was saved elsewhere meanwhile (version ${op.based} → ${current}):\n` +
+    `${lines.join("\n") || `~ ${op.s} → ${op.b}: now ${describe1(now)}`}\n\n` +
+    `Reapply your change to ${op.s} → ${op.b} (${yours}) on top of version ${current}?`;
+  if (!confirm(question)) {
+    toast(`Your change to ${op.s} → ${op.b} was not saved: the editor shows version ${current}.`, "error");
+    return false;
+  }
+  if (same(now, op.after)) return true;
+  return write({ ...op, before: now, force: true, based: current }, kind);
+}
+
+/**
+ * Write one cell: "ok" when the server stored it, "stale" (412: the network moved on),
+ * "offline" or "error". The page state follows the server.
+ */
 async function send(s, b, after, { force = false, note = "" } = {}) {
   state.pending = true;
   const name = state.net.name;
   const live = $("#live-edits").checked;
   // The version this change is based on: the server refuses it (412) if another tab or
   // editor saved meanwhile, instead of silently overwriting what they did.
-  const based = state.net.version;
-  const query = { force: force || undefined, live: live || undefined, note: note || undefined, expected_version: based };
+  const query = { force: force || undefined, live: live || undefined, note: note || undefined, expected_version: state.net.version };
   try {
     let version;
     if (after === null) {
@@ -337,19 +611,17 @@ async function send(s, b, after, { force = false, note = "" } = {}) {
       return { stimulus, behaviour, ...a };
     }) };
     setNetwork(state.net);
-    if (state.selected) select(state.selected.s, state.selected.b);
+    if (state.selected) select(state.selected.s, state.selected.b, { focus: $("#matrix").contains(document.activeElement) || document.activeElement === document.body });
     refreshVersions();
-    return true;
+    return "ok";
   } catch (error) {
-    if (error instanceof ApiError && error.status === 412 && error.body) {
-      state.pending = false;
-      return await conflict(s, b, after, { force, note }, based, error.body.version);
-    }
+    if (error instanceof ApiError && error.status === 412) return "stale";
+    if (error instanceof ApiError && error.status === 0) return "offline";
     const message = error instanceof ApiError && error.status === 409 && /lock/i.test(error.message)
       ? `${s} → ${b} is locked on the server: unlock it first.` : error.message;
     toast(`Saving ${s} → ${b}: ${message}`, "error");
-    if (error instanceof ApiError && error.status !== 0) await open(name, { keepSelection: true });
-    return false;
+    if (error instanceof ApiError) await open(name, { keepSelection: true });
+    return "error";
   } finally {
     state.pending = false;
   }
@@ -365,47 +637,31 @@ function describeDiff(d) {
   ];
 }
 
-/**
- * The network changed under a change of ours (412): show what the other writer did, show
- * the network as it is now, and reapply ours on top only if the user says so.
- */
-async function conflict(s, b, after, options, based, current) {
-  const name = state.net.name;
-  const diff = await attempt(() => get(`/networks/${seg(name)}/diff`, { from: based, to: current }), "Comparing versions");
-  await open(name, { keepSelection: true });
-  const lines = diff ? describeDiff(diff) : [];
-  const yours = after === null ? "remove it" : `set it to ${fmt(after.strength)} ${after.source}${after.locked ? " locked" : ""}`;
-  const question = `${name} was saved elsewhere meanwhile (version ${based} → ${current}):\n` +
-    `${lines.join("\n") || "(no association changed)"}\n\n` +
-    `Reapply your change to ${s} → ${b} (${yours}) on top of version ${current}?`;
-  if (!confirm(question)) {
-    toast(`Your change to ${s} → ${b} was not saved: the editor shows version ${current}.`, "error");
-    return false;
+/** Undo (or redo) the last change of this page, only while its cell is as the change left it. */
+function replay(from, to, kind) {
+  if (state.draft) { // a draft is undone by dropping it
+    if (kind === "undo") {
+      state.draft = null;
+      draw();
+      if (state.selected) select(state.selected.s, state.selected.b);
+      return Promise.resolve();
+    }
+    commitDraft();
   }
-  return send(s, b, after, options);
-}
-
-function undo() {
   return enqueue(async () => {
-    const op = state.undo.pop();
-    if (!op) return;
+    const op = from.pop();
+    if (!op || !state.net) return;
     state.selected = { s: op.s, b: op.b };
-    if (await send(op.s, op.b, op.before, { force: true, note: "undo" })) state.redo.push(op);
-    else state.undo.push(op);
+    const [before, after] = kind === "undo" ? [op.after, op.before] : [op.before, op.after];
+    const result = await write({ s: op.s, b: op.b, before, after, force: true, note: kind, based: state.net.version }, kind);
+    if (result === true || result === "kept") to.push(op);
+    else if (result !== "refused") from.push(op);
     updateUndo();
   });
 }
 
-function redo() {
-  return enqueue(async () => {
-    const op = state.redo.pop();
-    if (!op) return;
-    state.selected = { s: op.s, b: op.b };
-    if (await send(op.s, op.b, op.after, { force: true, note: "redo" })) state.undo.push(op);
-    else state.redo.push(op);
-    updateUndo();
-  });
-}
+const undo = () => replay(state.undo, state.redo, "undo");
+const redo = () => replay(state.redo, state.undo, "redo");
 
 function updateUndo() {
   $("#undo").disabled = !state.undo.length;
@@ -472,6 +728,7 @@ async function onRevert() {
   if (!net) return;
   state.undo = [];
   state.redo = [];
+  state.mine.add(net.version);
   setNetwork(net);
   await Promise.all([loadVersions(), loadList()]);
   toast(`Reverted to v${version}: now version ${net.version}.`, "ok");

@@ -33,10 +33,12 @@ export function rows(stimuli, sensors) {
 /**
  * Draw the matrix into `container`.
  *
- * `cell(stimulus, behaviour)` returns {text, bg, ink, source, locked, inNet, title} or null
- * for an empty cell. Returns the table; cells carry data-s and data-b.
+ * `cell(stimulus, behaviour)` returns {text, bg, ink, source, locked, inNet, draft, title}
+ * or null for an empty cell. Optional `rowTitle(stimulus)`, `colTitle(col)` and
+ * `colSub(col)` explain the headers (a tooltip; a second, smaller line under the name).
+ * Returns the table; cells carry data-s and data-b.
  */
-export function render(container, { groups, cols, cell, selected, readonly = false, label }) {
+export function render(container, { groups, cols, cell, selected, readonly = false, label, rowTitle, colTitle, colSub }) {
   const families = [];
   for (const c of cols) {
     const last = families[families.length - 1];
@@ -58,27 +60,30 @@ export function render(container, { groups, cols, cell, selected, readonly = fal
       cols.map((c) => el("th", {
         class: `b${famStart.has(c.name) ? " fam-start" : ""}${c.made ? " new-b" : ""}`,
         scope: "col",
-        title: c.made ? `${c.name}: a behaviour KP made` : c.name,
-      }, el("span", { text: c.name })))));
+        title: (colTitle && colTitle(c)) || (c.made ? `${c.name}: a behaviour KP made` : c.name),
+      }, el("span", { text: c.name }, colSub && colSub(c) ? el("small", { class: "sub", text: colSub(c) }) : null)))));
   const body = el("tbody");
   for (const g of groups) {
     body.append(el("tr", { class: "group" },
       el("th", { scope: "rowgroup" }, g.sensor, " ", el("span", { class: "level", text: `(${g.level})` })),
       el("td", { colspan: cols.length })));
     for (const s of g.stimuli) {
-      const tr = el("tr", {}, el("th", { scope: "row", text: s }));
+      const tr = el("tr", {}, el("th", { scope: "row", text: s, title: (rowTitle && rowTitle(s)) || undefined }));
       for (const c of cols) {
         const v = cell(s, c.name);
         const isSel = selected && selected.s === s && selected.b === c.name;
         const td = el("td", {
-          class: `c${famStart.has(c.name) ? " fam-start" : ""}${v && v.inNet ? " in-net" : ""}`,
+          class: `c${famStart.has(c.name) ? " fam-start" : ""}${v && v.inNet ? " in-net" : ""}${v && v.draft ? ` ${v.draft}` : ""}`,
           role: "gridcell",
           tabindex: isSel ? 0 : -1,
           "aria-selected": isSel ? "true" : "false",
           title: v && v.title ? v.title : `${s} → ${c.name}: none`,
           dataset: { s, b: c.name },
         });
-        if (v) {
+        if (v && v.empty) {
+          td.dataset.present = "false";
+          td.title = v.title || td.title;
+        } else if (v) {
           if (v.bg) td.style.background = v.bg;
           if (v.ink) td.style.color = v.ink;
           if (v.text !== undefined && v.text !== "") td.append(el("span", { class: "v", text: v.text }));

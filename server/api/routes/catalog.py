@@ -7,7 +7,7 @@ from typing import Any
 from fastapi import APIRouter
 from pydantic import JsonValue
 
-from core.brain.catalog import sensor_definitions
+from core.brain.catalog import Stimulus, sensor_definitions
 from core.conditions import CONDITIONS
 from core.worlds import default_world, load_world, world_names
 from server.api.deps import StateDep
@@ -22,13 +22,55 @@ from server.schemas import (
 
 router = APIRouter(tags=["catalog"])
 
+_MEANINGS = {
+    "Left": "the robot is left of its lane's centre line (more than 0.2 m)",
+    "Middle": "the robot is within 0.2 m of its lane's centre line",
+    "Right": "the robot is right of its lane's centre line (more than 0.2 m)",
+    "Corner": "a corner of the track is coming up",
+    "LeftWall": "a wall is close on the robot's left (sonar)",
+    "RightWall": "a wall is close on the robot's right (sonar)",
+    "Red": "the lamp is red and the stop line is 0.2-0.8 m ahead (camera)",
+    "Yellow": "the lamp is yellow and the stop line is 0.2-0.8 m ahead (camera)",
+    "Green": "the lamp is green and the stop line is 0.2-0.8 m ahead (camera)",
+    "SonarObstacleLeft": "an echo on the left that the map of the walls does not explain",
+    "SonarObstacleFront": "an echo dead ahead (both central sonars) that is not a wall",
+    "SonarObstacleRight": "an echo on the right that the map of the walls does not explain",
+    "Collision": "the bumper is pressed",
+}
+_LANE = {"L": "left", "M": "middle", "R": "right"}
+_SIDE = {"L": "left", "M": "ahead (middle)", "R": "right"}
+
+
+def _meaning(s: Stimulus) -> str:
+    """A stimulus in words: the camera's Obstacle_<lane>_<side> of Fig. 10 by its name."""
+    parts = s.name.split("_")
+    if len(parts) == 3 and parts[0] == "Obstacle" and parts[1] in _LANE and parts[2] in _SIDE:
+        return (
+            f"robot in the {_LANE[parts[1]]} lane, obstacle {_SIDE[parts[2]]}, "
+            "within 1.5 m of the camera"
+        )
+    return _MEANINGS.get(s.name, "")
+
+
+def _rule(s: Stimulus) -> str:
+    """The stimulus's rule as its data file's conditions, OR of ANDs."""
+    return " or ".join(
+        " and ".join(" ".join(str(x) for x in c.as_data()) for c in conj) for conj in s.rule
+    )
+
 
 @router.get("/stimuli")
 def list_stimuli(state: StateDep) -> list[StimulusPublic]:
-    """Every stimulus the logical sensors emit."""
+    """Every stimulus the logical sensors emit, with its meaning and its rule."""
     return [
         StimulusPublic(
-            name=s.name, sensor=s.sensor, objective=s.objective, level=s.level, priority=s.priority
+            name=s.name,
+            sensor=s.sensor,
+            objective=s.objective,
+            level=s.level,
+            priority=s.priority,
+            description=_meaning(s),
+            rule=_rule(s),
         )
         for s in state.catalog.stimuli
     ]

@@ -131,9 +131,15 @@ async def create_run(
         params=params,
         world=body.world or "",
         sensors=body.sensors or "",
-        network_id=None if stored is None else stored.id,
+        # A past version's run is not today's network's: live edits of it skip the run.
+        network_id=None if stored is None or body.network_version is not None else stored.id,
     )
     network = None if body.network is None else await io(networks.pairs, body.network)
+    if body.network_version is not None:
+        if body.network is None:
+            raise HTTPException(422, "network_version needs a network")
+        snap = await io(networks.snapshot, body.network, body.network_version)
+        network = snap.associations
     run_id = await io(engines.create, spec, network)
     return await _run(store, engines, run_id)
 

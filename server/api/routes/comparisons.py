@@ -1,0 +1,117 @@
+"""Success rates of runs over seeds, and the paired difference of two sets of runs.
+
+The editor's "run this network" starts ordinary runs (one per seed) through the runs API
+and asks here what they show: nothing is stored for a comparison. A seed is the unit of
+replication (`core.stats`): each run's value is its success rate over the first episodes
+every run has done, so runs still going are compared on equal terms.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Query, status
+from starlette.concurrency import run_in_threadpool as io
+
+from core.ports import RunStatus, StoredRun
+from core.stats import Estimate, bootstrap_mean, paired_difference
+from server.api.deps import EnginesDep, StoreDep
+from server.api.errors import ErrorPublic
+from server.schemas import ComparisonPublic, EstimatePublic
+
+router = APIRouter(prefix="/comparisons", tags=["runs"])
+MAX_SEEDS = 32
+"""Runs per side at most: a comparison reads every run's episodes."""
+RunIds = Annotated[list[int], Query(max_length=MAX_SEEDS, description="run ids, one per seed")]
+_ENDED = (RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.FAILED, RunStatus.INTERRUPTED)
+
+
+def _number(x: float) -> float | None:
+    return None if math.isnan(x) else x
+
+
+def _public(e: Estimate) -> EstimatePublic:
+    return EstimatePublic(mean=_number(e.mean), low=_number(e.low), high=_number(e.high), n=e.n)
+
+
+def _rate(store: StoreDep, run_id: int, episodes: int) -> float:
+    if episodes == 0:
+        return math.nan
+    page, _ = store.episode_summaries_page(run_id, 0, episodes)
+    return sum(e.outcome == "success" for e in page) / len(page)
+
+
+@router.get(
+    "",
+    responses={
+        404: {"model": ErrorPublic, "description": "no such run"},
+        409: {"model": ErrorPublic, "description": "runs a and b are not on the same seeds"},
+    },
+)
+async def compare_runs(
+    store: StoreDep,
+    engines: EnginesDep,
+    a: RunIds,
+    b: Annotated[
+        list[int] | None,
+        Query(max_length=MAX_SEEDS, description="runs to compare with, on a's seeds in order"),
+    ] = None,
+) -> ComparisonPublic:
+    """Runs `a`' success rate over seeds (95% bootstrap), and `a - b` paired by seed."""
+    if not a:
+        raise HTTPException(422, "name at least one run in a")
+    b = b or []
+    bad = [i for i in (*a, *b) if not 1 <= i <= 2**62]
+    if bad:
+        raise HTTPException(422, f"run ids are from 1 to 2**62, not {bad[0]}")
+    if b and len(b) != len(a):
+        raise HTTPException(
+            422,
+            f"a has {len(a)} runs and b {len(b)}: pair one run of b with each of a",
+        )
+    runs: list[StoredRun] = [await io(store.run_summary, i) for i in (*a, *b)]
+    for run_a, run_b in zip(runs[: len(b)], runs[len(a) :], strict=True):
+        if run_a.spec.seed != run_b.spec.seed:
+            raise HTTPException(
+                status.HTTP_409_CONFLICT,
+                f"run {run_a.id} has seed {run_a.spec.seed} and run {run_b.id} seed "
+                f"{run_b.spec.seed}: "
+                "a comparison pairs runs on the same seed",
+            )
+    done: list[int] = []
+    ended: list[bool] = []
+    for r in runs:
+        engine = engines.get(r.id)
+        done.append(engine.totals.episodes if engine is not None else r.totals.episodes)
+        ended.append((engine.status if engine is not None else r.status) in _ENDED)
+    horizon = min(done)
+    complete = all(ended)
+
+    def rates(ids: list[int]) -> list[float]:
+        return [_rate(store, i, horizon) for i in ids]
+
+    ra = await io(rates, list(a))
+    rb = await io(rates, b) if b else []
+    seeds = [r.spec.seed for r in runs[: len(a)]]
+    if horizon == 0:
+        empty = EstimatePublic(mean=None, low=None, high=None, n=len(a))
+        return ComparisonPublic(
+            episodes=0,
+            seeds=seeds,
+            a=empty,
+            b=empty if b else None,
+            diff=empty if b else None,
+            p=None,
+            complete=complete,
+        )
+    paired = paired_difference(ra, rb) if b else None
+    return ComparisonPublic(
+        episodes=horizon,
+        seeds=seeds,
+        a=_public(bootstrap_mean(ra)),
+        b=_public(bootstrap_mean(rb)) if b else None,
+        diff=_public(paired.diff) if paired else None,
+        p=_number(paired.p) if paired else None,
+        complete=complete,
+    )
