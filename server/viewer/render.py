@@ -27,7 +27,9 @@ from server.viewer.scene import (
     BULBS,
     CAMERA_HEIGHT_M,
     DIM,
+    FLOOR_COLOR,
     KP_COLOR,
+    STOPLINE_COLOR,
     SceneFrame,
     StaticScene,
     TickView,
@@ -64,7 +66,7 @@ NO_EPISODES = "(no stored episodes)"
 _BODY = (196, 30, 36)
 _TRAIL = (37, 99, 235)
 _WALL = (71, 85, 105)
-_FLOOR = (176, 180, 186)
+_FLOOR = FLOOR_COLOR
 _GROUND = (245, 245, 240)
 _BOX = (180, 128, 72)
 _FOV = (250, 204, 21)
@@ -229,7 +231,7 @@ class Renderer:
         sl = s.stopline
         sc.add_box(
             "/track/stopline",
-            color=(250, 250, 250),
+            color=STOPLINE_COLOR,
             dimensions=sl.size,
             position=sl.center,
             wxyz=yaw_quaternion(sl.yaw_rad),
@@ -337,7 +339,8 @@ class Renderer:
         with self._replay_folder:
             self._episode = gui.add_dropdown("Episode", (NO_EPISODES,))
             self._play = gui.add_button("Play")
-            self._scrub = gui.add_slider("Tick", 0, 1, 1, 0)
+            # Counted from 1, as the decision panel counts an episode's ticks.
+            self._scrub = gui.add_slider("Tick", 1, 2, 1, 1)
             self._speed = gui.add_dropdown(
                 "Speed", tuple(speed_label(s) for s in SPEEDS), initial_value=speed_label(1.0)
             )
@@ -396,7 +399,7 @@ class Renderer:
         )
         self._play.on_click(command(lambda e: TogglePlay()))
         self._scrub.on_update(
-            command(lambda e: Seek(int(_number(self._scrub.value))) if from_client(e) else None)
+            command(lambda e: Seek(int(_number(self._scrub.value)) - 1) if from_client(e) else None)
         )
         self._speed.on_update(
             command(
@@ -615,10 +618,10 @@ class Renderer:
         clock = state.clock
         if clock is not None:
             if changed("scrub.max", clock.ticks):
-                self._scrub.max = max(clock.ticks - 1, 1)
+                self._scrub.max = max(clock.ticks, 2)
             index = clock.at(now)
             if changed("scrub", index):
-                _assign(self._scrub, index)
+                _assign(self._scrub, index + 1)  # the episode tick the panel shows
             if changed("play", clock.playing):
                 self._play.label = "Pause" if clock.playing else "Play"
             if changed("speed", clock.speed):

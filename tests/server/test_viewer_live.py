@@ -253,6 +253,11 @@ async def test_replay_from_the_panel_draws_the_stored_poses(tmp_path: Path) -> N
             assert r.drawn.behaviour == row["behaviour"]
             assert list(r.drawn.stimuli) == row["stimuli"]
             assert tuple(r._robot.position)[:2] == pytest.approx((row["x"], row["y"]))
+            # The slider and the panel count the same ticks, both from 1 (defect 10).
+            await until(lambda: r._scrub.value == r.drawn.episode_tick, what="the slider")  # type: ignore[union-attr]
+            assert f"(tick {r.drawn.episode_tick} of it)" in r._decision.content
+            assert r._scrub.value == index + 1 and r._scrub.min == 1
+        assert r._scrub.max == replay.ticks
 
 
 async def test_each_run_is_drawn_in_its_own_world_live_and_replayed(tmp_path: Path) -> None:
