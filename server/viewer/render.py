@@ -150,8 +150,12 @@ class Renderer:
     The scene is of the shown run's world (its preset): when another run or a replay of
     another world is shown, the track, the obstacle and the robot are built again.
 
+    It draws for one viewer (a `viser.ClientHandle`: its own scene and panel, which
+    shadow the server's) or on the server's own scene and panel, which every browser sees
+    (a `viser.ViserServer`: tests and scripts).
+
     Args:
-        server: the viser server (already listening).
+        server: where it draws: one client's handle, or the viser server (listening).
         scene: the world's fixed parts.
         world: the world's configuration (the episodes' layouts are drawn from it).
         post: hands a panel command to the service's event loop (thread-safe).
@@ -160,7 +164,7 @@ class Renderer:
 
     def __init__(
         self,
-        server: viser.ViserServer,
+        server: viser.ViserServer | viser.ClientHandle,
         scene: StaticScene,
         world: WorldConfig,
         post: Callable[[ViewerCommand], None],
@@ -200,11 +204,17 @@ class Renderer:
     def _build_scene(self) -> None:
         s = self.static
         sc = self.server.scene
-        sc.world_axes.visible = False
+        if isinstance(self.server, viser.ViserServer):  # a client's scene has no axes of its own
+            sc.world_axes.visible = False
         cx, cy, _ = s.center
         ox0, oy0, ox1, oy1 = s.outer_box
-        self.server.initial_camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
-        self.server.initial_camera.look_at = (cx, cy - 0.1, 0.0)
+        camera: Any = (
+            self.server.initial_camera
+            if isinstance(self.server, viser.ViserServer)
+            else self.server.camera
+        )
+        camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
+        camera.look_at = (cx, cy - 0.1, 0.0)
         sc.add_box(
             "/ground",
             color=_GROUND,

@@ -410,10 +410,11 @@ def get_episode(
 async def view_run(run_id: RunId, request: Request, state: StateDep, store: StoreDep) -> ViewChosen:
     """Show the run in the 3D view (live, or where it stopped); answers the view's URL.
 
-    The console's "3D view" button: the view shows one run to everyone watching, and this
-    chooses it, as its run dropdown does; it then no longer jumps to the newest run. It
-    changes what every viewer sees, so it is a write (a POST, with the token when one is
-    configured), not a link an `<img>` on any page could follow.
+    The console's "3D view" button: the next viewer that connects (within a minute)
+    starts on this run, live, and stays on it rather than following the newest run. Each
+    viewer has its own run, so the viewers already open keep theirs. It chooses what a
+    viewer sees, so it is a write (a POST, with the token when one is configured), not a
+    link an `<img>` on any page could follow.
     """
     await io(store.run_summary, run_id)
     viewer = state.viewer
@@ -421,10 +422,7 @@ async def view_run(run_id: RunId, request: Request, state: StateDep, store: Stor
         raise HTTPException(
             status.HTTP_409_CONFLICT, "the 3D view is off on this service (SRLAB_VISER=false)"
         )
-    from server.viewer.state import SelectRun, SetMode  # viser loads with the view only
-
-    viewer.controller.post(SetMode("live"))
-    viewer.controller.post(SelectRun(run_id))
+    viewer.choose(run_id)  # for the viewer the console opens next; open ones keep theirs
     host = request.url.hostname or "127.0.0.1"
     if ":" in host:  # an IPv6 address
         host = f"[{host}]"
