@@ -15,6 +15,14 @@ tests/browser.py), then measures in one run, ``--rounds`` times in turn:
   browser's rendering;
 * **viewer, shared cores**: the same with Chromium at the server's priority on any core.
 
+With ``--console`` it measures the trainer console instead (issue 18's figure), ``--rounds``
+times in turn: **none** as above, and **console 2D**: the same run with the console page
+(``/#/console/<run>``, which shows the 2D view) open in Chromium on CPU 1 at ``--nice``,
+following the run's event stream. Besides the lateness it prints what the page measured
+itself (``window.srlabView2d``): tick events received, frames drawn, each frame's draw
+time and the delay from a tick's arrival to the end of its frame (p50, p99, max). The goal:
+the console's lateness p99 within 0.5 ms of none's, and the page drawing every tick.
+
 The page is loaded and idle before its run starts, so a figure is the steady state of
 watching, not the page's start-up. For each run: tick lateness p99 and max and overruns,
 from the engine's own live figures (GET /api/runs/{id}), the ticks the page showed, and
@@ -122,6 +130,8 @@ class Phase:
     """The first and last tick the page showed (viewer phases)."""
     cpu: str
     load: float
+    page: dict[str, Any] | None = None
+    """What the console page measured itself (console phases)."""
 
 
 class Meter:
@@ -155,10 +165,20 @@ async def page_tick(page: Any) -> tuple[int, int] | None:
     return (int(m[1]), int(m[2])) if m else None
 
 
+async def canvas_tick(page: Any) -> int | None:
+    """The tick the console's 2D view drew last."""
+    tick = await page.get_attribute("#view2d", "data-tick")
+    return int(tick) if tick else None
+
+
 async def measure(
-    client: RawClient, server: Server, page: Any | None, args: argparse.Namespace, name: str
+    client: RawClient,
+    server: Server,
+    page: Any | None,
+    args: argparse.Namespace,
+    name: str,
+    console_url: str | None = None,
 ) -> Phase:
-    meter = Meter(server.pid)
     run = await call(
         client,
         "POST",
@@ -166,14 +186,41 @@ async def measure(
         {"condition": "kp", "mode": "realtime", "hz": args.hz, "seed": args.seed},
     )
     run_id = int(run["id"])
+    if page is not None and console_url is not None:
+        # The console opens on the created run and follows it once it starts.
+        await page.goto(f"{console_url}/#/console/{run_id}")
+        await page.wait_for_selector("body[data-ready=true]", timeout=60_000)
+        if name == "console, no 2D":
+            await page.evaluate("() => document.querySelector('#view2d-card').remove()")
+        await asyncio.sleep(3.0)  # the page settles before the run
+    meter = Meter(server.pid)
     await call(client, "POST", f"/api/runs/{run_id}/start")
     first = None
-    if page is not None:
+    if page is not None and console_url is not None and name == "console, no 2D":
+        await page.wait_for_function(
+            "() => /^[0-9]+$/.test(document.querySelector('#st-tick').textContent)",
+            timeout=30_000,
+        )
+    elif page is not None and console_url is not None:
+        await page.wait_for_selector("#view2d[data-tick]", timeout=30_000)
+        await page.evaluate("() => Object.assign(window.srlabView2d, {ticks: 0, draws: 0, "
+                            "drawMs: [], delayMs: []})")  # fmt: skip
+        tick = await canvas_tick(page)
+        first = (0, tick) if tick is not None else None
+    elif page is not None:
         await page.get_by_text(f"Run {run_id}").first.wait_for(timeout=30_000)
         first = await page_tick(page)
     await asyncio.sleep(args.seconds)
     state = await call(client, "GET", f"/api/runs/{run_id}")
-    last = await page_tick(page) if page is not None else None
+    measured: dict[str, Any] | None = None
+    if page is not None and console_url is not None and name == "console, no 2D":
+        last = None
+    elif page is not None and console_url is not None:
+        tick = await canvas_tick(page)
+        last = (0, tick) if tick is not None else None
+        measured = await page.evaluate("() => window.srlabView2d")
+    else:
+        last = await page_tick(page) if page is not None else None
     cpu = meter.report()
     await stop_run(client, run_id)
     live = state.get("live") or {}
@@ -188,7 +235,17 @@ async def measure(
         shown,
         cpu,
         os.getloadavg()[0],
+        measured,
     )
+
+
+def spread(values: list[float]) -> str:
+    """p50, p99 and max of page timings in ms."""
+    if not values:
+        return "-"
+    xs = sorted(values)
+    p99 = xs[min(len(xs) - 1, round(0.99 * (len(xs) - 1)))]
+    return f"{statistics.median(xs):.2f} / {p99:.2f} / {xs[-1]:.2f}"
 
 
 def chromium_command(folder: Path, nice: int, cpu: int | None) -> Path:
@@ -254,6 +311,126 @@ def browser_root(before: set[int], after: set[int]) -> int:
 PHASES = ("none", "viewer", "viewer, small page", "viewer, shared cores")
 SMALL = (64, 64)
 """The small page's viewport: the same messages to handle, next to nothing to render."""
+
+
+CONSOLE_PHASES = ("none", "console, no 2D", "console 2D")
+"""'console, no 2D' is the console page with the 2D view's card taken out before the run:
+what the rest of the console costs the service (its stream, its polls and reads)."""
+
+
+async def bench_console(args: argparse.Namespace, server: Server) -> None:
+    """None against the console with its 2D view open, side by side, `--rounds` times."""
+    from playwright.async_api import async_playwright
+
+    client = RawClient(server.port, 4, 30.0)
+    try:
+        await wait_healthy(client, server, 60.0)
+        url = f"http://{HOST}:{server.port}"
+        print(f"srlab serve on {HOST}:{server.port}, pid {server.pid}")
+        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+        warm = await call(client, "POST", "/api/runs", {"condition": "kp", "mode": "realtime"})
+        await call(client, "POST", f"/api/runs/{warm['id']}/start")
+        await asyncio.sleep(2.0)
+        await stop_run(client, int(warm["id"]))
+        phases: list[Phase] = []
+        async with async_playwright() as pw:
+            pinned = args.pin and (os.cpu_count() or 1) >= 2
+            if pinned:
+                pin_process(server.pid, 0)
+            before = descendants(os.getpid())
+            browser = await pw.chromium.launch(
+                executable_path=str(
+                    chromium_command(server.folder, args.nice, 1 if pinned else None)
+                ),
+                args=FLAGS,
+                headless=True,
+            )
+            root = browser_root(before, descendants(os.getpid()))
+            try:
+                for r in range(args.rounds):
+                    for name in CONSOLE_PHASES:
+                        page = None
+                        keeper: asyncio.Task[None] | None = None
+                        moved: list[int] = []
+                        if name != "none":
+                            if pinned:
+                                keeper = asyncio.create_task(
+                                    confined(root, 1, args.nice, 0.5, moved)
+                                )
+                            page = await browser.new_page(
+                                viewport={"width": args.width, "height": args.height}
+                            )
+                        phase = await measure(client, server, page, args, name, url)
+                        if keeper is not None:
+                            keeper.cancel()
+                            with contextlib.suppress(asyncio.CancelledError):
+                                await keeper
+                        if page is not None:
+                            await page.close()
+                        phases.append(phase)
+                        print(
+                            f"round {r + 1} {name:14} run {phase.run_id:3}: ticks {phase.ticks:5}"
+                            f", lateness p99 {ms(phase.p99_s, 5)}, max {ms(phase.max_s, 5)}, "
+                            f"overruns {phase.overruns}"
+                        )
+                        print(f"    CPU: {phase.cpu}; load average {phase.load:.2f}")
+                        if phase.page is not None:
+                            m = phase.page
+                            print(
+                                f"    page: {m['ticks']} tick events, {m['draws']} frames drawn;"
+                                f" draw ms p50/p99/max {spread(m['drawMs'])}; tick-to-frame"
+                                f" ms p50/p99/max {spread(m['delayMs'])}"
+                            )
+                        await asyncio.sleep(1.0)
+            finally:
+                await browser.close()
+        report_console(phases, args)
+    finally:
+        await client.aclose()
+
+
+def report_console(phases: list[Phase], args: argparse.Namespace) -> None:
+    """The table: each phase's lateness p99 (median of rounds), and the page's timings."""
+
+    def of(name: str) -> list[Phase]:
+        return [p for p in phases if p.name == name and p.p99_s is not None]
+
+    none, console, bare = of("none"), of("console 2D"), of("console, no 2D")
+    print()
+    print(
+        f"realtime kp runs at {args.hz:g} Hz, {args.seconds:g} s each, {args.rounds} rounds; "
+        f"the console at {args.width}x{args.height}"
+        + (f", server on CPU 0, Chromium on CPU 1 at niceness {args.nice}" if args.pin else "")
+    )
+    if not none or not console:
+        print("no figures")
+        return
+    a = statistics.median(p.p99_s for p in none if p.p99_s is not None)
+    b = statistics.median(p.p99_s for p in console if p.p99_s is not None)
+    draws = [x for p in console if p.page for x in p.page["drawMs"]]
+    delays = [x for p in console if p.page for x in p.page["delayMs"]]
+    got = sum(p.page["ticks"] for p in console if p.page)
+    drawn = sum(p.page["draws"] for p in console if p.page)
+    print("| phase | lateness p99 ms | max ms | overruns |")
+    print("|---|---|---|---|")
+    for p in phases:
+        print(f"| {p.name} (run {p.run_id}) | {ms(p.p99_s)} | {ms(p.max_s)} | {p.overruns} |")
+    verdict = "within" if b - a <= 0.0005 else "NOT within"
+    print(
+        f"median p99: none {ms(a)}, console 2D {ms(b)}, difference {ms(b - a, 5)} "
+        f"({verdict} 0.5 ms)"
+    )
+    if bare:
+        c = statistics.median(p.p99_s for p in bare if p.p99_s is not None)
+        print(
+            f"median p99: console without the 2D view {ms(c)}: the 2D view's own share "
+            f"{ms(b - c, 5)}, the rest of the console's {ms(c - a, 5)}"
+        )
+    print(
+        f"page: {got} tick events, {drawn} frames; draw ms p50/p99/max {spread(draws)}; "
+        f"tick-to-frame ms p50/p99/max {spread(delays)}"
+    )
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 async def bench(args: argparse.Namespace, server: Server) -> None:
@@ -404,6 +581,11 @@ def main() -> None:
         help="niceness of the 'viewer' phase's Chromium (19); 'viewer, shared cores' runs it "
         "at 0 on any core",
     )
+    parser.add_argument(
+        "--console",
+        action="store_true",
+        help="measure the trainer console with its 2D view instead of the 3D view",
+    )
     args = parser.parse_args()
     if args.seconds <= 0 or args.rounds < 1 or not 0 < args.hz <= 1000:
         parser.error("--seconds must be positive, --rounds at least 1, --hz in (0, 1000]")
@@ -415,7 +597,7 @@ def main() -> None:
         started = time.perf_counter()
         try:
             server.start()
-            asyncio.run(bench(args, server))
+            asyncio.run(bench_console(args, server) if args.console else bench(args, server))
         finally:
             code = server.stop()
             print(

@@ -151,10 +151,17 @@ class StatusChanged:
 
 @dataclass(frozen=True, slots=True)
 class TickPublished:
-    """A tick's snapshot, as subscribers see it (throttled to their rate)."""
+    """A tick's snapshot, as subscribers see it (throttled to their rate).
+
+    With what a top-down view draws besides the pose: the sonars' readings of that tick
+    (in the robot's sonar order, noisy as the robot read them) and the obstacle's centre
+    (None: the episode has none). Read only when a tick is published, never per tick.
+    """
 
     run_id: int
     snapshot: Snapshot
+    sonar_m: tuple[float, ...] = ()
+    obstacle: tuple[float, float] | None = None
 
 
 class SubscriptionClosed(Exception):
@@ -429,6 +436,8 @@ class Engine:
         if replay is None:
             self._replayed.set()
         self._ack_queue: asyncio.Queue[object] = asyncio.Queue()
+        self._steps: deque[asyncio.Future[int]] = deque()
+        """Single-tick steps asked of the paused run, answered with the tick they ran."""
 
     # --- construction ---------------------------------------------------------------
 
@@ -682,6 +691,38 @@ class Engine:
             self._set_status(RunStatus.RUNNING)
             self._resumed.set()
 
+    async def step(self) -> int:
+        """Run exactly one tick of a paused realtime run; returns the tick it ran.
+
+        The tick task runs it at a tick boundary, as any other tick (rewards and edits due
+        there first), and the run stays paused. `RunStateError` unless the run is paused
+        and realtime (a fast run has no ticks to wait for), or if it ends first.
+        """
+        if self.status is not RunStatus.PAUSED or self._closing:
+            raise RunStateError(f"run {self.run_id} is {self.status.value}, not paused")
+        if self.spec.mode is not Mode.REALTIME:
+            raise RunStateError(f"run {self.run_id} is a fast run: it has no single ticks")
+        if not self._replayed.is_set():
+            await self._replayed.wait()
+        done: asyncio.Future[int] = asyncio.get_running_loop().create_future()
+        self._steps.append(done)
+        self._resumed.set()  # wakes the paused tick task, which stays paused
+        return await done
+
+    def _answer_step(self) -> None:
+        """Answer the oldest step asked with the tick just run (each step has a tick)."""
+        while self._steps:
+            done = self._steps.popleft()
+            if not done.done():  # its caller may have given up
+                done.set_result(self.sim.tick_count)
+                return
+
+    def _refuse_steps(self, error: BaseException) -> None:
+        while self._steps:
+            done = self._steps.popleft()
+            if not done.done():
+                done.set_exception(error)
+
     def stop(self) -> None:
         """End the run now, at the boundary after its current tick (status stopped).
 
@@ -818,6 +859,7 @@ class Engine:
             await self._settle(self.sim.tick_count + 1, until=math.inf)
         finally:
             self._closing = True
+            self._refuse_steps(RunStateError(f"run {self.run_id} ended before the step"))
             self._queue.put_nowait(_CLOSE)
             self._episode_queue.put_nowait(_CLOSE)
             self._ack_queue.put_nowait(_CLOSE)
@@ -868,6 +910,13 @@ class Engine:
                 break
             if self._paused:
                 await self._resumed.wait()
+                if self._paused and self._steps and not self._stop:
+                    # A single-tick step: one tick at this boundary, then paused again.
+                    self._resumed.clear()
+                    await self._step()
+                    self._answer_step()
+                    if self._steps:
+                        self._resumed.set()  # the next one, at the next boundary
                 deadline = clock()
                 continue
             if self._rate_changed:
@@ -878,6 +927,8 @@ class Engine:
             started = clock()
             self.stats.lateness_s.add(max(0.0, started - deadline))
             await self._step()
+            if self._steps:  # asked for just before a resume: this tick is the oldest's
+                self._answer_step()
             period = 1.0 / self._hz
             deadline += period
             behind = clock() - deadline
@@ -938,10 +989,15 @@ class Engine:
 
     def _publish_tick(self, snap: Snapshot) -> None:
         now = time.monotonic()
-        event = TickPublished(self.run_id, snap)
+        event: TickPublished | None = None
         for sub in self._subscribers:
             if sub.tick_period < math.inf and now >= sub.next_tick_at:
                 sub.next_tick_at = now + sub.tick_period
+                if event is None:  # built once, and only for a tick someone is sent
+                    sim = self.sim
+                    event = TickPublished(
+                        self.run_id, snap, sim.sonar_m(), sim.world.layout.obstacle_center
+                    )
                 sub.offer(event)
 
     def _enqueue_internal(self, e: RewardDue) -> None:

@@ -124,6 +124,7 @@ class Simulation:
         self._cause: Cause | None = None
         self._done = True
         self._snapshot: Snapshot | None = None
+        self._channels: list[float] = []
         self.ticks_by_origin: dict[str, int] = {}
         """Ticks run so far by what made their behaviour run (see `Snapshot.origin`)."""
         self.stimulus_ticks = [0] * len(self.catalog.stimuli)
@@ -169,6 +170,10 @@ class Simulation:
             0.0,
         )
         return self._snapshot
+
+    def sonar_m(self) -> tuple[float, ...]:
+        """The sonars' readings of the last tick (or reset), in metres, sonar 0 first."""
+        return tuple(self._channels[Channel.SONAR_0 : Channel.SONAR_7 + 1])
 
     def upcoming_stimuli(self) -> list[int]:
         """The stimuli the next tick will act on (sensed at the end of the last one)."""

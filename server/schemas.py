@@ -141,6 +141,31 @@ class WorldPublic(BaseModel):
     default: bool = Field(description="the world a run uses when it names none")
 
 
+class SonarPublic(BaseModel):
+    """One sonar: where it reads from and along which axis, in the robot's frame."""
+
+    x_m: float
+    y_m: float
+    angle_rad: float = Field(description="its axis relative to the heading, + = left")
+
+
+class RunWorldPublic(BaseModel):
+    """A run's world as a top-down view draws it: the fixed parts, in metres."""
+
+    world: str = Field(description="its world preset ('' for the default)")
+    outer_box: list[float] = Field(description="[x0, y0, x1, y1]: the track's outer walls")
+    inner_box: list[float] = Field(description="[x0, y0, x1, y1]: the island's walls")
+    corridor_width_m: float
+    stopline: list[list[float]] = Field(description="the stop line's two ends, [[x, y], [x, y]]")
+    lamp: list[float] = Field(description="[x, y] of the traffic lamp")
+    start_pose: list[float] = Field(description="[x, y, heading_rad] of each episode's start")
+    robot_length_m: float
+    robot_width_m: float
+    sonar_range_m: float
+    sonars: list[SonarPublic]
+    obstacle_size_m: float
+
+
 WORLD_NAMES: list[JsonValue] = list(world_names())
 """The world presets the service knows, listed in /openapi.json."""
 SENSOR_DEFINITIONS: list[JsonValue] = list(sensor_definitions())
@@ -263,6 +288,12 @@ class RunPublic(BaseModel):
     successes: int
     ticks: int
     live: LiveState | None = None
+
+
+class RunRate(Strict):
+    """A realtime run's new tick rate."""
+
+    hz: float = Field(ge=HZ_MIN, le=HZ_MAX, description="ticks per second")
 
 
 class ViewChosen(BaseModel):
@@ -563,6 +594,14 @@ class TickEvent(BaseModel):
     released_by: str | None
     lamp: Literal["none", "red", "yellow", "green"]
     progress_m: float
+    sonar_m: list[float] = Field(
+        default_factory=list,
+        description="the sonars' readings of that tick, sonar 0 first (their mounts and "
+        "axes are in GET /api/runs/{id}/world)",
+    )
+    obstacle: list[float] | None = Field(
+        None, description="the obstacle's centre [x, y] in metres; null: this episode has none"
+    )
     competition: CompetitionEvent | None = None
 
 

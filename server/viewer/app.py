@@ -1,10 +1,15 @@
-"""The 3D view's lifecycle: viser's server, the renderer thread and the controller task."""
+"""The 3D view's lifecycle: viser's server, and per viewer a renderer thread and controller."""
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
 import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import viser
 
@@ -19,38 +24,125 @@ from server.viewer.control import Controller
 from server.viewer.gate import Gate
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
-from server.viewer.state import ClientsChanged, Inbox
+from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
 
 log = logging.getLogger("srlab.viewer")
+
+
+CHOICE_TTL_S = 60.0
+"""How long a run chosen for the next viewer (POST /api/runs/{id}/view) waits for it."""
+
+
+@dataclass
+class Session:
+    """One viewer's own view: its state, its controller task and its renderer thread."""
+
+    inbox: Inbox
+    controller: Controller
+    renderer: Renderer
+    task: concurrent.futures.Future[None]
 
 
 class Viewer:
     """viser on its own port, showing the service's runs; `start` it, then `await stop()`.
 
-    viser serves on its own thread and event loop. Its callbacks only post commands to the
-    controller, which runs on the service's event loop; the renderer thread is the only
-    caller of viser's scene and panel API.
+    Each browser that connects gets a `Session` of its own: its own scene and panel (viser's
+    client-scoped API), its own run, live or replay, and tick, so two trainers never steer
+    each other. viser serves on its own thread and event loop. Its callbacks only post
+    commands to a session's controller, which runs on the service's event loop; a
+    session's renderer thread is the only caller of that client's scene and panel API.
     """
 
     def __init__(
         self,
         server: viser.ViserServer,
-        renderer: Renderer,
-        controller: Controller,
-        inbox: Inbox,
         gate: Gate,
+        loop: asyncio.AbstractEventLoop,
+        make: Callable[[viser.ViserServer | viser.ClientHandle], Session],
     ) -> None:
         self.server = server
         self.gate = gate
-        self.renderer = renderer
-        self.controller = controller
-        self.inbox = inbox
-        self._task: asyncio.Task[None] | None = None
+        self.sessions: dict[int, Session] = {}
+        """The connected viewers' sessions by viser client id."""
+        self._loop = loop
+        self._make = make
+        self._lock = threading.Lock()
+        self._choice: tuple[int, float] | None = None
+        self._shared: Session | None = None
 
     @property
     def port(self) -> int:
         """The 3D view's port (its gate's: viser itself listens on loopback behind it)."""
         return self.gate.port
+
+    @property
+    def shared(self) -> Session:
+        """A session on the server's own scene and panel, driven by no browser (tests).
+
+        Every browser sees what it draws beneath its own session's: it is made only when
+        asked for, never by the service.
+        """
+        if self._shared is None:
+            self._shared = self._make(self.server)
+        return self._shared
+
+    @property
+    def controller(self) -> Controller:
+        """The shared session's controller (tests)."""
+        return self.shared.controller
+
+    @property
+    def renderer(self) -> Renderer:
+        """The shared session's renderer (tests)."""
+        return self.shared.renderer
+
+    def choose(self, run_id: int) -> None:
+        """Show `run_id` to the next browser that connects (within `CHOICE_TTL_S`).
+
+        The console's "3D view" button opens a new viewer: it starts on the console's run,
+        and the viewers already open keep theirs.
+        """
+        with self._lock:
+            self._choice = (run_id, time.monotonic())
+
+    def _take_choice(self) -> int | None:
+        with self._lock:
+            choice, self._choice = self._choice, None
+        if choice is None or time.monotonic() - choice[1] > CHOICE_TTL_S:
+            return None
+        return choice[0]
+
+    def open(self, target: viser.ViserServer | viser.ClientHandle) -> Session:
+        """A new watching session drawing on `target`, on the run chosen for it if any.
+
+        Blocking (it builds the scene): call it from a thread, not the event loop.
+        """
+        session = self._make(target)
+        run_id = self._take_choice()
+        if run_id is not None:
+            session.controller.post(SetMode("live"))
+            session.controller.post(SelectRun(run_id))
+        session.controller.post(ClientsChanged(1))
+        return session
+
+    @staticmethod
+    def close(session: Session) -> None:
+        """End a session (blocking: its renderer thread is joined)."""
+        session.task.cancel()
+        session.renderer.stop(session.inbox)
+
+    def connected(self, client: viser.ClientHandle) -> None:
+        """A browser connected (viser's thread pool): build and start its session."""
+        session = self.open(client)
+        with self._lock:
+            self.sessions[client.client_id] = session
+
+    def disconnected(self, client: viser.ClientHandle) -> None:
+        """A browser left (viser's thread pool): end its session."""
+        with self._lock:
+            session = self.sessions.pop(client.client_id, None)
+        if session is not None:
+            self.close(session)
 
     @classmethod
     async def start(
@@ -74,42 +166,48 @@ class Viewer:
         names and origins the view accepts (default: loopback names, no other origin).
         """
         policy = policy or SitePolicy.of(["127.0.0.1", "localhost", "[::1]", host], [])
-        inbox = Inbox()
-        controller = Controller(
-            inbox, manager, store, catalog, limiter, writable=writable, world=world
-        )
+        loop = asyncio.get_running_loop()
         first = world or load_world().config  # until a run is shown
+        scene = static_scene(first)
+
+        def make(target: viser.ViserServer | viser.ClientHandle) -> Session:
+            inbox = Inbox()
+            controller = Controller(
+                inbox, manager, store, catalog, limiter, writable=writable, world=world, loop=loop
+            )
+            renderer = Renderer(target, scene, first, controller.post, fixed=world)
+            task = asyncio.run_coroutine_threadsafe(controller.run(), loop)
+            renderer.start(inbox)
+            return Session(inbox, controller, renderer, task)
+
         server = await asyncio.to_thread(_listen)
+        server.scene.world_axes.visible = False  # for every client
         gate = Gate(host, port, server.get_port(), policy)
         try:
             await asyncio.to_thread(_open, gate)
-            renderer = await asyncio.to_thread(
-                Renderer, server, static_scene(first), first, controller.post, fixed=world
-            )
         except BaseException:
-            await asyncio.to_thread(gate.stop)
             await asyncio.to_thread(server.stop)
             raise
-        viewer = cls(server, renderer, controller, inbox, gate)
-
-        def clients_changed(_: viser.ClientHandle) -> None:
-            controller.post(ClientsChanged(len(server.get_clients())))
-
-        server.on_client_connect(clients_changed)
-        server.on_client_disconnect(clients_changed)
-        viewer._task = asyncio.create_task(controller.run(), name="viewer controller")
-        renderer.start(inbox)
+        viewer = cls(server, gate, loop, make)
+        server.on_client_connect(viewer.connected)
+        server.on_client_disconnect(viewer.disconnected)
         log.info("the 3D view is on http://%s:%d/", host, viewer.port)
         return viewer
 
     async def stop(self) -> None:
-        """Stop the controller, the renderer and viser's server."""
-        task, self._task = self._task, None
-        if task is not None:
-            task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
-        await asyncio.to_thread(self.renderer.stop, self.inbox)
+        """Stop every session, then viser's server and the gate."""
+        with self._lock:
+            sessions = list(self.sessions.values())
+            self.sessions.clear()
+        if self._shared is not None:
+            sessions.append(self._shared)
+            self._shared = None
+        for session in sessions:
+            session.task.cancel()
+        for session in sessions:
+            with contextlib.suppress(asyncio.CancelledError, concurrent.futures.CancelledError):
+                await asyncio.wrap_future(session.task)
+            await asyncio.to_thread(session.renderer.stop, session.inbox)
         await asyncio.to_thread(self.gate.stop)
         await asyncio.to_thread(self.server.stop)
 

@@ -104,6 +104,7 @@ class Controller:
         limiter: the service's reward rate limiter (the panel is one more client).
         writable: the panel may reward and change rates (the service is on loopback).
         world: the world every replay is drawn in (None: each run's own preset).
+        loop: the service's event loop, when built on another thread (a viewer's connect).
     """
 
     def __init__(
@@ -116,6 +117,7 @@ class Controller:
         *,
         writable: bool,
         world: WorldConfig | None = None,
+        loop: asyncio.AbstractEventLoop | None = None,
     ) -> None:
         self.inbox = inbox
         self.manager = manager
@@ -125,10 +127,11 @@ class Controller:
         self.world = world
         self.state = ViewState(writable=writable)
         self._commands: asyncio.Queue[ViewerCommand] = asyncio.Queue()
-        try:  # built on the service's loop: commands posted before `run` starts wait
-            self._loop: asyncio.AbstractEventLoop | None = asyncio.get_running_loop()
-        except RuntimeError:
-            self._loop = None
+        self._loop: asyncio.AbstractEventLoop | None = loop
+        if loop is None:
+            # Built on the service's loop: commands posted before `run` starts wait.
+            with contextlib.suppress(RuntimeError):
+                self._loop = asyncio.get_running_loop()
         self._follow: asyncio.Task[None] | None = None
         self._signature: tuple[tuple[int, str], ...] | None = None
         self._stored: dict[int, tuple[str, str, int, str, float, str]] = {}

@@ -27,7 +27,9 @@ from server.viewer.scene import (
     BULBS,
     CAMERA_HEIGHT_M,
     DIM,
+    FLOOR_COLOR,
     KP_COLOR,
+    STOPLINE_COLOR,
     SceneFrame,
     StaticScene,
     TickView,
@@ -64,7 +66,7 @@ NO_EPISODES = "(no stored episodes)"
 _BODY = (196, 30, 36)
 _TRAIL = (37, 99, 235)
 _WALL = (71, 85, 105)
-_FLOOR = (176, 180, 186)
+_FLOOR = FLOOR_COLOR
 _GROUND = (245, 245, 240)
 _BOX = (180, 128, 72)
 _FOV = (250, 204, 21)
@@ -148,8 +150,12 @@ class Renderer:
     The scene is of the shown run's world (its preset): when another run or a replay of
     another world is shown, the track, the obstacle and the robot are built again.
 
+    It draws for one viewer (a `viser.ClientHandle`: its own scene and panel, which
+    shadow the server's) or on the server's own scene and panel, which every browser sees
+    (a `viser.ViserServer`: tests and scripts).
+
     Args:
-        server: the viser server (already listening).
+        server: where it draws: one client's handle, or the viser server (listening).
         scene: the world's fixed parts.
         world: the world's configuration (the episodes' layouts are drawn from it).
         post: hands a panel command to the service's event loop (thread-safe).
@@ -158,7 +164,7 @@ class Renderer:
 
     def __init__(
         self,
-        server: viser.ViserServer,
+        server: viser.ViserServer | viser.ClientHandle,
         scene: StaticScene,
         world: WorldConfig,
         post: Callable[[ViewerCommand], None],
@@ -198,11 +204,17 @@ class Renderer:
     def _build_scene(self) -> None:
         s = self.static
         sc = self.server.scene
-        sc.world_axes.visible = False
+        if isinstance(self.server, viser.ViserServer):  # a client's scene has no axes of its own
+            sc.world_axes.visible = False
         cx, cy, _ = s.center
         ox0, oy0, ox1, oy1 = s.outer_box
-        self.server.initial_camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
-        self.server.initial_camera.look_at = (cx, cy - 0.1, 0.0)
+        camera: Any = (
+            self.server.initial_camera
+            if isinstance(self.server, viser.ViserServer)
+            else self.server.camera
+        )
+        camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
+        camera.look_at = (cx, cy - 0.1, 0.0)
         sc.add_box(
             "/ground",
             color=_GROUND,
@@ -229,7 +241,7 @@ class Renderer:
         sl = s.stopline
         sc.add_box(
             "/track/stopline",
-            color=(250, 250, 250),
+            color=STOPLINE_COLOR,
             dimensions=sl.size,
             position=sl.center,
             wxyz=yaw_quaternion(sl.yaw_rad),
@@ -337,7 +349,8 @@ class Renderer:
         with self._replay_folder:
             self._episode = gui.add_dropdown("Episode", (NO_EPISODES,))
             self._play = gui.add_button("Play")
-            self._scrub = gui.add_slider("Tick", 0, 1, 1, 0)
+            # Counted from 1, as the decision panel counts an episode's ticks.
+            self._scrub = gui.add_slider("Tick", 1, 2, 1, 1)
             self._speed = gui.add_dropdown(
                 "Speed", tuple(speed_label(s) for s in SPEEDS), initial_value=speed_label(1.0)
             )
@@ -396,7 +409,7 @@ class Renderer:
         )
         self._play.on_click(command(lambda e: TogglePlay()))
         self._scrub.on_update(
-            command(lambda e: Seek(int(_number(self._scrub.value))) if from_client(e) else None)
+            command(lambda e: Seek(int(_number(self._scrub.value)) - 1) if from_client(e) else None)
         )
         self._speed.on_update(
             command(
@@ -615,10 +628,10 @@ class Renderer:
         clock = state.clock
         if clock is not None:
             if changed("scrub.max", clock.ticks):
-                self._scrub.max = max(clock.ticks - 1, 1)
+                self._scrub.max = max(clock.ticks, 2)
             index = clock.at(now)
             if changed("scrub", index):
-                _assign(self._scrub, index)
+                _assign(self._scrub, index + 1)  # the episode tick the panel shows
             if changed("play", clock.playing):
                 self._play.label = "Pause" if clock.playing else "Play"
             if changed("speed", clock.speed):

@@ -37,6 +37,10 @@ YELLOW: Rgb = (250, 204, 21)
 GREEN: Rgb = (22, 163, 74)
 DIM: Rgb = (55, 55, 60)
 """A lamp bulb that is off."""
+FLOOR_COLOR: Rgb = (176, 180, 186)
+"""The corridor's floor: a light grey."""
+STOPLINE_COLOR: Rgb = (17, 24, 39)
+"""The stop line: near black, so it stands out on the light floor (white did not)."""
 KP_COLOR: Rgb = (217, 70, 239)
 """The highlight of a behaviour released by a KP-made association."""
 BULBS: tuple[LampColor, LampColor, LampColor] = (LampColor.RED, LampColor.YELLOW, LampColor.GREEN)
@@ -260,6 +264,17 @@ def sonar_ranges(
     return tuple(out)
 
 
+def contrast_ratio(a: Rgb, b: Rgb) -> float:
+    """WCAG's contrast ratio of two colours (1: none, 21: black on white)."""
+
+    def luminance(c: Rgb) -> float:
+        lin = [(v / 255) / 12.92 if v <= 10 else ((v / 255 + 0.055) / 1.055) ** 2.4 for v in c]
+        return 0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+
+    hi, lo = sorted((luminance(a), luminance(b)), reverse=True)
+    return (hi + 0.05) / (lo + 0.05)
+
+
 def range_color(range_m: float, max_m: float) -> Rgb:
     """A sonar ray's colour: red when something is close, through yellow, to green at range."""
     u = min(max(range_m / max_m, 0.0), 1.0) if max_m > 0 else 1.0
@@ -435,6 +450,7 @@ __all__ = [
     "StaticScene",
     "TickView",
     "Trail",
+    "contrast_ratio",
     "decision_markdown",
     "range_color",
     "robot_body_mesh",

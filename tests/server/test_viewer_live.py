@@ -135,10 +135,24 @@ async def test_the_view_link_chooses_the_run_and_it_stays_chosen(tmp_path: Path)
         r = await client.post(f"/api/runs/{chosen}/view")
         assert r.status_code == 200, r.text
         assert r.json() == {"run": chosen, "url": f"http://127.0.0.1:{port}/"}
-        await until(lambda: viewer.controller.state.run_id == chosen, what="the chosen run")
-        assert viewer.controller.state.mode == "live"
-        await asyncio.sleep(2.5)  # the view looks for runs every second: it stays put
-        assert viewer.controller.state.run_id == chosen
+        # The next viewer to connect starts on it, live; the one open keeps its own.
+        fresh = await asyncio.to_thread(viewer.open, viewer.server)
+        try:
+            c = fresh.controller
+            await until(lambda: c.state.run_id == chosen, what="the chosen run")
+            assert c.state.mode == "live"
+            await asyncio.sleep(2.5)  # the view looks for runs every second: it stays put
+            assert c.state.run_id == chosen
+            assert viewer.controller.state.run_id == newest
+            assert viewer.controller.state.mode == "replay"
+        finally:
+            await asyncio.to_thread(viewer.close, fresh)
+        # A choice is for one viewer: the one after starts on the newest live run.
+        later = await asyncio.to_thread(viewer.open, viewer.server)
+        try:
+            await until(lambda: later.controller.state.run_id == newest, what="the newest")
+        finally:
+            await asyncio.to_thread(viewer.close, later)
 
         missing = await client.post("/api/runs/999/view")
         assert missing.status_code == 404 and "999" in missing.json()["detail"]
@@ -253,6 +267,11 @@ async def test_replay_from_the_panel_draws_the_stored_poses(tmp_path: Path) -> N
             assert r.drawn.behaviour == row["behaviour"]
             assert list(r.drawn.stimuli) == row["stimuli"]
             assert tuple(r._robot.position)[:2] == pytest.approx((row["x"], row["y"]))
+            # The slider and the panel count the same ticks, both from 1 (defect 10).
+            await until(lambda: r._scrub.value == r.drawn.episode_tick, what="the slider")  # type: ignore[union-attr]
+            assert f"(tick {r.drawn.episode_tick} of it)" in r._decision.content
+            assert r._scrub.value == index + 1 and r._scrub.min == 1
+        assert r._scrub.max == replay.ticks
 
 
 async def test_each_run_is_drawn_in_its_own_world_live_and_replayed(tmp_path: Path) -> None:

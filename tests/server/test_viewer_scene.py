@@ -13,12 +13,15 @@ from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, LampColor, MotorCommand, PymunkWorld, WorldConfig
 from server.viewer.scene import (
     DIM,
+    FLOOR_COLOR,
     GREEN,
     KP_COLOR,
     RED,
+    STOPLINE_COLOR,
     YELLOW,
     TickView,
     Trail,
+    contrast_ratio,
     decision_markdown,
     obstacle_box,
     range_color,
@@ -279,3 +282,9 @@ def test_a_realtime_frame_drawn_later_than_half_a_tick_is_dropped() -> None:
     assert not late(replace(state, live=replace(live, realtime=False)), 1.0)
     assert not late(replace(state, live=replace(live, status="paused")), 1.0)
     assert not late(replace(state, mode="replay"), 1.0)
+
+
+def test_the_stop_line_stands_out_on_the_floor() -> None:
+    # Defect 10: the white line on light grey was hard to see. WCAG's 3:1 for graphics.
+    assert contrast_ratio(STOPLINE_COLOR, FLOOR_COLOR) >= 3.0
+    assert contrast_ratio((0, 0, 0), (255, 255, 255)) == pytest.approx(21.0)

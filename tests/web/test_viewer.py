@@ -8,6 +8,7 @@ screenshot is a real rendering and the test reads its pixels.
 from __future__ import annotations
 
 import io
+import re
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -122,7 +123,8 @@ def test_a_stored_episode_replays_in_the_view(server: LiveServer, browser: Brows
     page = open_view(browser, server)
     try:
         # Pick the run in the dropdown, then the replay view.
-        page.get_by_role("combobox", name="Run").click()
+        # Client-scoped panels name no combobox: the Run dropdown is the first.
+        page.get_by_role("combobox").first.click()
         page.get_by_role("option", name=f"#{run_id} kp fast").click()
         page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
         page.get_by_role("button", name="Replay", exact=True).click()
@@ -134,3 +136,50 @@ def test_a_stored_episode_replays_in_the_view(server: LiveServer, browser: Brows
         page.get_by_text("Replay of a stored episode").wait_for(timeout=90_000)
     finally:
         page.close()
+
+
+def header_run(page: Page) -> int | None:
+    """The run the panel's header names ("Run 7: kp, seed 3, ...")."""
+    found = re.search(r"Run (\d+): ", page.inner_text("body"))
+    return int(found[1]) if found else None
+
+
+def wait_header(page: Page, run_id: int, timeout: float = 90.0) -> None:
+    deadline = time.monotonic() + timeout
+    while header_run(page) != run_id:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the viewer shows run {header_run(page)}, not {run_id}")
+        time.sleep(0.2)
+
+
+def test_two_viewers_watch_different_runs_without_steering_each_other(
+    server: LiveServer, browser: Browser
+) -> None:
+    api = server.client
+    runs = []
+    for seed in (11, 12):
+        body = {"condition": "kp", "mode": "realtime", "hz": 5, "seed": seed}
+        run_id = api.post("/api/runs", json=body).json()["id"]
+        assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+        runs.append(run_id)
+    first, second = runs
+    pages: list[Page] = []
+    try:
+        # The console's "3D view" button: the next viewer starts on the chosen run.
+        assert api.post(f"/api/runs/{first}/view").status_code == 200
+        one = open_view(browser, server)
+        pages.append(one)
+        wait_header(one, first)
+        assert api.post(f"/api/runs/{second}/view").status_code == 200
+        two = open_view(browser, server)
+        pages.append(two)
+        wait_header(two, second)
+        # The first viewer was not steered by the second's choice: it keeps its own run.
+        time.sleep(1.5)  # a shared view would have switched by now (the bound is generous)
+        assert header_run(one) == first
+        assert header_run(two) == second
+    finally:
+        for page in pages:
+            page.close()
+        for run_id in runs:
+            api.post(f"/api/runs/{run_id}/stop")

@@ -7,6 +7,7 @@ import { get, getAll, post } from "./api.js";
 import { learningCurve } from "./chart.js";
 import { columns, key, render, rows } from "./matrix.js";
 import { $, $$, attempt, el, fmt, heat, throttle, toast, typing } from "./ui.js";
+import "./view2d.js"; // issue 18 hook: the 2D view listens for srlab:run and srlab:tick
 
 const LIVE = new Set(["running", "paused"]);
 const TICK_HZ = 10;
@@ -71,6 +72,12 @@ export function init(catalog) {
     drawCurve();
     drawTimeline();
   }, 200));
+  // issue 18 hook: the 2D view's controls (pause, resume, step, rate) changed the run.
+  document.addEventListener("srlab:run-changed", (e) => {
+    if (!state.run || e.detail.id !== state.run.id) return;
+    showRun(e.detail);
+    if (LIVE.has(e.detail.status) && !state.source) follow();
+  });
 }
 
 /** Show the console for run `id` (or the newest run). */
@@ -246,6 +253,7 @@ async function openView(event) {
 
 function showRun(run) {
   state.run = run;
+  document.dispatchEvent(new CustomEvent("srlab:run", { detail: run })); // issue 18 hook: the 2D view
   const status = run ? run.status : "—";
   const badge = $("#run-status");
   badge.textContent = status;
@@ -353,6 +361,7 @@ function resetLive() {
 
 function onTick(t) {
   state.tick = t;
+  document.dispatchEvent(new CustomEvent("srlab:tick", { detail: t })); // issue 18 hook: the 2D view
   $("#st-episode").textContent = t.episode;
   $("#st-tick").textContent = t.tick;
   const lamp = $("#st-lamp");

@@ -59,6 +59,8 @@ def encode(
     """An engine event as an SSE event name and JSON payload (None: not streamed).
 
     With `selector`, tick events carry the competition among released behaviours. A tick
+    carries what a top-down view draws: pose, lamp, the sonars' readings and the obstacle
+    (the track's fixed parts are GET /api/runs/{id}/world). A tick
     says what made its behaviour run (`origin`: the releasing association's source,
     explored, default or commanded) and the stimulus it answered (`released_by`, or null).
     """
@@ -81,6 +83,8 @@ def encode(
             "how": snap.how.value, "origin": snap.origin,
             "released_by": s[snap.released_by] if 0 <= snap.released_by < len(s) else None,
             "lamp": snap.lamp.name.lower(), "progress_m": snap.progress_m,
+            "sonar_m": [round(r, 3) for r in event.sonar_m],
+            "obstacle": None if event.obstacle is None else list(event.obstacle),
         }  # fmt: skip
     if isinstance(event, RewardApplied):
         return "reward", {

@@ -10,8 +10,11 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, st
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import Engine
+from core.errors import UnknownNameError
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
+from core.sim.track import TrackGeometry
 from core.trace import unpack
+from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.schemas import (
@@ -25,7 +28,10 @@ from server.schemas import (
     RunCreate,
     RunNetworkPublic,
     RunPublic,
+    RunRate,
     RunsPublic,
+    RunWorldPublic,
+    SonarPublic,
     TraceRowPublic,
     ViewChosen,
 )
@@ -210,6 +216,86 @@ async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> Run
     return await _control(run_id, store, engines, ("paused",), Engine.resume)
 
 
+@router.post(
+    "/{run_id}/step",
+    dependencies=[WriteGuard],
+    responses={409: {"model": ErrorPublic, "description": "not a paused realtime run"}},
+)
+async def step_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
+    """Run exactly one tick of a paused realtime run; it stays paused.
+
+    The tick runs at a tick boundary through the engine's tick task, as any other tick:
+    rewards and edits due there are applied first. Answered once it has run.
+    """
+    await io(store.run_summary, run_id)
+    engine = _live(engines, run_id)
+    await engine.step()  # RunStateError (409) unless paused and realtime
+    return await _run(store, engines, run_id)
+
+
+@router.post(
+    "/{run_id}/rate",
+    dependencies=[WriteGuard],
+    responses={409: {"model": ErrorPublic, "description": "not a live realtime run"}},
+)
+async def set_run_rate(
+    run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
+) -> RunPublic:
+    """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
+    await io(store.run_summary, run_id)
+    engine = _live(engines, run_id)
+    if engine.status.value not in ("running", "paused"):
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
+    if engine.spec.mode is not Mode.REALTIME:
+        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is fast: it has no rate")
+    engine.set_rate(body.hz)
+    return await _run(store, engines, run_id)
+
+
+def world_public(name: str) -> RunWorldPublic:
+    """The fixed parts of world preset `name` ("" or gone: the default) for a 2D view."""
+    try:
+        preset = load_world(name or None)
+    except UnknownNameError:
+        preset = load_world()
+    config = preset.config
+    geo = TrackGeometry.build(config.track)
+    robot = config.robot
+    d = geo.directions[config.track.signal.leg]
+    half = config.track.corridor_width_m / 2
+    sx, sy = geo.stopline_point
+    nx, ny = float(-d[1]) * half, float(d[0]) * half
+    mount = robot.sonar_mount_m
+    sonars = []
+    for deg in robot.sonar_angles_deg:
+        a = math.radians(deg)
+        sonars.append(SonarPublic(x_m=mount * math.cos(a), y_m=mount * math.sin(a), angle_rad=a))
+    return RunWorldPublic(
+        world=name,
+        outer_box=[float(v) for v in geo.outer_box],
+        inner_box=[float(v) for v in geo.inner_box],
+        corridor_width_m=config.track.corridor_width_m,
+        stopline=[[sx - nx, sy - ny], [sx + nx, sy + ny]],
+        lamp=list(geo.lamp_point),
+        start_pose=list(geo.start_pose),
+        robot_length_m=robot.length_m,
+        robot_width_m=robot.width_m,
+        sonar_range_m=robot.sonar_range_m,
+        sonars=sonars,
+        obstacle_size_m=config.track.obstacle.size_m,
+    )
+
+
+@router.get("/{run_id}/world")
+async def get_run_world(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunWorldPublic:
+    """The run's track as a top-down view draws it: walls, stop line, lamp, robot, sonars.
+
+    What moves (pose, lamp colour, sonar readings, obstacle) comes with each tick event.
+    """
+    run = await _run(store, engines, run_id)
+    return world_public(run.world)
+
+
 STOP_WAIT_S = 10.0
 """How long `POST .../stop` waits for the run to end before answering 202."""
 
@@ -330,10 +416,11 @@ def get_episode(
 async def view_run(run_id: RunId, request: Request, state: StateDep, store: StoreDep) -> ViewChosen:
     """Show the run in the 3D view (live, or where it stopped); answers the view's URL.
 
-    The console's "3D view" button: the view shows one run to everyone watching, and this
-    chooses it, as its run dropdown does; it then no longer jumps to the newest run. It
-    changes what every viewer sees, so it is a write (a POST, with the token when one is
-    configured), not a link an `<img>` on any page could follow.
+    The console's "3D view" button: the next viewer that connects (within a minute)
+    starts on this run, live, and stays on it rather than following the newest run. Each
+    viewer has its own run, so the viewers already open keep theirs. It chooses what a
+    viewer sees, so it is a write (a POST, with the token when one is configured), not a
+    link an `<img>` on any page could follow.
     """
     await io(store.run_summary, run_id)
     viewer = state.viewer
@@ -341,10 +428,7 @@ async def view_run(run_id: RunId, request: Request, state: StateDep, store: Stor
         raise HTTPException(
             status.HTTP_409_CONFLICT, "the 3D view is off on this service (SRLAB_VISER=false)"
         )
-    from server.viewer.state import SelectRun, SetMode  # viser loads with the view only
-
-    viewer.controller.post(SetMode("live"))
-    viewer.controller.post(SelectRun(run_id))
+    viewer.choose(run_id)  # for the viewer the console opens next; open ones keep theirs
     host = request.url.hostname or "127.0.0.1"
     if ":" in host:  # an IPv6 address
         host = f"[{host}]"

@@ -1,0 +1,131 @@
+"""What the console's 2D view needs over HTTP: one-tick steps, the rate, the track, ticks."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from apphelpers import client_for, create, settings_for, until
+
+from core.errors import RunStateError
+from server.api.routes.events import encode
+from server.schemas import TickEvent
+
+pytestmark = pytest.mark.anyio
+
+
+async def _paused_realtime_run(client: Any, hz: float = 5.0) -> int:
+    run = await create(client, condition="kp", mode="realtime", hz=hz)
+    run_id = int(run["id"])
+    await client.post(f"/api/runs/{run_id}/start")
+    await until(client, run_id, "running")
+    paused = await client.post(f"/api/runs/{run_id}/pause")
+    assert paused.json()["status"] == "paused"
+    return run_id
+
+
+async def test_step_runs_exactly_one_tick_of_a_paused_run(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run_id = await _paused_realtime_run(client)
+        before = (await client.get(f"/api/runs/{run_id}")).json()["ticks"]
+        for k in range(1, 4):
+            r = await client.post(f"/api/runs/{run_id}/step")
+            assert r.status_code == 200, r.text
+            stepped = r.json()
+            assert stepped["status"] == "paused"
+            assert stepped["ticks"] == before + k
+            assert stepped["live"]["tick"] == before + k
+        # Still paused: nothing ticks on its own.
+        await asyncio.sleep(0.5)
+        assert (await client.get(f"/api/runs/{run_id}")).json()["ticks"] == before + 3
+        assert (await client.post(f"/api/runs/{run_id}/resume")).json()["status"] == "running"
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_step_of_a_running_or_fast_run_is_409(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="kp", mode="realtime", hz=20)
+        await client.post(f"/api/runs/{run['id']}/start")
+        await until(client, run["id"], "running")
+        r = await client.post(f"/api/runs/{run['id']}/step")
+        assert r.status_code == 409 and "not paused" in r.json()["detail"]
+        await client.post(f"/api/runs/{run['id']}/stop")
+        created = await create(client, condition="kp")
+        assert (await client.post(f"/api/runs/{created['id']}/step")).status_code == 409
+        assert (await client.post("/api/runs/99/step")).status_code == 404
+
+
+async def test_steps_asked_together_each_run_one_tick(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run_id = await _paused_realtime_run(client)
+        before = (await client.get(f"/api/runs/{run_id}")).json()["ticks"]
+        answers = await asyncio.gather(*(client.post(f"/api/runs/{run_id}/step") for _ in range(3)))
+        assert all(a.status_code == 200 for a in answers)
+        assert (await client.get(f"/api/runs/{run_id}")).json()["ticks"] == before + 3
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_a_pending_step_is_answered_when_the_run_stops(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        run_id = await _paused_realtime_run(client)
+        engine = app.state.srlab.engines.get(run_id)
+        assert engine is not None
+        step = asyncio.create_task(engine.step())
+        await asyncio.sleep(0)  # the step is asked; the tick task has not woken yet
+        engine.stop()
+        with pytest.raises(RunStateError, match="ended before the step"):
+            await step
+        await until(client, run_id, "stopped")
+
+
+async def test_rate_changes_a_live_realtime_run(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run_id = await _paused_realtime_run(client)
+        r = await client.post(f"/api/runs/{run_id}/rate", json={"hz": 20})
+        assert r.status_code == 200 and r.json()["live"]["hz"] == 20.0
+        bad = await client.post(f"/api/runs/{run_id}/rate", json={"hz": 0})
+        assert bad.status_code == 422 and "hz" in json.dumps(bad.json())
+        await client.post(f"/api/runs/{run_id}/stop")
+        await until(client, run_id, "stopped")
+        assert (await client.post(f"/api/runs/{run_id}/rate", json={"hz": 5})).status_code == 409
+
+
+async def test_world_describes_the_runs_track(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="kp")
+        r = await client.get(f"/api/runs/{run['id']}/world")
+        assert r.status_code == 200
+        w = r.json()
+        x0, y0, x1, y1 = w["outer_box"]
+        ix0, iy0, ix1, iy1 = w["inner_box"]
+        assert x0 < ix0 < ix1 < x1 and y0 < iy0 < iy1 < y1
+        assert len(w["sonars"]) == 8 and w["sonar_range_m"] > 0
+        assert len(w["stopline"]) == 2 and len(w["lamp"]) == 2
+        assert (await client.get("/api/runs/99/world")).status_code == 404
+
+
+async def test_tick_events_carry_sonar_readings_and_the_obstacle(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        run = await create(client, condition="kp", mode="realtime", hz=50)
+        await client.post(f"/api/runs/{run['id']}/start")
+        await until(client, run["id"], "running")
+        engine = app.state.srlab.engines.get(run["id"])
+        assert engine is not None
+        sub = engine.subscribe(tick_hz=50)
+        ticks: list[dict[str, Any]] = []
+        async with asyncio.timeout(30):
+            while len(ticks) < 3:
+                encoded = encode(await sub.get(), engine.sim.brain.catalog)
+                if encoded is not None and encoded[0] == "tick":
+                    ticks.append(json.loads(json.dumps(encoded[1])))
+        engine.unsubscribe(sub)
+        await client.post(f"/api/runs/{run['id']}/stop")
+        world = (await client.get(f"/api/runs/{run['id']}/world")).json()
+    for t in ticks:
+        TickEvent.model_validate(t)  # the stream's contract
+        assert len(t["sonar_m"]) == len(world["sonars"]) == 8
+        assert all(0 <= r <= world["sonar_range_m"] + 0.5 for r in t["sonar_m"])
+        assert t["obstacle"] is None or len(t["obstacle"]) == 2
