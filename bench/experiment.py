@@ -42,6 +42,10 @@ EVAL_EPISODES = 10
 SIGNALS: tuple[SignalMode, ...] = ("given", "learned")
 
 
+REFERENCE_BARE = 38_080
+"""Bare pymunk's ticks/s on this project's machine when the goals were set (2026-11-28)."""
+
+
 def _report(title: str, results: Sequence[TaskResult], elapsed: float, jobs: int, bare: float,
             goal_s: float) -> None:  # fmt: skip
     episodes = sum(len(r.episodes) + len(r.evaluation) + len(r.transfer) for r in results)
@@ -49,6 +53,10 @@ def _report(title: str, results: Sequence[TaskResult], elapsed: float, jobs: int
     failed = [r for r in results if not r.ok]
     print(title)
     print(f"  wall time             {elapsed:8.1f} s   (goal: <= {goal_s:g} s)")
+    # The same work at the reference machine's speed, scaled by bare physics measured in
+    # this run: a slower machine (or a busy one) is told apart from a slower srlab.
+    scaled = elapsed * bare / REFERENCE_BARE
+    print(f"  at the reference speed {scaled:7.1f} s   (x bare / {REFERENCE_BARE:,} ticks/s)")
     print(f"  episodes/s            {episodes / elapsed:8.0f}  (evaluation episodes included)")
     print(f"  training ticks/s      {ticks / elapsed:8.0f}  (all jobs)")
     print(f"  per job / bare        {ticks / elapsed / jobs / bare:8.2f}")
