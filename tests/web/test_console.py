@@ -249,3 +249,22 @@ def test_the_live_state_says_what_made_the_behaviour_run_and_tallies_the_origins
     finally:
         server.client.post(f"/api/runs/{run['id']}/stop")
     wait_status(server.client, run["id"], "stopped")
+
+
+def test_an_empty_memory_grid_says_why(page: Page, server: LiveServer) -> None:
+    # A run that never learns, and a learning run without KP: their empty grids explain.
+    innate = create_run(server, condition="innate", mode="fast", episodes=1, seed=1)
+    assert server.client.post(f"/api/runs/{innate}/start").status_code == 200
+    wait_status(server.client, innate, "finished", timeout=240)
+    open_view(page, server, f"console/{innate}")
+    note = page.locator("#memory-empty")
+    expect(note).to_contain_text("innate does not learn")
+    rp = create_run(server, condition="rp", mode="fast", episodes=1, seed=1)
+    assert server.client.post(f"/api/runs/{rp}/start").status_code == 200
+    wait_status(server.client, rp, "finished", timeout=240)
+    open_view(page, server, f"console/{rp}")
+    page.check("input[name=memory][value=rltm]")
+    expect(note).to_contain_text("rp runs without it")
+    page.check("input[name=memory][value=ltm]")
+    if server.client.get(f"/api/runs/{rp}/ltm").json()["data"]:
+        expect(note).to_be_hidden()

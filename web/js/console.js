@@ -542,6 +542,24 @@ async function loadMemory() {
   state.memory = new Map(memory.data.map((m) => [key(m.stimulus, m.behaviour), m.reliability]));
   state.network = new Map(network.data.map((a) => [key(a.stimulus, a.behaviour), a]));
   drawHeat();
+  explainEmpty(kind, run);
+}
+
+/** Why the chosen memory holds nothing (an empty grid says nothing by itself). */
+function explainEmpty(kind, run) {
+  const note = $("#memory-empty");
+  const c = state.conditions.get(run.condition);
+  let why = "";
+  if (state.memory.size === 0) {
+    if (c && !c.learning) why = `${run.condition} does not learn: its LTM and RLTM stay empty.`;
+    else if (kind === "rltm" && c && !c.kp)
+      why = `RLTM is knowledge propagation's memory: ${run.condition} runs without it (a kp run fills it).`;
+    else if (kind === "rltm")
+      why = "Nothing propagated yet: RLTM gets a camera pair when a reward follows sonar responses recorded while the camera saw an obstacle stimulus.";
+    else why = "Nothing learned yet: LTM gets a pair when a reward credits an STM record (a tick whose behaviour answered a stimulus).";
+  }
+  note.textContent = why;
+  note.hidden = !why;
 }
 
 const refreshMemory = throttle(() => loadMemory(), 700);
