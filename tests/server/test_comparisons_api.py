@@ -66,7 +66,7 @@ async def test_compare_runs_errors_name_the_problem(tmp_path: Path) -> None:
         assert r.status_code == 200, r.text
         assert r.json()["episodes"] == 0 and r.json()["a"]["mean"] is None
         r = await client.post("/api/runs", json={"condition": "dp", "network_version": 1})
-        assert r.status_code == 422 and "needs a network" in r.text
+        assert r.status_code == 404 and "give `network` too" in r.text
         r = await client.post(
             "/api/runs", json={"condition": "dp", "network": "dp", "network_version": 99}
         )

@@ -12,6 +12,7 @@ import math
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, status
+from pydantic import Field
 from starlette.concurrency import run_in_threadpool as io
 
 from core.ports import RunStatus, StoredRun
@@ -23,7 +24,10 @@ from server.schemas import ComparisonPublic, EstimatePublic
 router = APIRouter(prefix="/comparisons", tags=["runs"])
 MAX_SEEDS = 32
 """Runs per side at most: a comparison reads every run's episodes."""
-RunIds = Annotated[list[int], Query(max_length=MAX_SEEDS, description="run ids, one per seed")]
+RunIdItem = Annotated[int, Field(ge=1, le=2**62)]
+RunIds = Annotated[
+    list[RunIdItem], Query(max_length=MAX_SEEDS, description="run ids, one per seed")
+]
 _ENDED = (RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.FAILED, RunStatus.INTERRUPTED)
 
 
@@ -54,7 +58,7 @@ async def compare_runs(
     engines: EnginesDep,
     a: RunIds,
     b: Annotated[
-        list[int] | None,
+        list[RunIdItem] | None,
         Query(max_length=MAX_SEEDS, description="runs to compare with, on a's seeds in order"),
     ] = None,
 ) -> ComparisonPublic:

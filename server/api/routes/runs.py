@@ -143,7 +143,13 @@ async def create_run(
     network = None if body.network is None else await io(networks.pairs, body.network)
     if body.network_version is not None:
         if body.network is None:
-            raise HTTPException(422, "network_version needs a network")
+            # Schema-valid (JSON Schema cannot say "only with network" for a nullable
+            # field), and what it names is not there: a version of no network.
+            raise HTTPException(
+                status.HTTP_404_NOT_FOUND,
+                f"network_version {body.network_version} names a version of no network: "
+                "give `network` too",
+            )
         snap = await io(networks.snapshot, body.network, body.network_version)
         network = snap.associations
     run_id = await io(engines.create, spec, network)
