@@ -204,25 +204,60 @@ def test_an_rp_runs_program_rewards_are_on_the_timeline_beside_the_persons(
     wait_status(server.client, run_id, "stopped")
 
 
+STEPS_TO_A_RESPONSE = 3000
+"""A bound on the ticks stepped to the robot's first innate response (its first corner is
+about a hundred ticks from the start)."""
+
+
+def step_to_an_innate_response(server: LiveServer, run_id: int) -> dict[str, Any]:
+    """Step the paused run a tick at a time until a tick runs an innate response.
+
+    An innate response (a corner's turn, Table I) answers a stimulus, so its tick leaves a
+    record in STM; the step is taken only if that tick did not end the episode (which
+    empties STM). Returns the run as that step answered it.
+    """
+    run: dict[str, Any] = server.client.get(f"/api/runs/{run_id}").json()
+    for _ in range(STEPS_TO_A_RESPONSE):
+        before = run
+        r = server.client.post(f"/api/runs/{run_id}/step")
+        assert r.status_code == 200, r.text
+        run = r.json()
+        innate = run["live"]["ticks_by_origin"].get("innate", 0)
+        if (
+            innate > before["live"]["ticks_by_origin"].get("innate", 0)
+            and run["episodes_done"] == before["episodes_done"]
+        ):
+            return run
+    raise AssertionError(f"no innate response in {STEPS_TO_A_RESPONSE} ticks: {run}")
+
+
 def test_the_credit_is_summed_per_pair_with_the_raw_rows_one_click_away(
     page: Page, server: LiveServer
 ) -> None:
     run_id = started(server, condition="trainer", mode="realtime", hz=20, seed=3)
     try:
+        # Held, then stepped to a tick that left a record in STM: the reward has something
+        # to credit whatever the machine's speed.
+        assert server.client.post(f"/api/runs/{run_id}/pause").status_code == 200
         open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("paused")
+        run = step_to_an_innate_response(server, run_id)
+        # Slowest, so that only a tick or two runs between the resume and the reward's
+        # boundary: the robot is turning at a corner then, which ends no episode.
+        r = server.client.post(f"/api/runs/{run_id}/rate", json={"hz": 0.5})
+        assert r.status_code == 200, r.text
+        assert server.client.post(f"/api/runs/{run_id}/resume").status_code == 200
         expect(page.locator("#run-status")).to_have_text("running")
-        eventually(lambda: page.locator("#st-tick").inner_text().isdigit(), what="live ticks")
-        page.wait_for_timeout(500)  # some STM to credit (its amount does not matter)
         page.click("#reward-plus")
         applied = eventually(
             lambda: (r := trainer_rewards(server, run_id)) and r[0]["applied"] and r[0],
             what="the reward applied",
         )
+        assert applied["episode"] == run["live"]["episode"]
+        assert applied["tick"] > run["ticks"]
+        assert applied["credited"] > 0, applied
         effect = page.locator("#reward-effect")
         expect(effect.locator(".head")).to_contain_text(f"credited {applied['credited']} STM")
-        if not applied["credited"]:
-            expect(effect.locator(".why")).to_contain_text("Nothing")
-            return
         pairs = effect.locator("table.pairs tbody tr")
         expect(pairs.first).to_be_visible()
         counts = [int(t) for t in pairs.locator("td:nth-child(2)").all_inner_texts()]

@@ -1,16 +1,28 @@
 """The console's 2D view in real Chromium against a live `srlab serve`: the robot drawn
-where the run says it is, and its controls (pause, step one tick, rate)."""
+where the run says it is, its controls (pause, step one tick, rate), and the robot beside
+the reward buttons, both in the window, from 1024 px up."""
 
 from __future__ import annotations
 
 import io
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
-from liveserver import LiveServer
+import pytest
+from browser import artifact
+from conftest import BROWSER_WAIT_MS
+from liveserver import LiveServer, wait_status
 from PIL import Image
-from playwright.sync_api import Page, expect
+from playwright.sync_api import Browser, ConsoleMessage, Error, FloatRect, Page, expect
 from webpage import eventually, open_view
+
+WINDOWS = [(1024, 768), (1440, 768), (1440, 900)]
+"""Window sizes (width, height) a trainer uses: from 1024 px wide, typical heights."""
+
+MIN_CANVAS_PX = 240
+"""The narrowest 2D view a trainer can still follow the robot in."""
 
 
 def create_run(server: LiveServer, **body: Any) -> int:
@@ -102,3 +114,99 @@ def test_step_advances_exactly_one_tick_and_the_controls_follow_the_status(
     expect(page.locator("#run-status")).to_have_text("running")
     expect(page.locator("#view2d-step")).to_be_disabled()
     server.client.post(f"/api/runs/{run_id}/stop")
+
+
+@contextmanager
+def sized_page(browser: Browser, width: int, height: int) -> Iterator[Page]:
+    """A fresh page of that window size; a JavaScript error in it fails the test."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    page = context.new_page()
+    errors: list[str] = []
+
+    def on_error(error: Error) -> None:
+        errors.append(str(error))
+
+    def on_console(message: ConsoleMessage) -> None:
+        if message.type == "error" and "Failed to load resource" not in message.text:
+            errors.append(message.text)
+
+    page.on("pageerror", on_error)
+    page.on("console", on_console)
+    page.set_default_timeout(BROWSER_WAIT_MS)
+    try:
+        yield page
+    finally:
+        context.close()
+    assert not errors, f"JavaScript errors in the page: {errors}"
+
+
+def in_window(page: Page, selector: str) -> FloatRect:
+    """The box of `selector`, asserted to lie wholly inside the window as it is now."""
+    size = page.viewport_size
+    assert size is not None
+    box = page.locator(selector).bounding_box()
+    assert box is not None, f"{selector} is not shown"
+    assert box["x"] >= 0 and box["x"] + box["width"] <= size["width"], (selector, box, size)
+    assert box["y"] >= 0 and box["y"] + box["height"] <= size["height"], (selector, box, size)
+    return box
+
+
+@pytest.mark.parametrize(("width", "height"), WINDOWS)
+def test_the_robot_is_beside_the_reward_buttons_in_one_window(
+    browser: Browser, server: LiveServer, width: int, height: int
+) -> None:
+    run_id = create_run(server, condition="trainer", mode="realtime", hz=20, seed=width)
+    assert server.client.post(f"/api/runs/{run_id}/start").status_code == 200
+    try:
+        with sized_page(browser, width, height) as page:
+            open_view(page, server, f"console/{run_id}")
+            expect(page.locator("#run-status")).to_have_text("running")
+            eventually(lambda: drawn(page).get("tick"), what="a tick drawn")
+            # As the page opens, unscrolled: the robot, its controls and the buttons are
+            # all in the window, and nothing is wider than it.
+            assert page.evaluate("[window.scrollX, window.scrollY]") == [0, 0]
+            canvas = in_window(page, "#view2d")
+            for selector in (
+                "#view2d-card",
+                "#view2d-toggle",
+                "#view2d-step",
+                "#view2d-hz",
+                "#reward-plus",
+                "#reward-plus-half",
+                "#reward-minus",
+                "#reward-minus-half",
+            ):
+                in_window(page, selector)
+            scroll = page.evaluate("document.documentElement.scrollWidth")
+            assert scroll <= width, f"the page is {scroll} px wide in a {width} px window"
+            for card in ("#live-card", "#heat-card", "#train-card", "#timeline-card"):
+                box = page.locator(card).bounding_box()
+                assert box is not None and box["x"] >= 0 and box["x"] + box["width"] <= width
+            # A view a trainer can follow, drawn to its shape (the track's, about 3:2).
+            assert canvas["width"] >= MIN_CANVAS_PX, canvas
+            assert canvas["height"] >= MIN_CANVAS_PX / 2, canvas
+            # Beside the buttons: to their left, at the same height of the window.
+            plus = in_window(page, "#reward-plus")
+            assert canvas["x"] + canvas["width"] <= plus["x"]
+            assert canvas["y"] < plus["y"] + plus["height"]
+            assert plus["y"] < canvas["y"] + canvas["height"]
+            # Nothing covers them: the window's own point is the canvas, and a press where
+            # the button is seen (no scrolling) is a reward.
+            hit = page.evaluate(
+                "([x, y]) => document.elementFromPoint(x, y).id",
+                [canvas["x"] + canvas["width"] / 2, canvas["y"] + canvas["height"] / 2],
+            )
+            assert hit == "view2d"
+            page.mouse.click(plus["x"] + plus["width"] / 2, plus["y"] + plus["height"] / 2)
+            eventually(
+                lambda: any(
+                    r["source"] == "trainer" and r["value"] == 1.0
+                    for r in server.client.get(f"/api/runs/{run_id}/rewards").json()["data"]
+                ),
+                what="the pressed reward logged",
+            )
+            assert page.evaluate("[window.scrollX, window.scrollY]") == [0, 0]
+            page.screenshot(path=artifact(f"console-view2d-{width}x{height}.png"))
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")

@@ -7,7 +7,8 @@
 // can change around it: `srlab:run` (detail: the run as GET /api/runs/{id} answers it, or
 // null) and `srlab:tick` (detail: a tick event's data). It draws at most once per animation
 // frame, only when a tick came, and keeps its own figures in `window.srlabView2d` (the
-// bench reads the page's frame time there).
+// bench reads the page's frame time there). Its card's place, beside the Train card, and
+// its layout are style.css's (the "2D view" section).
 
 import { get, post } from "./api.js";
 import { $, attempt, el, fmt } from "./ui.js";
@@ -15,7 +16,7 @@ import { $, attempt, el, fmt } from "./ui.js";
 const MARGIN_PX = 12;
 const LAMP = { red: "#dc2626", yellow: "#facc15", green: "#16a34a", none: "#6b7280" };
 const FLOOR = "#b0b4ba";
-const GROUND = "#f5f5f0";
+const GROUND = "#f5f5f0"; // style.css paints the canvas the same, before its first frame
 const WALL = "#475569";
 const ROBOT = "#c41e24";
 const OBSTACLE = "#b48048";
@@ -60,16 +61,6 @@ function build() {
         el("button", { type: "button", id: "view2d-step", text: "Step one tick", title: "Run exactly one tick of the paused run", onclick: step }),
         form,
         el("p", { class: "muted small", text: "Rays: the sonars' readings, red when close. The lamp shows its colour; the brown square is the obstacle." }))));
-  const style = el("style", { text: `
-#view2d-card { grid-column: 1 / -1; }
-.view2d-body { display: grid; grid-template-columns: minmax(0, 1fr) 200px; gap: 12px; align-items: start; }
-.view2d-canvas { min-width: 0; }
-#view2d { width: 100%; height: auto; display: block; background: ${GROUND}; border-radius: 6px; }
-.view2d-controls { display: grid; gap: 8px; }
-.view2d-rate label { display: flex; gap: 4px; align-items: center; }
-.view2d-rate input { width: 70px; }
-` });
-  document.head.append(style);
   new ResizeObserver(() => schedule()).observe(view.canvas);
   controls();
 }
