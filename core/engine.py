@@ -186,6 +186,8 @@ class Subscription:
         self._ready = asyncio.Event()
         self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
         self.next_tick_at = 0.0
+        self.tick_sent = -1
+        """The tick of the last snapshot it was offered (-1: none yet)."""
         self.dropped = 0
         self.closed = False
 
@@ -411,6 +413,7 @@ class Engine:
         self._last_reward_job: _RewardJob | None = None
         self._subscribers: list[Subscription] = []
         self._tick_subscribers = 0
+        self._last_snap: Snapshot | None = None
         self._paused = False
         self._resumed = asyncio.Event()
         self._resumed.set()
@@ -909,6 +912,9 @@ class Engine:
             if self._stop:
                 break
             if self._paused:
+                if self._tick_subscribers and self._last_snap is not None:
+                    # The tick the run paused at, to viewers whose throttle skipped it.
+                    self._publish_tick(self._last_snap, force=True)
                 await self._resumed.wait()
                 if self._paused and self._steps and not self._stop:
                     # A single-tick step: one tick at this boundary, then paused again.
@@ -960,8 +966,10 @@ class Engine:
         snap = result.snapshot
         if self._trace is not None:
             self._trace.add(snap)
+        self._last_snap = snap
         if self._tick_subscribers:
-            self._publish_tick(snap)
+            # A single step of a paused run is always shown: no later tick would replace it.
+            self._publish_tick(snap, force=self._paused)
         ended: EpisodeEnded | None = None
         if result.events:
             for e in result.events:
@@ -987,12 +995,18 @@ class Engine:
         self._episode_start_tick = self.sim.tick_count
         self._episode_rewards = 0
 
-    def _publish_tick(self, snap: Snapshot) -> None:
+    def _publish_tick(self, snap: Snapshot, force: bool = False) -> None:
+        """Offer a tick to the subscribers due one (all tick subscribers when forced)."""
         now = time.monotonic()
         event: TickPublished | None = None
         for sub in self._subscribers:
-            if sub.tick_period < math.inf and now >= sub.next_tick_at:
+            if (
+                sub.tick_period < math.inf
+                and sub.tick_sent != snap.tick
+                and (force or now >= sub.next_tick_at)
+            ):
                 sub.next_tick_at = now + sub.tick_period
+                sub.tick_sent = snap.tick
                 if event is None:  # built once, and only for a tick someone is sent
                     sim = self.sim
                     event = TickPublished(

@@ -261,6 +261,36 @@ def test_tick_snapshots_are_throttled_per_subscriber() -> None:
     assert not any(isinstance(ev, TickPublished) for ev in none.drain())
 
 
+def test_a_throttled_subscriber_sees_the_paused_tick_and_every_step() -> None:
+    """Steps come faster than the throttle allows, yet each one is shown: nothing after a
+    step would replace a skipped one, so a viewer would be left a tick behind for good."""
+    engine = Engine.create(realtime("delayed", 8, hz=50.0), InMemoryRunStore(CATALOG))
+    sub = engine.subscribe(maxsize=10_000, tick_hz=0.5)  # one tick per 2 s at most
+    shown: list[int] = []
+
+    async def script(e: Engine) -> None:
+        await wait_ticks(e, 5)
+        e.pause()
+        while e.status is not RunStatus.PAUSED:
+            await asyncio.sleep(0.001)
+        async with asyncio.timeout(60):  # a bound for a hang, not a speed test
+            while not shown or shown[-1] != e.sim.tick_count:
+                await asyncio.sleep(0.001)
+                shown.extend(
+                    ev.snapshot.tick for ev in sub.drain() if isinstance(ev, TickPublished)
+                )
+        for _ in range(3):
+            tick = await e.step()
+            ticks = [ev.snapshot.tick for ev in sub.drain() if isinstance(ev, TickPublished)]
+            assert ticks == [tick]
+            shown.extend(ticks)
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    assert shown[-3:] == [shown[-4] + 1, shown[-4] + 2, shown[-4] + 3]
+    assert len(set(shown)) == len(shown)  # no tick offered twice
+
+
 def test_a_waiting_reader_is_released_when_its_subscription_closes() -> None:
     """A stream of a run that is not ticking ends at shutdown instead of waiting forever."""
     engine = Engine.create(fast("delayed", 3, 2), InMemoryRunStore(CATALOG))
