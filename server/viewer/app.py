@@ -21,7 +21,7 @@ from server.guard import SitePolicy
 from server.persistence import SqlAlchemyRunStore
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
-from server.viewer.gate import Gate
+from server.viewer.gate import Gate, Peer
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
@@ -30,7 +30,8 @@ log = logging.getLogger("srlab.viewer")
 
 
 CHOICE_TTL_S = 60.0
-"""How long a run chosen for the next viewer (POST /api/runs/{id}/view) waits for it."""
+"""How long a run chosen for the next viewer (POST /api/runs/{id}/view), or named by a
+socket that has not become a viewer yet (`/run/<id>`), waits for it."""
 
 
 @dataclass
@@ -68,7 +69,11 @@ class Viewer:
         self._make = make
         self._lock = threading.Lock()
         self._choice: tuple[int, float] | None = None
+        self._named: dict[Peer, tuple[int, float]] = {}
+        """Runs named by the URL of a socket not yet a viewer, by the socket's address."""
         self._shared: Session | None = None
+        # A view URL that names its run (/run/<id>) chooses it for the socket it opens.
+        gate.on_run = self.name
 
     @property
     def port(self) -> int:
@@ -105,20 +110,56 @@ class Viewer:
         with self._lock:
             self._choice = (run_id, time.monotonic())
 
-    def _take_choice(self) -> int | None:
+    def name(self, run_id: int, peer: Peer) -> None:
+        """Show `run_id` to the viewer whose websocket viser sees come from `peer`.
+
+        The gate calls it for a websocket on `/run/<id>`, just before viser gets the
+        handshake, so a page opened on such a URL gets its run back each time it
+        reconnects, after a restart of the service included. It is kept by socket, not in
+        `choose`'s one slot: viser makes a socket a viewer only at its first camera
+        message, and pages reconnecting together after a restart (their retry timers
+        started at the same moment) would otherwise take each other's runs. A socket
+        closed before it became a viewer leaves its entry, dropped after `CHOICE_TTL_S`.
+        """
+        now = time.monotonic()
         with self._lock:
-            choice, self._choice = self._choice, None
+            self._named = {p: c for p, c in self._named.items() if now - c[1] <= CHOICE_TTL_S}
+            self._named[peer] = (run_id, now)
+
+    def _named_run(self, client: viser.ClientHandle) -> int | None:
+        peer = _peer(self.server, client.client_id)
+        if peer is None:
+            return None
+        with self._lock:
+            named = self._named.pop(peer, None)
+        return None if named is None else named[0]
+
+    def _take_choice(self, named: int | None = None) -> int | None:
+        """The run a new viewer starts on: the one its URL `named`, else the chosen one.
+
+        A choice of the run the URL names is used up too: the console's link posts the
+        choice and opens `/run/<id>`, and the next viewer on `/` must not inherit it.
+        """
+        with self._lock:
+            choice = self._choice
+            if named is None or (choice is not None and choice[0] == named):
+                self._choice = None
+        if named is not None:
+            return named
         if choice is None or time.monotonic() - choice[1] > CHOICE_TTL_S:
             return None
         return choice[0]
 
-    def open(self, target: viser.ViserServer | viser.ClientHandle) -> Session:
+    def open(
+        self, target: viser.ViserServer | viser.ClientHandle, named: int | None = None
+    ) -> Session:
         """A new watching session drawing on `target`, on the run chosen for it if any.
 
+        `named` is the run its URL names (`/run/<id>`), which wins over `choose`'s.
         Blocking (it builds the scene): call it from a thread, not the event loop.
         """
         session = self._make(target)
-        run_id = self._take_choice()
+        run_id = self._take_choice(named)
         if run_id is not None:
             session.controller.post(SetMode("live"))
             session.controller.post(SelectRun(run_id))
@@ -133,7 +174,7 @@ class Viewer:
 
     def connected(self, client: viser.ClientHandle) -> None:
         """A browser connected (viser's thread pool): build and start its session."""
-        session = self.open(client)
+        session = self.open(client, self._named_run(client))
         with self._lock:
             self.sessions[client.client_id] = session
 
@@ -183,14 +224,16 @@ class Viewer:
         server = await asyncio.to_thread(_listen)
         server.scene.world_axes.visible = False  # for every client
         gate = Gate(host, port, server.get_port(), policy)
+        # Wired before the gate opens: a browser reconnecting after a restart may be the
+        # very first connection, and its /run/<id> must find the viewer to choose with.
+        viewer = cls(server, gate, loop, make)
+        server.on_client_connect(viewer.connected)
+        server.on_client_disconnect(viewer.disconnected)
         try:
             await asyncio.to_thread(_open, gate)
         except BaseException:
             await asyncio.to_thread(server.stop)
             raise
-        viewer = cls(server, gate, loop, make)
-        server.on_client_connect(viewer.connected)
-        server.on_client_disconnect(viewer.disconnected)
         log.info("the 3D view is on http://%s:%d/", host, viewer.port)
         return viewer
 
@@ -215,6 +258,21 @@ class Viewer:
 def _listen() -> viser.ViserServer:
     """The viser server, on an ephemeral loopback port reached only through the gate."""
     return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
+
+
+def _peer(server: viser.ViserServer, client_id: int) -> Peer | None:
+    """The address viser sees client `client_id`'s websocket come from, if it tells.
+
+    viser (1.1) offers no public way to tell which connection a client is; its websocket
+    server's table of live connections does. Should another viser lack it, a URL's run is
+    lost (the viewer starts as on `/`) and tests/server/test_viewer_gate.py says so.
+    """
+    connections = getattr(getattr(server, "_websock_server", None), "_live_connections", None)
+    connection = connections.get(client_id) if isinstance(connections, dict) else None
+    address = getattr(connection, "remote_address", None)
+    if not isinstance(address, tuple) or len(address) < 2:
+        return None
+    return str(address[0]), int(address[1])
 
 
 def _open(gate: Gate) -> None:

@@ -7,6 +7,19 @@ each connection's request head, refuses a Host the service does not answer to (D
 rebinding) and a websocket handshake from another site (the API's rule, `SitePolicy`),
 then relays the bytes both ways. The panel's writes travel over that socket, so this is
 what keeps a foreign page from rewarding or re-pacing runs through it.
+
+The gate also gives the view URLs that name a run, `/run/<id>` (the console's link). viser's
+page opens its websocket on its own URL's path (its client drops the query and a trailing
+slash), so the socket of a page opened on `/run/7` asks for `/run/7`, the first time and on
+every automatic reconnect, a restart of the service included. The gate hands such a
+socket's run to `on_run`, with the address viser sees the socket come from (the gate's own
+end of the relay: the viewer starts that socket's session on the run, and no other's, even
+when several pages reconnect at once), and rewrites the path to `/`, which is all viser
+serves (its page, one self-contained index.html, and its socket). Only a connection's first
+request head is read
+(later keep-alive requests are relayed raw); that is enough, since the page needs nothing
+but index.html, viser's server answers one plain HTTP request per connection and closes
+it, and the websocket is a connection of its own.
 """
 
 from __future__ import annotations
@@ -15,7 +28,9 @@ import asyncio
 import contextlib
 import json
 import logging
+import re
 import threading
+from collections.abc import Callable
 from http import HTTPStatus
 
 from server.guard import SitePolicy
@@ -27,6 +42,29 @@ HEAD_LIMIT = 16 * 1024
 HEAD_TIMEOUT_S = 10.0
 """A client that has not sent its request head by then is dropped (slow clients)."""
 CHUNK = 64 * 1024
+Peer = tuple[str, int]
+"""A TCP address as viser sees a connection's far end: (host, port)."""
+RUN_PATH = re.compile(r"/run/([0-9]{1,18})/?")
+"""A view URL's path that names a run. At most 18 digits: run ids stay below 2**62 (the
+API's bound), and a longer or non-digit id is no run but a plain path (viser's 404)."""
+
+
+def run_path(head: bytes) -> tuple[bytes, int | None]:
+    """The request head as viser must get it, and the run its path names, if any.
+
+    `GET /run/7?x HTTP/1.1` becomes `GET /?x HTTP/1.1` and names run 7; any other head
+    is returned unchanged, with None.
+    """
+    line, sep, rest = head.partition(b"\r\n")
+    parts = line.split(b" ")
+    if len(parts) != 3:
+        return head, None
+    method, target, version = parts
+    path, query, params = target.partition(b"?")
+    found = RUN_PATH.fullmatch(path.decode("latin-1"))
+    if found is None:
+        return head, None
+    return b" ".join((method, b"/" + query + params, version)) + sep + rest, int(found[1])
 
 
 def _parse_head(head: bytes) -> tuple[str, dict[str, str]]:
@@ -66,14 +104,25 @@ def _response(status: HTTPStatus, detail: str) -> bytes:
 class Gate:
     """Listens on `host`:`port` on a thread of its own and relays accepted connections.
 
-    `start` raises OSError when the port is taken; `stop` closes it and every relay.
+    `on_run` is called (on the gate's thread) with the run of each accepted websocket
+    handshake on `/run/<id>` and the address of the gate's connection to viser that will
+    carry it, before viser gets it. `start` raises OSError when the port is taken; `stop`
+    closes it and every relay.
     """
 
-    def __init__(self, host: str, port: int, upstream_port: int, policy: SitePolicy) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        upstream_port: int,
+        policy: SitePolicy,
+        on_run: Callable[[int, Peer], None] | None = None,
+    ) -> None:
         self.host = host
         self.port = port
         self.upstream_port = upstream_port
         self.policy = policy
+        self.on_run = on_run
         self.refused = 0
         """Requests refused so far (tests and the reliability suite read it)."""
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -160,14 +209,28 @@ class Gate:
             writer.write(_response(status, detail))
             await writer.drain()
             return
+        head, run_id = run_path(head)
         up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
         try:
+            # Past the guard (a foreign page chooses nothing) and before viser sees the
+            # handshake, so the choice is there when viser opens the session.
+            if run_id is not None and headers.get("upgrade", "").lower() == "websocket":
+                self._chose(run_id, up_writer.get_extra_info("sockname"))
             up_writer.write(head)
             await asyncio.gather(
                 _pipe(reader, up_writer), _pipe(up_reader, writer), return_exceptions=True
             )
         finally:
             up_writer.close()
+
+    def _chose(self, run_id: int, sockname: object) -> None:
+        if self.on_run is None or not isinstance(sockname, tuple):
+            return
+        try:
+            self.on_run(run_id, (str(sockname[0]), int(sockname[1])))
+        except Exception:
+            # The view still opens, on the run it would show without the URL's.
+            log.exception("the 3D view could not choose run %d", run_id)
 
 
 async def _pipe(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

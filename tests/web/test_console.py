@@ -122,11 +122,12 @@ def test_the_3d_link_opens_the_view_on_that_run_not_the_newest(
         open_view(page, server, f"console/{chosen}")
         link = page.locator("#view3d")
         port = server.client.get("/api/health").json()["viser_port"]
-        expect(link).to_have_attribute("href", f"http://127.0.0.1:{port}/")
+        # A URL naming the run: the view's socket gets it back on every reconnect.
+        expect(link).to_have_attribute("href", f"http://127.0.0.1:{port}/run/{chosen}")
         with page.context.expect_page() as opened:
-            link.click()  # POST /api/runs/{chosen}/view, then the view opens
+            link.click()  # POST /api/runs/{chosen}/view, then the view opens on the link
         view = opened.value
-        view.wait_for_url(f"http://127.0.0.1:{port}/")
+        view.wait_for_url(f"http://127.0.0.1:{port}/run/{chosen}")
         view.get_by_text(shows(chosen)).first.wait_for(timeout=90_000)
         for _ in range(10):  # the view looks for new runs every second: it stays put
             view.wait_for_timeout(300)

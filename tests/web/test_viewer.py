@@ -18,9 +18,10 @@ import httpx
 import numpy as np
 import pytest
 from browser import artifact
-from liveserver import LiveServer, start_server, stop_server, wait_status
+from liveserver import LiveServer, free_port, start_server, stop_server, wait_status
 from PIL import Image
 from playwright.sync_api import Browser, Page
+from webpage import eventually
 
 from server.viewer.render import REWARD_NOTE
 
@@ -183,3 +184,44 @@ def test_two_viewers_watch_different_runs_without_steering_each_other(
             page.close()
         for run_id in runs:
             api.post(f"/api/runs/{run_id}/stop")
+
+
+def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
+    browser: Browser, tmp_path: Path
+) -> None:
+    # Issue 18, defect 7: viser's page reconnects by itself after a restart, as a new
+    # viewer; on / it would follow the newest run, on /run/<id> it gets its run back.
+    database = tmp_path / "restart.db"
+    env = {"SRLAB_VISER_PORT": str(free_port())}  # the same view port after the restart
+    first = start_server(database, env=env)
+    page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+    try:
+        api = first.client
+        body = {"condition": "kp", "mode": "realtime", "hz": 5, "seed": 21}
+        chosen = api.post("/api/runs", json=body).json()["id"]
+        assert api.post(f"/api/runs/{chosen}/start").status_code == 200
+        # Newer than the chosen run: the one a viewer on / starts on after the restart.
+        newest = api.post("/api/runs", json={**body, "seed": 22}).json()["id"]
+        port = api.get("/api/health").json()["viser_port"]
+        page.goto(f"http://127.0.0.1:{port}/run/{chosen}")
+        wait_header(page, chosen)
+
+        stop_server(first)  # the chosen run is interrupted
+        second = start_server(database, port=first.port, env=env)
+        try:
+            assert second.client.post(f"/api/runs/{newest}/start").status_code == 200
+
+            def reconnected() -> bool:
+                # The status shows it is the new service's viewer, not the old one's panel.
+                text = page.inner_text("body")
+                return header_run(page) == chosen and "interrupted" in text
+
+            eventually(reconnected, what=f"the reconnected view on run {chosen}")
+            for _ in range(10):  # the view looks for new runs every second: it stays put
+                time.sleep(0.3)
+                assert header_run(page) == chosen, page.inner_text("body")
+        finally:
+            second.client.post(f"/api/runs/{newest}/stop")
+            stop_server(second)
+    finally:
+        page.close()

@@ -242,13 +242,15 @@ async function select(id) {
   if (LIVE.has(run.status)) follow();
 }
 
-/** Choose the run in the 3D view (a write: a POST), then open the view where it answers. */
+/** Choose the run in the 3D view (a write: a POST), then open the link's /run/<id> URL. */
 async function openView(event) {
   event.preventDefault();
   const link = event.currentTarget;
   if (link.getAttribute("aria-disabled") === "true" || !link.dataset.run) return;
   const chosen = await attempt(() => post(`/runs/${link.dataset.run}/view`), "Opening the 3D view");
-  if (chosen) window.open(chosen.url, "_blank", "noopener");
+  // The link's URL, not the answer's: a view opened on /run/<id> keeps its run when its
+  // socket reconnects (after a restart of the service, say); one on / would not.
+  if (chosen) window.open(link.href, "_blank", "noopener");
 }
 
 function showRun(run) {
@@ -270,9 +272,10 @@ function showRun(run) {
   $("#train-about").textContent = !run ? "" : condition ? `${run.condition}: ${aboutRewards(condition)}` : run.condition;
   const link = $("#view3d");
   if (run && state.viserPort) {
-    // The click chooses the run in the view (a POST: it changes what every viewer sees),
-    // and the link opens the view.
-    link.href = `${location.protocol}//${location.hostname.includes(":") ? `[${location.hostname}]` : location.hostname}:${state.viserPort}/`;
+    // The click chooses the run in the view (a POST: the API's way, kept for scripts), and
+    // the link opens the view on a URL naming the run: the view's gate chooses it again
+    // for every socket the page opens, so a reconnect (a restart) does not switch runs.
+    link.href = `${location.protocol}//${location.hostname.includes(":") ? `[${location.hostname}]` : location.hostname}:${state.viserPort}/run/${run.id}`;
     link.dataset.run = String(run.id);
     link.setAttribute("aria-disabled", "false");
     link.title = `Open run #${run.id} in the 3D view`;
