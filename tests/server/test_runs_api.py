@@ -10,6 +10,8 @@ from typing import Any
 import pytest
 from apphelpers import client_for, create, settings_for, until
 
+from server.schemas import EpisodeDetail
+
 pytestmark = pytest.mark.anyio
 
 
@@ -23,7 +25,12 @@ async def test_create_run_and_run_it_in_fast_mode(tmp_path: Path) -> None:
         assert done["episodes_done"] == 4 and done["ticks"] > 0
         episodes = (await client.get(f"/api/runs/{run['id']}/episodes")).json()
         assert episodes["count"] == 4
-        detail = (await client.get(f"/api/runs/{run['id']}/episodes/0")).json()
+        answer = await client.get(f"/api/runs/{run['id']}/episodes/0")
+        assert answer.headers["content-type"] == "application/json"
+        # Written as JSON directly (no response model on the way out): it must still be
+        # exactly what the documented schema says.
+        EpisodeDetail.model_validate_json(answer.content, strict=True)
+        detail = answer.json()
         assert len(detail["trace"]) == detail["ticks"]
         assert detail["trace"][0]["behaviour"] == "goforward3"
         ltm = (await client.get(f"/api/runs/{run['id']}/ltm")).json()

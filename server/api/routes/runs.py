@@ -7,6 +7,7 @@ from collections.abc import Callable
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
+from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import Engine
@@ -32,7 +33,6 @@ from server.schemas import (
     RunsPublic,
     RunWorldPublic,
     SonarPublic,
-    TraceRowPublic,
     ViewChosen,
 )
 
@@ -379,13 +379,13 @@ def list_episodes(
     return EpisodesPublic(data=data, count=total)
 
 
-@router.get("/{run_id}/episodes/{episode}")
+@router.get("/{run_id}/episodes/{episode}", response_model=EpisodeDetail)
 def get_episode(
     run_id: RunId,
     episode: Annotated[int, Path(ge=0, le=2**62)],
     store: StoreDep,
     state: StateDep,
-) -> EpisodeDetail:
+) -> Response:
     """One episode with its trace: pose, stimuli and behaviour every tick.
 
     Each row says what made the behaviour run (`origin`: the releasing association's
@@ -395,23 +395,29 @@ def get_episode(
     if found is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"run {run_id} has no episode {episode}")
     stimuli = [s.name for s in state.catalog.stimuli]
-    behaviours = [b.name for b in state.catalog.behaviours]
-    extra = [b.name for b in store.behaviours(run_id)]
-    names = behaviours + extra
+    names = [b.name for b in state.catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
+    n_stimuli, n_names = len(stimuli), len(names)
+    # The rows are the store's own, so they are written as JSON directly (pydantic-core's
+    # encoder; the stdlib's takes 3 ms on floats): a pydantic row each, validated again as
+    # the response model, cost two thirds of a long episode's read (4.5 of 7.4 ms for 361
+    # ticks). EpisodeDetail stays the documented schema, and
+    # tests/server/test_runs_api.py validates answers against it.
     trace = [
-        TraceRowPublic(
-            tick=r.tick, x=r.x, y=r.y, heading_rad=r.heading_rad,
-            behaviour=names[r.behaviour] if 0 <= r.behaviour < len(names) else None,
-            how=r.how, origin=r.origin,
-            released_by=stimuli[r.released_by] if 0 <= r.released_by < len(stimuli) else None,
-            lamp=r.lamp, stimuli=[stimuli[i] for i in r.stimuli if i < len(stimuli)],
-        )
+        {
+            "tick": r.tick, "x": r.x, "y": r.y, "heading_rad": r.heading_rad,
+            "behaviour": names[r.behaviour] if 0 <= r.behaviour < n_names else None,
+            "how": r.how, "origin": r.origin,
+            "released_by": stimuli[r.released_by] if 0 <= r.released_by < n_stimuli else None,
+            "lamp": r.lamp, "stimuli": [stimuli[i] for i in r.stimuli if i < n_stimuli],
+        }
         for r in (unpack(found.trace) if found.trace else [])
     ]  # fmt: skip
-    return EpisodeDetail(
-        episode=found.episode, outcome=found.outcome, cause=found.cause, ticks=found.ticks,
-        start_tick=found.start_tick, rewards=found.rewards, trace=trace,
-    )  # fmt: skip
+    body = {
+        "episode": found.episode, "outcome": found.outcome, "cause": found.cause,
+        "ticks": found.ticks, "start_tick": found.start_tick, "rewards": found.rewards,
+        "trace": trace,
+    }  # fmt: skip
+    return Response(to_json(body), media_type="application/json")
 
 
 @router.post(
