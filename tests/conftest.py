@@ -186,10 +186,12 @@ BROWSER_WAIT_MS = 90_000
 expect.set_options(timeout=BROWSER_WAIT_MS)
 
 
-@pytest.fixture
-def page(browser: Browser) -> Iterator[Page]:
-    """A fresh 1280x800 page; a JavaScript error in it fails the test."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800}, accept_downloads=True)
+@contextmanager
+def sized_page(browser: Browser, width: int = 1280, height: int = 800) -> Iterator[Page]:
+    """A fresh page of that window size; a JavaScript error in it fails the test."""
+    context = browser.new_context(
+        viewport={"width": width, "height": height}, accept_downloads=True
+    )
     page = context.new_page()
     errors: list[str] = []
 
@@ -209,3 +211,10 @@ def page(browser: Browser) -> Iterator[Page]:
     finally:
         context.close()
     assert not errors, f"JavaScript errors in the page: {errors}"
+
+
+@pytest.fixture
+def page(browser: Browser) -> Iterator[Page]:
+    """A fresh 1280x800 page; a JavaScript error in it fails the test."""
+    with sized_page(browser) as page:
+        yield page

@@ -9,43 +9,17 @@ behind a dialog or per key repeat, and messages that do not pile up while offlin
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import pytest
 from browser import artifact
-from conftest import BROWSER_WAIT_MS
+from conftest import sized_page
 from liveserver import LiveServer, start_server, stop_server, wait_status
-from playwright.sync_api import Browser, ConsoleMessage, Error, Page, Route, expect
+from playwright.sync_api import Browser, Page, Route, expect
 from webpage import eventually, open_view
 
 WIDTHS = [1024, 1440]
-
-
-@contextmanager
-def sized_page(browser: Browser, width: int, height: int = 800) -> Iterator[Page]:
-    """A fresh page `width` px wide; a JavaScript error in it fails the test."""
-    context = browser.new_context(viewport={"width": width, "height": height})
-    page = context.new_page()
-    errors: list[str] = []
-
-    def on_error(error: Error) -> None:
-        errors.append(str(error))
-
-    def on_console(message: ConsoleMessage) -> None:
-        if message.type == "error" and "Failed to load resource" not in message.text:
-            errors.append(message.text)
-
-    page.on("pageerror", on_error)
-    page.on("console", on_console)
-    page.set_default_timeout(BROWSER_WAIT_MS)
-    try:
-        yield page
-    finally:
-        context.close()
-    assert not errors, f"JavaScript errors in the page: {errors}"
 
 
 def inside(page: Page, selector: str, vertical: bool = True) -> None:

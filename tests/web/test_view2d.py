@@ -5,17 +5,15 @@ the reward buttons, both in the window, from 1024 px up."""
 from __future__ import annotations
 
 import io
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 import pytest
 from browser import artifact
-from conftest import BROWSER_WAIT_MS
+from conftest import sized_page
 from liveserver import LiveServer, wait_status
 from PIL import Image
-from playwright.sync_api import Browser, ConsoleMessage, Error, FloatRect, Page, expect
+from playwright.sync_api import Browser, FloatRect, Page, expect
 from webpage import eventually, open_view
 
 WINDOWS = [(1024, 768), (1440, 768), (1440, 900)]
@@ -114,30 +112,6 @@ def test_step_advances_exactly_one_tick_and_the_controls_follow_the_status(
     expect(page.locator("#run-status")).to_have_text("running")
     expect(page.locator("#view2d-step")).to_be_disabled()
     server.client.post(f"/api/runs/{run_id}/stop")
-
-
-@contextmanager
-def sized_page(browser: Browser, width: int, height: int) -> Iterator[Page]:
-    """A fresh page of that window size; a JavaScript error in it fails the test."""
-    context = browser.new_context(viewport={"width": width, "height": height})
-    page = context.new_page()
-    errors: list[str] = []
-
-    def on_error(error: Error) -> None:
-        errors.append(str(error))
-
-    def on_console(message: ConsoleMessage) -> None:
-        if message.type == "error" and "Failed to load resource" not in message.text:
-            errors.append(message.text)
-
-    page.on("pageerror", on_error)
-    page.on("console", on_console)
-    page.set_default_timeout(BROWSER_WAIT_MS)
-    try:
-        yield page
-    finally:
-        context.close()
-    assert not errors, f"JavaScript errors in the page: {errors}"
 
 
 def in_window(page: Page, selector: str) -> FloatRect:
