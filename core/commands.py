@@ -2,7 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
+from enum import StrEnum
+
+
+class RewardSource(StrEnum):
+    """Who gave a reward. A `str`: it is stored, logged and sent as its value."""
+
+    TRAINER = "trainer"
+    """A person (or a client speaking for one): an external reward, kept in the log."""
+    PROGRAM = "program"
+    """The reinforcement program: produced again when a run is replayed."""
+    TASK = "task"
+    """The task itself (a lap completed): produced again when a run is replayed."""
+
+
+INTERNAL_SOURCES = frozenset({RewardSource.PROGRAM, RewardSource.TASK})
+"""The sources a run produces itself, so a replay produces them again."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -10,8 +26,9 @@ class InjectReward:
     """A reward in [-1, 1] from a trainer, a reinforcement program or the task itself."""
 
     value: float
+    _: KW_ONLY
     note: str = ""
-    source: str = "trainer"
+    source: RewardSource = RewardSource.TRAINER
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

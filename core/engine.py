@@ -32,7 +32,7 @@ from core.brain.brain import BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog
 from core.brain.network import Association, BehaviourNetwork
 from core.checkpoint import decode, encode, export_state, restore_simulation
-from core.commands import EditAssociation, InjectReward
+from core.commands import INTERNAL_SOURCES, EditAssociation, InjectReward, RewardSource
 from core.conditions import Condition, get_condition
 from core.errors import CatalogError, RunStateError, StorageError
 from core.events import (
@@ -615,7 +615,9 @@ class Engine:
             sub.offer(StatusChanged(self.run_id, self.status, self.error))
             self.unsubscribe(sub)
 
-    async def reward(self, value: float, note: str = "", source: str = "trainer") -> RewardAck:
+    async def reward(
+        self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
+    ) -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
@@ -634,7 +636,7 @@ class Engine:
         job = _RewardJob(
             stamp,
             self.sim.episode,
-            InjectReward(value, note, source),
+            InjectReward(value, note=note, source=source),
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
@@ -1015,7 +1017,8 @@ class Engine:
                 sub.offer(event)
 
     def _enqueue_internal(self, e: RewardDue) -> None:
-        job = _RewardJob(e.tick, e.episode, InjectReward(e.value, e.note, e.source), False)
+        reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
+        job = _RewardJob(e.tick, e.episode, reward, False)
         logged = self._logged_internal.get((e.tick, e.source, e.value))
         if logged:
             stored = logged.popleft()
@@ -1106,14 +1109,15 @@ class Engine:
         so each is stored once; a logged reward whose learning was never committed (the
         process died in between) is committed now.
         """
-        internal = ("task", "program")
         skip = self._replay_skip_upto
         rewards = deque(
-            r for r in stored.rewards_after if r.record.source not in internal and r.id > skip
+            r
+            for r in stored.rewards_after
+            if r.record.source not in INTERNAL_SOURCES and r.id > skip
         )
         self._logged_internal = {}
         for r in stored.rewards_after:
-            if r.record.source in internal:
+            if r.record.source in INTERNAL_SOURCES:
                 key = (r.record.tick, r.record.source, r.record.value)
                 self._logged_internal.setdefault(key, deque()).append(r)
         commands = deque(stored.commands_after)
@@ -1133,7 +1137,9 @@ class Engine:
                 job = _RewardJob(
                     r.record.tick,
                     r.record.episode,
-                    InjectReward(r.record.value, r.record.note, r.record.source),
+                    InjectReward(
+                        r.record.value, note=r.record.note, source=RewardSource(r.record.source)
+                    ),
                     external=True,
                     logged_id=r.id,
                     committed_before=r.applied,

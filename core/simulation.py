@@ -12,7 +12,7 @@ from core.brain.brain import Brain, BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.network import BehaviourNetwork
 from core.brain.selection import How
-from core.commands import InjectReward
+from core.commands import InjectReward, RewardSource
 from core.conditions import Condition
 from core.errors import SimulationStateError
 from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied, RewardDue
@@ -179,9 +179,12 @@ class Simulation:
         """The stimuli the next tick will act on (sensed at the end of the last one)."""
         return self.brain.stimuli(self._channels)
 
-    def reward(self, value: float, source: str = "trainer", note: str = "") -> RewardApplied:
+    def reward(
+        self, value: float, *, source: RewardSource = RewardSource.TRAINER, note: str = ""
+    ) -> RewardApplied:
         """Apply a reward now, between ticks: it credits every STM record so far."""
-        return self.apply_reward(InjectReward(value, note, source), self.tick_count + 1)[0]
+        reward = InjectReward(value, note=note, source=source)
+        return self.apply_reward(reward, self.tick_count + 1)[0]
 
     def apply_reward(
         self, r: InjectReward, tick: int, episode: int | None = None
@@ -223,7 +226,7 @@ class Simulation:
         if self.trainer is not None:
             judged = self.trainer.judge(brain.last)
             if judged is not None:
-                r = InjectReward(judged, self.trainer.name, "program")
+                r = InjectReward(judged, note=self.trainer.name, source=RewardSource.PROGRAM)
                 if self.defer_rewards:
                     # Due at the next boundary: the engine's reward task applies it there.
                     events.append(
@@ -290,7 +293,9 @@ class Simulation:
             events.append(EpisodeEnded(self.episode, outcome, cause, self._episode_tick))
             reward = self.condition.success_reward
             if outcome is Outcome.SUCCESS and reward is not None:
-                self._apply_rewards([InjectReward(reward, "lap completed", "task")], events)
+                self._apply_rewards(
+                    [InjectReward(reward, note="lap completed", source=RewardSource.TASK)], events
+                )
         return TickResult(snap, tuple(events))
 
     def _apply_rewards(self, rewards: Iterable[InjectReward], events: list[Event]) -> None:

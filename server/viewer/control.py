@@ -17,6 +17,7 @@ import time
 from dataclasses import replace
 
 from core.brain.catalog import Catalog
+from core.commands import RewardSource
 from core.engine import Engine, StatusChanged, SubscriptionClosed, TickPublished
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
@@ -436,7 +437,7 @@ class Controller:
             wait = self.limiter.allow(f"{LIMITER_KEY}:{client}", run=engine.run_id)
             if wait > 0:
                 raise ValueError(f"too many rewards: wait {wait:.1f} s")
-            ack = await engine.reward(value, note=REWARD_NOTE, source="trainer")
+            ack = await engine.reward(value, note=REWARD_NOTE, source=RewardSource.TRAINER)
         except (CoreError, ValueError) as e:
             self._publish(notice=f"**Reward {sign} not given:** {e}")
             return

@@ -22,7 +22,7 @@ def rollout(seed: int, ticks: int = TICKS) -> tuple[list[Snapshot], list[Event],
     snapshots = [sim.reset()]
     events: list[Event] = []
     for n in range(ticks):
-        inputs = TickInputs((InjectReward(0.5, "probe"),)) if n % 97 == 50 else TickInputs()
+        inputs = TickInputs((InjectReward(0.5, note="probe"),)) if n % 97 == 50 else TickInputs()
         result = sim.tick(inputs)
         snapshots.append(result.snapshot)
         events.extend(result.events)

@@ -148,7 +148,7 @@ def test_rewards_between_ticks_credit_the_records_so_far() -> None:
     assert (event.tick, event.value, event.source, event.note) == (5, 0.5, "trainer", "good")
     assert [(c.tick, c.d_k) for c in event.credits] == [(4, 1), (3, 2), (2, 3), (1, 4)]
     sim.tick()
-    result = sim.tick(TickInputs(rewards=(InjectReward(-0.5, "bad"),)))
+    result = sim.tick(TickInputs(rewards=(InjectReward(-0.5, note="bad"),)))
     (applied,) = rewards(result.events)
     assert (applied.tick, applied.value) == (6, -0.5)
     assert [(c.tick, c.d_k) for c in applied.credits] == [(5, 1)]

@@ -12,7 +12,7 @@ from pathlib import Path
 import httpx
 
 from core.brain.catalog import load_catalog
-from core.commands import InjectReward
+from core.commands import InjectReward, RewardSource
 from core.conditions import get_condition
 from core.events import RewardApplied
 from core.ports import StoredReward
@@ -177,7 +177,7 @@ def replay_ltm(
     while count < target:
         boundary = sim.tick_count + 1
         now = tuple(
-            InjectReward(r.record.value, r.record.note, r.record.source)
+            InjectReward(r.record.value, note=r.record.note, source=RewardSource(r.record.source))
             for r in external
             if r.record.tick == boundary
         )

@@ -8,6 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
+from core.commands import RewardSource
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
 from server.api.routes.runs import RunId
 from server.ratelimit import client_key
@@ -55,7 +56,7 @@ async def inject_reward(
         raise HTTPException(
             status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
         )
-    ack = await engine.reward(body.value, note=body.note, source="trainer")
+    ack = await engine.reward(body.value, note=body.note, source=RewardSource.TRAINER)
     return RewardAccepted(id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value)
 
 
