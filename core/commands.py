@@ -52,29 +52,3 @@ class EditAssociation:
     def __post_init__(self) -> None:
         if self.strength is not None and not 0.0 <= self.strength <= 1.0:
             raise ValueError("an association's strength must be in [0, 1]")
-
-
-@dataclass(frozen=True, slots=True)
-class PauseRun:
-    """Stop ticking until resumed."""
-
-
-@dataclass(frozen=True, slots=True)
-class ResumeRun:
-    """Tick again after a pause."""
-
-
-@dataclass(frozen=True, slots=True)
-class StopRun:
-    """End the run at the next tick boundary."""
-
-
-@dataclass(frozen=True, slots=True)
-class SetRate:
-    """Change a realtime run's tick rate."""
-
-    hz: float
-
-    def __post_init__(self) -> None:
-        if not 0.0 < self.hz <= 1000.0:
-            raise ValueError("hz must be in (0, 1000]")
