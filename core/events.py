@@ -5,8 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from core.brain.memory import Credit
-
 
 class Outcome(StrEnum):
     """How an episode ended."""
@@ -22,6 +20,18 @@ class Cause(StrEnum):
     OBSTACLE_COLLISION = "obstacle_collision"
     SIGNAL_VIOLATION = "signal_violation"
     TIMEOUT = "timeout"
+
+
+@dataclass(frozen=True, slots=True)
+class Credit:
+    """What one STM record received from a reward."""
+
+    tick: int
+    stimulus: int
+    behaviour: int
+    d_k: int
+    before: float
+    after: float
 
 
 @dataclass(frozen=True, slots=True)

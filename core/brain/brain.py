@@ -7,16 +7,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.brain.catalog import Behaviour, Catalog
-from core.brain.memory import Credit, LongTermMemory, ShortTermMemory
+from core.brain.memory import LongTermMemory, ShortTermMemory
 from core.brain.motor import Motor
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
 from core.brain.propagation import KnowledgePropagation, KpConfig, Propagated
 from core.brain.selection import COMMANDED, Decision, How, SelectionConfig, Selector
 from core.brain.sensors import compile_detector
-from core.events import AssociationDemoted, AssociationPromoted
+from core.events import AssociationDemoted, AssociationPromoted, Credit
 from core.sim.robot import RobotConfig
-from core.sim.world import MotorCommand
+from core.sim.types import MotorCommand
 
 
 @dataclass(frozen=True, slots=True)

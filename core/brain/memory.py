@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+
+from core.events import Credit as Credit  # re-exported: Credit lives with the events
 
 Pair = tuple[int, int]
 """(stimulus id, behaviour id)."""
@@ -33,18 +34,6 @@ def reinforce(v: float, reward: float, eta: float, d_k: int) -> float:
     if reward >= 0.0:
         return v + reward * eta * (1.0 - v) / d_k
     return v + reward * eta * v / d_k
-
-
-@dataclass(frozen=True, slots=True)
-class Credit:
-    """What one STM record received from a reward."""
-
-    tick: int
-    stimulus: int
-    behaviour: int
-    d_k: int
-    before: float
-    after: float
 
 
 class ShortTermMemory:

@@ -6,7 +6,7 @@ import math
 
 from core.brain.catalog import Behaviour, Catalog
 from core.sim.channels import Channel
-from core.sim.world import MotorCommand
+from core.sim.types import MotorCommand
 
 _HEADING_ERROR = int(Channel.HEADING_ERROR_RAD)
 _HEADING = int(Channel.HEADING_RAD)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -134,3 +136,112 @@ def test_the_engine_may_read_the_clock(source: str) -> None:
 def test_the_checker_allows_instance_rngs() -> None:
     source = "import numpy as np\nrng = np.random.default_rng(np.random.SeedSequence([1]))\n"
     assert violations(source, "ok.py") == []
+
+
+BRAIN = CORE / "brain"
+PHYSICS_PACKAGES = {"pymunk", "numba"}
+PHYSICS_MODULES = {"core.sim.world", "core.sim._kernel"}
+"""The pymunk world and its numba kernels; the brain uses `core.sim.types` instead."""
+LEAF_MODULES = [CORE / "events.py", CORE / "commands.py"]
+"""Modules the brain imports, which must not import back up into the brain."""
+
+
+def brain_files() -> list[Path]:
+    return sorted(BRAIN.glob("*.py"))
+
+
+def imported_modules(source: str, label: str) -> list[tuple[int, str]]:
+    """Every absolute module `source` imports, as (line, dotted name); `from a import b` gives
+    both `a` and `a.b` (b may be a submodule)."""
+    found = []
+    for node in ast.walk(ast.parse(source, filename=label)):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            found.append((node.lineno, node.module))
+            found += [(node.lineno, f"{node.module}.{alias.name}") for alias in node.names]
+    return found
+
+
+def physics_imports(source: str, label: str) -> list[str]:
+    """What in `source` imports pymunk, numba or the pymunk world."""
+    return [
+        f"{label}:{line}: imports {name}"
+        for line, name in imported_modules(source, label)
+        if name.split(".")[0] in PHYSICS_PACKAGES or name in PHYSICS_MODULES
+    ]
+
+
+def brain_imports(source: str, label: str) -> list[str]:
+    """What in `source` imports from the brain."""
+    return [
+        f"{label}:{line}: imports {name}"
+        for line, name in imported_modules(source, label)
+        if name == "core.brain" or name.startswith("core.brain.")
+    ]
+
+
+@pytest.mark.parametrize("path", brain_files(), ids=lambda p: p.name)
+def test_the_brain_does_not_import_physics(path: Path) -> None:
+    label = str(path.relative_to(CORE.parent))
+    assert physics_imports(path.read_text(encoding="utf-8"), label) == []
+
+
+@pytest.mark.parametrize("path", LEAF_MODULES, ids=lambda p: p.name)
+def test_no_import_runs_back_up_into_the_brain(path: Path) -> None:
+    label = str(path.relative_to(CORE.parent))
+    assert brain_imports(path.read_text(encoding="utf-8"), label) == []
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "import pymunk",
+        "import numba.core",
+        "from numba import njit",
+        "from core.sim.world import MotorCommand",
+        "from core.sim import world",
+        "from core.sim import _kernel as k",
+    ],
+)
+def test_the_physics_checker_catches_imports(source: str) -> None:
+    assert physics_imports(source, "probe.py") != []
+
+
+@pytest.mark.parametrize(
+    "source",
+    ["from core.brain.memory import Credit", "import core.brain.brain", "from core import brain"],
+)
+def test_the_brain_checker_catches_imports(source: str) -> None:
+    assert brain_imports(source, "probe.py") != []
+
+
+def test_the_checkers_allow_the_plain_types() -> None:
+    source = "from core.sim.types import MotorCommand\nfrom core.sim.channels import Channel\n"
+    assert physics_imports(source, "ok.py") == []
+    assert brain_imports("from core.events import Credit\n", "ok.py") == []
+
+
+def test_importing_the_brain_loads_no_physics() -> None:
+    """Each brain module, imported in a fresh interpreter, leaves pymunk and numba unloaded
+    (this catches what the source check cannot: a package `__init__` that loads them)."""
+    modules = [f"core.brain.{p.stem}" for p in brain_files()]
+    script = (
+        "import importlib, sys\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        f"    loaded = sorted(m for m in {sorted(PHYSICS_PACKAGES)!r} if m in sys.modules)\n"
+        "    if loaded:\n"
+        "        print(name, 'loads', *loaded)\n"
+        "        break\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script],
+        cwd=CORE.parent,
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == ""

@@ -1,0 +1,116 @@
+"""The world's plain types and the `World` protocol: what the brain and the simulation share.
+
+Nothing here imports pymunk or numba, so the brain can use a `MotorCommand` without loading
+the physics; `core.sim.world` holds the pymunk world and re-exports these names.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any, Literal, NamedTuple, Protocol
+
+import numpy as np
+
+from core.sim.robot import RobotConfig
+from core.sim.track import TrackConfig, TrackGeometry
+
+__all__ = [
+    "CollisionKind",
+    "EpisodeLayout",
+    "LampColor",
+    "MotorCommand",
+    "SensorFrame",
+    "World",
+    "WorldConfig",
+]
+
+CollisionKind = Literal["wall", "obstacle"]
+
+
+class LampColor(IntEnum):
+    """The lamp's colour as the camera channel encodes it (the paper's "Blue" is green)."""
+
+    NONE = 0
+    RED = 1
+    YELLOW = 2
+    GREEN = 3
+
+
+@dataclass(frozen=True, slots=True)
+class WorldConfig:
+    """Everything that defines the simulated world.
+
+    Attributes:
+        track: the corridor, signal and obstacle.
+        robot: the AmigoBot.
+        dt_s: the fixed tick, seconds; the physics steps once per tick.
+        max_ticks: an episode's time limit in ticks (120 s by default).
+    """
+
+    track: TrackConfig = field(default_factory=TrackConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    dt_s: float = 0.1
+    max_ticks: int = 1200
+
+    def __post_init__(self) -> None:
+        if self.dt_s <= 0 or self.max_ticks <= 0:
+            raise ValueError("dt_s and max_ticks must be positive")
+
+
+class MotorCommand(NamedTuple):
+    """Wheel command for one tick: forward speed and turning rate (+ = left)."""
+
+    speed_mps: float
+    turn_rad_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeLayout:
+    """What is random in an episode: where the obstacle is and how the lamp cycles."""
+
+    obstacle_center: tuple[float, float] | None
+    obstacle_leg: int
+    signal_phases: tuple[tuple[LampColor, int], ...]
+    """The lamp's cycle as (colour, ticks), repeated if the episode outlasts it."""
+
+
+class SensorFrame(NamedTuple):
+    """All physical readings after a step, plus what the world itself judged.
+
+    `channels` is indexed by `core.sim.channels.Channel`. `collision` and `violation` are the
+    referee's view (the robot only knows what its bumper and camera report).
+    """
+
+    tick: int
+    x: float
+    y: float
+    heading_rad: float
+    channels: np.ndarray[Any, np.dtype[np.float64]]
+    lamp: LampColor
+    collision: CollisionKind | None
+    violation: bool
+
+
+class World(Protocol):
+    """What the brain's simulation needs from a world."""
+
+    config: WorldConfig
+    geometry: TrackGeometry
+
+    def reset(self, seed: int, episode: int) -> SensorFrame:
+        """Start episode `episode` of the run seeded `seed`; return the first frame."""
+        ...
+
+    def apply(self, command: MotorCommand) -> None:
+        """Set the wheel command for the next step."""
+        ...
+
+    def step(self) -> SensorFrame:
+        """Advance one tick and sense."""
+        ...
+
+    @property
+    def layout(self) -> EpisodeLayout:
+        """The current episode's layout."""
+        ...
