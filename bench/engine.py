@@ -21,7 +21,7 @@ from pathlib import Path
 
 from core.brain.catalog import load_catalog
 from core.conditions import get_condition
-from core.engine import Engine, EngineStats
+from core.engine import EngineStats, RunEngine
 from core.ports import Mode, RunSpec
 from core.runner import run
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
@@ -39,14 +39,14 @@ def fast(folder: Path, condition: str, episodes: int, repeats: int) -> tuple[flo
     catalog = load_catalog()
     store = _store(folder, "fast.db")
     run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of both paths
-    asyncio.run(Engine.create(RunSpec(condition, 0, 3, Mode.FAST), store, catalog=catalog).run())
+    asyncio.run(RunEngine.create(RunSpec(condition, 0, 3, Mode.FAST), store, catalog=catalog).run())
     plain_rates, engine_rates = [], []
     ticks = 0
     for seed in range(1, repeats + 1):
         started = time.perf_counter()
         plain = run(get_condition(condition), seed, episodes, catalog=catalog)
         plain_rates.append(plain.ticks / (time.perf_counter() - started))
-        engine = Engine.create(
+        engine = RunEngine.create(
             RunSpec(condition, seed, episodes, Mode.FAST), store, catalog=catalog
         )
         started = time.perf_counter()
@@ -58,7 +58,7 @@ def fast(folder: Path, condition: str, episodes: int, repeats: int) -> tuple[flo
 
 
 def realtime(folder: Path, seconds: float, hz: float) -> EngineStats:
-    engine = Engine.create(
+    engine = RunEngine.create(
         RunSpec("rp", 2, None, Mode.REALTIME, hz=hz), _store(folder, "realtime.db")
     )
 

@@ -1113,7 +1113,7 @@ def store_episodes(url: str, episodes: int) -> int:
     """
     from sqlalchemy import insert
 
-    from core.engine import Engine
+    from core.engine import RunEngine
     from core.ports import Mode, RunSpec
     from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
     from server.persistence.orm import EpisodeRow, RunRow
@@ -1122,7 +1122,7 @@ def store_episodes(url: str, episodes: int) -> int:
     engine = make_engine(url)
     sessions = make_sessionmaker(engine)
     store = SqlAlchemyRunStore(sessions)
-    run = Engine.create(RunSpec("innate", seed=1, episodes=1, mode=Mode.FAST), store)
+    run = RunEngine.create(RunSpec("innate", seed=1, episodes=1, mode=Mode.FAST), store)
     asyncio.run(run.run())
     first = store.episode(run.run_id, 0)
     assert first is not None

@@ -362,10 +362,10 @@ async def _gather(
             return batch, False
 
 
-class Engine:
+class RunEngine:
     """One run: a simulation driven by a tick task and a reward task.
 
-    Build it with `Engine.create` (a new run) or `Engine.restore` (a stored one), then
+    Build it with `RunEngine.create` (a new run) or `RunEngine.restore` (a stored one), then
     `await engine.run()`. While it runs, `reward`, `edit`, `pause`, `resume`, `stop`,
     `set_rate` and `subscribe` are safe to call from the same event loop.
     """
@@ -514,7 +514,7 @@ class Engine:
         network: tuple[Association, ...] | None = None,
         trace: bool = True,
         pacer: Pacer | None = None,
-    ) -> Engine:
+    ) -> RunEngine:
         """A new run, stored with status created.
 
         It runs in the spec's world preset and sensor definition, stored by name with the
@@ -547,7 +547,7 @@ class Engine:
         trace: bool = True,
         mode: Mode | None = None,
         pacer: Pacer | None = None,
-    ) -> Engine:
+    ) -> RunEngine:
         """A stored run, rebuilt from its last checkpoint; `run()` replays its log first.
 
         It runs in the world and sensor definition it was stored with (the defaults for a
@@ -1368,14 +1368,17 @@ def _pair(sim: Simulation, a: Association) -> NetworkPair:
     )
 
 
+Engine = RunEngine
+"""The old name, kept only for server/api/routes/networks.py and server/services/networks.py
+while they are rewritten (issue 19): import `RunEngine`; `Engine` is SQLAlchemy's word."""
+
 __all__ = [
     "HZ_MAX",
     "HZ_MIN",
-    "Engine",
-    "EngineStats",
     "MonotonicPacer",
     "Pacer",
     "RewardAck",
+    "RunEngine",
     "StatusChanged",
     "Subscription",
     "SubscriptionClosed",

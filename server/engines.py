@@ -9,7 +9,7 @@ from collections.abc import Iterable
 
 from core.brain.catalog import Catalog
 from core.brain.network import Association
-from core.engine import Engine, Subscription
+from core.engine import RunEngine, Subscription
 from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
 from core.setup import Setup
@@ -28,7 +28,7 @@ class TooManyStreamsError(RunStateError):
 
 
 class EngineManager:
-    """Owns the `Engine` of every run ticking (or paused) in this process, and no other.
+    """Owns the `RunEngine` of every run ticking (or paused) in this process, and no other.
 
     A created run is stored with a checkpoint before its first tick, and a run that has
     ended has all of its state in storage: neither keeps an engine in memory, so memory
@@ -52,7 +52,7 @@ class EngineManager:
         """The shipped catalogue under the default sensor definition (names only: each
         run's engine loads its own definition's, see `core.setup.Setup`)."""
         self.max_runs = max_runs
-        self._engines: dict[int, Engine] = {}
+        self._engines: dict[int, RunEngine] = {}
         self._tasks: dict[int, asyncio.Task[RunStatus]] = {}
         self._starting: set[int] = set()
         """Runs whose slot is taken while their engine is rebuilt."""
@@ -63,11 +63,11 @@ class EngineManager:
         self._streams: dict[int, set[Subscription]] = {}
         """The subscriptions `subscribe` gave, by run, until `unsubscribe`."""
 
-    def get(self, run_id: int) -> Engine | None:
+    def get(self, run_id: int) -> RunEngine | None:
         """The engine of a run ticking or paused here (or one whose end is not stored)."""
         return self._engines.get(run_id)
 
-    def engines(self) -> Iterable[Engine]:
+    def engines(self) -> Iterable[RunEngine]:
         """Every engine this process has."""
         return self._engines.values()
 
@@ -94,9 +94,9 @@ class EngineManager:
                 )
                 for p in network
             )
-        return Engine.create(spec, self.store, network=assoc).run_id
+        return RunEngine.create(spec, self.store, network=assoc).run_id
 
-    async def start(self, run_id: int) -> Engine:
+    async def start(self, run_id: int) -> RunEngine:
         """Start a stored run from its checkpoint and log (created, stopped, interrupted).
 
         The run slot is taken first: a start refused (`TooManyRunsError`) or one that fails
@@ -117,7 +117,7 @@ class EngineManager:
             if stale is not None:  # it ended here without its status stored
                 await asyncio.to_thread(self._settle_status, stale)
             # In its stored world and definition.
-            engine = await asyncio.to_thread(Engine.restore, run_id, self.store)
+            engine = await asyncio.to_thread(RunEngine.restore, run_id, self.store)
         finally:
             self._starting.discard(run_id)
         self._engines[run_id] = engine
@@ -174,7 +174,7 @@ class EngineManager:
                 del self._streams[run_id]
         sub.close()
 
-    def _settle_status(self, engine: Engine) -> None:
+    def _settle_status(self, engine: RunEngine) -> None:
         """Store how a run this process ran ended, if storage still says it is going.
 
         A run that failed because storage failed often could not store that either. This
@@ -204,7 +204,7 @@ class EngineManager:
         done, _ = await asyncio.wait({task}, timeout=timeout_s)
         return bool(done)
 
-    async def _run(self, engine: Engine) -> RunStatus:
+    async def _run(self, engine: RunEngine) -> RunStatus:
         try:
             return await engine.run()
         except StorageError as e:
@@ -217,7 +217,7 @@ class EngineManager:
         finally:
             self._forget(engine)
 
-    def _forget(self, engine: Engine) -> None:
+    def _forget(self, engine: RunEngine) -> None:
         """Let an ended run's engine go, unless its final status is not in storage."""
         run_id = engine.run_id
         if self._engines.get(run_id) is engine and engine.end_stored:

@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from core.engine import Engine
+from core.engine import RunEngine
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
 from core.ports import Mode, RunSpec, RunStatus, StoredRun
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     store, db_engine = _store(args.url)
     try:
         if args.resume is not None:
-            engine = Engine.restore(args.resume, store)
+            engine = RunEngine.restore(args.resume, store)
         else:
             params: dict[str, float] = {}
             if args.eta is not None:
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 world=getattr(args, "world", None) or "",
                 sensors=getattr(args, "sensors", None) or "",
             )
-            engine = Engine.create(spec, store)
+            engine = RunEngine.create(spec, store)
         return asyncio.run(_run(engine, args.quiet, stdout, stderr))
     finally:
         db_engine.dispose()
@@ -100,7 +100,7 @@ PROGRESS_EVERY_S = 5.0
 realtime mode), so a log or a pipe shows the run is alive."""
 
 
-async def _run(engine: Engine, quiet: bool, stdout: IO[str], stderr: IO[str]) -> int:
+async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str]) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, engine.interrupt)

@@ -16,8 +16,8 @@ from core.sim.channels import CHANNELS
 Source = Literal["innate", "dp", "learned", "kp", "expert", "designed"]
 SOURCES: tuple[Source, ...] = ("innate", "dp", "learned", "kp", "expert", "designed")
 Level = Literal["low", "high"]
-Mode = Literal["align", "steer", "constant"]
-MODES = ("align", "steer", "constant")
+MotionMode = Literal["align", "steer", "constant"]
+MOTION_MODES = ("align", "steer", "constant")
 OPS = ("<", "<=", ">", ">=", "==", "!=")
 
 
@@ -43,7 +43,7 @@ class Behaviour:
     speed_mps: float
     turn_dps: float
     ticks: int
-    mode: Mode = "constant"
+    mode: MotionMode = "constant"
     synthesized: bool = False
 
     def motion_vector(self, dt_s: float) -> tuple[float, float, float]:
@@ -253,8 +253,8 @@ def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
         if ticks < 1:
             raise CatalogError(f"{where}: ticks must be >= 1")
         mode = b.get("mode", "constant")
-        if mode not in MODES:
-            raise CatalogError(f"{where}: mode must be one of {', '.join(MODES)}")
+        if mode not in MOTION_MODES:
+            raise CatalogError(f"{where}: mode must be one of {', '.join(MOTION_MODES)}")
         out.append(
             Behaviour(
                 id=i,

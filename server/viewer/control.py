@@ -18,7 +18,7 @@ from dataclasses import replace
 
 from core.brain.catalog import Catalog
 from core.commands import RewardSource
-from core.engine import Engine, StatusChanged, SubscriptionClosed, TickPublished
+from core.engine import RunEngine, StatusChanged, SubscriptionClosed, TickPublished
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
 from core.ports import Mode, RunStatus
@@ -57,7 +57,7 @@ LIMITER_KEY = "3d-view"
 """The rate limiter's client name for rewards given from the panel, with the viewer's id."""
 
 
-def tick_view(engine: Engine, snap: Snapshot) -> TickView:
+def tick_view(engine: RunEngine, snap: Snapshot) -> TickView:
     """A live snapshot as the view shows it (call on the engine's event loop)."""
     brain = engine.sim.brain
     cat = brain.catalog
@@ -384,7 +384,7 @@ class Controller:
 
     async def _follow_run(self, run_id: int) -> None:
         """Push the run's tick snapshots to the renderer; wait out its pauses and restarts."""
-        shown: Engine | None = None
+        shown: RunEngine | None = None
         while True:
             engine = self.manager.get(run_id)
             if engine is None or engine.status not in ACTIVE:

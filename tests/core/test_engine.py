@@ -18,8 +18,8 @@ from core.conditions import get_condition
 from core.engine import (
     HZ_MAX,
     HZ_MIN,
-    Engine,
     RewardAck,
+    RunEngine,
     StatusChanged,
     Subscription,
     SubscriptionClosed,
@@ -50,7 +50,9 @@ def realtime(condition: str, seed: int, hz: float = 200.0) -> RunSpec:
     return RunSpec(condition, seed, None, Mode.REALTIME, hz=hz)
 
 
-async def drive(engine: Engine, script: Callable[[Engine], Coroutine[Any, Any, None]]) -> RunStatus:
+async def drive(
+    engine: RunEngine, script: Callable[[RunEngine], Coroutine[Any, Any, None]]
+) -> RunStatus:
     """Run the engine and a script beside it; the script must stop the engine."""
     async with asyncio.TaskGroup() as tg:
         runner = tg.create_task(engine.run())
@@ -58,7 +60,7 @@ async def drive(engine: Engine, script: Callable[[Engine], Coroutine[Any, Any, N
     return runner.result()
 
 
-async def wait_ticks(engine: Engine, n: int) -> None:
+async def wait_ticks(engine: RunEngine, n: int) -> None:
     target = engine.sim.tick_count + n
     while engine.sim.tick_count < target:
         await asyncio.sleep(0.001)
@@ -67,7 +69,7 @@ async def wait_ticks(engine: Engine, n: int) -> None:
 @pytest.mark.parametrize("condition", ["kp", "rp", "delayed", "dp"])
 def test_fast_mode_gives_the_same_ltm_as_the_headless_loop(condition: str) -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(fast(condition, 3, 12), store, catalog=CATALOG)
+    engine = RunEngine.create(fast(condition, 3, 12), store, catalog=CATALOG)
     assert asyncio.run(engine.run()) is RunStatus.FINISHED
     plain = headless_run(get_condition(condition), 3, 12, catalog=CATALOG)
     assert engine.sim.brain.ltm.as_dict() == plain.ltm
@@ -85,11 +87,11 @@ def test_fast_mode_gives_the_same_ltm_as_the_headless_loop(condition: str) -> No
 
 def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("kp", 1, hz=500.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("kp", 1, hz=500.0), store, catalog=CATALOG)
     sub = engine.subscribe(maxsize=10_000)
     acks = []
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 30)
         acks.append(await e.reward(1.0, note="good"))
         await wait_ticks(e, 5)
@@ -116,9 +118,9 @@ def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
 def test_a_run_replays_from_its_seed_and_command_log() -> None:
     """Rewards and edits at arbitrary moments of a realtime run, replayed in fast mode."""
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         for i in range(6):
             await wait_ticks(e, 40 + 13 * i)
             await e.reward(1.0 if i % 2 else -0.5)
@@ -138,7 +140,7 @@ def test_a_run_replays_from_its_seed_and_command_log() -> None:
     for c in store.commands(engine.run_id):
         replay_store.log_command(replay_id, c.record, LearningUpdate())
     replay_store.set_status(replay_id, RunStatus.INTERRUPTED)
-    again = Engine.restore(replay_id, replay_store, catalog=CATALOG)
+    again = RunEngine.restore(replay_id, replay_store, catalog=CATALOG)
     assert asyncio.run(again.run(until_tick=ticks)) is RunStatus.STOPPED
 
     assert again.sim.tick_count == ticks
@@ -150,7 +152,7 @@ def test_a_run_replays_from_its_seed_and_command_log() -> None:
 
 def test_shutdown_with_a_pending_reward_commits_it_and_leaves_no_task() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 2, hz=50.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("delayed", 2, hz=50.0), store, catalog=CATALOG)
 
     async def main() -> None:
         runner = asyncio.create_task(engine.run())
@@ -170,10 +172,10 @@ def test_shutdown_with_a_pending_reward_commits_it_and_leaves_no_task() -> None:
 
 def test_pause_resume_and_rewards_need_a_running_run() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 4, hz=500.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("delayed", 4, hz=500.0), store, catalog=CATALOG)
     sub = engine.subscribe(maxsize=1000)
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 5)
         e.pause()
         await asyncio.sleep(0.01)
@@ -204,10 +206,10 @@ def test_pause_resume_and_rewards_need_a_running_run() -> None:
 
 def test_an_edit_reaches_the_robot_at_the_next_boundary_and_is_logged() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("kp", 5, hz=500.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("kp", 5, hz=500.0), store, catalog=CATALOG)
     red, stop = CATALOG.stimulus("Red").id, CATALOG.behaviour("stop").id
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 3)
         assert e.sim.brain.network.get(red, stop) is None
         command_id = await e.edit(EditAssociation("Red", "stop", 1.0, "dp", locked=True))
@@ -225,9 +227,9 @@ def test_an_edit_reaches_the_robot_at_the_next_boundary_and_is_logged() -> None:
 
 
 def test_edit_of_an_unknown_stimulus_is_refused() -> None:
-    engine = Engine.create(realtime("kp", 5), InMemoryRunStore(CATALOG), catalog=CATALOG)
+    engine = RunEngine.create(realtime("kp", 5), InMemoryRunStore(CATALOG), catalog=CATALOG)
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 1)
         with pytest.raises(Exception, match="unknown stimulus"):
             await e.edit(EditAssociation("Purple", "stop", 1.0))
@@ -238,7 +240,7 @@ def test_edit_of_an_unknown_stimulus_is_refused() -> None:
 
 def test_a_slow_subscriber_never_stalls_the_tick_task() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(fast("delayed", 6, 20), store, catalog=CATALOG)
+    engine = RunEngine.create(fast("delayed", 6, 20), store, catalog=CATALOG)
     slow = engine.subscribe(maxsize=2, tick_hz=1e6)
     assert asyncio.run(engine.run()) is RunStatus.FINISHED
     assert engine.totals.episodes == 20
@@ -247,11 +249,11 @@ def test_a_slow_subscriber_never_stalls_the_tick_task() -> None:
 
 
 def test_tick_snapshots_are_throttled_per_subscriber() -> None:
-    engine = Engine.create(realtime("delayed", 8, hz=500.0), InMemoryRunStore(CATALOG))
+    engine = RunEngine.create(realtime("delayed", 8, hz=500.0), InMemoryRunStore(CATALOG))
     few = engine.subscribe(maxsize=10_000, tick_hz=20.0)
     none = engine.subscribe(maxsize=10_000)
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 100)
         e.stop()
 
@@ -264,11 +266,11 @@ def test_tick_snapshots_are_throttled_per_subscriber() -> None:
 def test_a_throttled_subscriber_sees_the_paused_tick_and_every_step() -> None:
     """Steps come faster than the throttle allows, yet each one is shown: nothing after a
     step would replace a skipped one, so a viewer would be left a tick behind for good."""
-    engine = Engine.create(realtime("delayed", 8, hz=50.0), InMemoryRunStore(CATALOG))
+    engine = RunEngine.create(realtime("delayed", 8, hz=50.0), InMemoryRunStore(CATALOG))
     sub = engine.subscribe(maxsize=10_000, tick_hz=0.5)  # one tick per 2 s at most
     shown: list[int] = []
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 5)
         e.pause()
         while e.status is not RunStatus.PAUSED:
@@ -293,7 +295,7 @@ def test_a_throttled_subscriber_sees_the_paused_tick_and_every_step() -> None:
 
 def test_a_waiting_reader_is_released_when_its_subscription_closes() -> None:
     """A stream of a run that is not ticking ends at shutdown instead of waiting forever."""
-    engine = Engine.create(fast("delayed", 3, 2), InMemoryRunStore(CATALOG))
+    engine = RunEngine.create(fast("delayed", 3, 2), InMemoryRunStore(CATALOG))
     waiting = engine.subscribe(maxsize=4)
     iterating = engine.subscribe(maxsize=4)
 
@@ -349,7 +351,7 @@ class FailingStore(InMemoryRunStore):
 
 def test_a_storage_error_ends_the_run_with_a_clear_error_and_keeps_what_was_committed() -> None:
     store = FailingStore(fail_at=3)
-    engine = Engine.create(fast("delayed", 1, 200), store, catalog=CATALOG)
+    engine = RunEngine.create(fast("delayed", 1, 200), store, catalog=CATALOG)
     with pytest.raises(StorageError, match="disk is full"):
         asyncio.run(engine.run())
     assert engine.status is RunStatus.FAILED
@@ -380,7 +382,7 @@ class SlowDiskStore(InMemoryRunStore):
 
 def test_ticks_never_wait_for_a_commit_and_what_queued_meanwhile_goes_in_one() -> None:
     store = SlowDiskStore()
-    engine = Engine.create(fast("rp", 4, 60), store, catalog=CATALOG)
+    engine = RunEngine.create(fast("rp", 4, 60), store, catalog=CATALOG)
 
     async def main() -> None:
         runner = asyncio.create_task(engine.run())
@@ -408,7 +410,7 @@ class CommandFailingStore(InMemoryRunStore):
 
 
 def test_an_edit_that_cannot_be_stored_is_answered_with_the_error_not_left_waiting() -> None:
-    engine = Engine.create(fast("kp", 2, 500), CommandFailingStore(CATALOG), catalog=CATALOG)
+    engine = RunEngine.create(fast("kp", 2, 500), CommandFailingStore(CATALOG), catalog=CATALOG)
     answered: list[BaseException] = []
 
     async def main() -> None:
@@ -430,18 +432,18 @@ def test_an_edit_that_cannot_be_stored_is_answered_with_the_error_not_left_waiti
 def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
     store = InMemoryRunStore(CATALOG)
     spec = fast("kp", 9, 16)
-    engine = Engine.create(spec, store, catalog=CATALOG)
+    engine = RunEngine.create(spec, store, catalog=CATALOG)
 
-    async def stop_midway(e: Engine) -> None:
+    async def stop_midway(e: RunEngine) -> None:
         while e.totals.episodes < 7:
             await asyncio.sleep(0)
         e.interrupt()
 
     assert asyncio.run(drive(engine, stop_midway)) is RunStatus.INTERRUPTED
     assert store.load_run(engine.run_id).status is RunStatus.INTERRUPTED
-    resumed = Engine.restore(engine.run_id, store, catalog=CATALOG)
+    resumed = RunEngine.restore(engine.run_id, store, catalog=CATALOG)
     assert asyncio.run(resumed.run()) is RunStatus.FINISHED
-    whole = Engine.create(spec, InMemoryRunStore(CATALOG), catalog=CATALOG)
+    whole = RunEngine.create(spec, InMemoryRunStore(CATALOG), catalog=CATALOG)
     asyncio.run(whole.run())
     assert resumed.sim.brain.ltm.as_dict() == whole.sim.brain.ltm.as_dict()
     assert resumed.totals == whole.totals
@@ -450,20 +452,20 @@ def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
 
 def test_a_finished_run_cannot_be_resumed_and_unknown_params_are_refused() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(fast("innate", 1, 1), store, catalog=CATALOG)
+    engine = RunEngine.create(fast("innate", 1, 1), store, catalog=CATALOG)
     asyncio.run(engine.run())
     with pytest.raises(RunStateError, match="finished"):
-        Engine.restore(engine.run_id, store, catalog=CATALOG)
+        RunEngine.restore(engine.run_id, store, catalog=CATALOG)
     with pytest.raises(ValueError, match="unknown learning parameters: gamma"):
-        Engine.create(fast("kp", 1, 1, gamma=0.5), store, catalog=CATALOG)
+        RunEngine.create(fast("kp", 1, 1, gamma=0.5), store, catalog=CATALOG)
     with pytest.raises(RunStateError, match="qlambda"):
-        Engine.create(fast("qlambda", 1, 1), store, catalog=CATALOG)
+        RunEngine.create(fast("qlambda", 1, 1), store, catalog=CATALOG)
 
 
 def test_realtime_pacing_is_measured() -> None:
-    engine = Engine.create(realtime("delayed", 1, hz=100.0), InMemoryRunStore(CATALOG))
+    engine = RunEngine.create(realtime("delayed", 1, hz=100.0), InMemoryRunStore(CATALOG))
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 20)
         e.set_rate(200.0)
         assert e.hz == 200.0
@@ -481,8 +483,8 @@ def test_realtime_pacing_is_measured() -> None:
 def test_a_tick_rate_out_of_bounds_is_refused(hz: float) -> None:
     store = InMemoryRunStore(CATALOG)
     with pytest.raises(ValueError, match=r"hz must be a number from 0\.5 to 1000"):
-        Engine.create(realtime("delayed", 1, hz=hz), store)
-    engine = Engine.create(realtime("delayed", 1, hz=HZ_MIN), store)
+        RunEngine.create(realtime("delayed", 1, hz=hz), store)
+    engine = RunEngine.create(realtime("delayed", 1, hz=HZ_MIN), store)
     with pytest.raises(ValueError, match="hz must be"):
         engine.set_rate(hz)
     assert engine.hz == HZ_MIN
@@ -490,17 +492,21 @@ def test_a_tick_rate_out_of_bounds_is_refused(hz: float) -> None:
 
 def test_a_run_stored_with_a_tiny_rate_ticks_at_the_slowest_bounded_one() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 1, hz=HZ_MIN), store)
+    engine = RunEngine.create(realtime("delayed", 1, hz=HZ_MIN), store)
     store._runs[engine.run_id].spec = replace(engine.spec, hz=1e-300)
-    assert Engine.restore(engine.run_id, store).hz == HZ_MIN
+    assert RunEngine.restore(engine.run_id, store).hz == HZ_MIN
 
 
-def sleepy(pacer: ManualPacer) -> Engine:
+def sleepy(pacer: ManualPacer) -> RunEngine:
     """A realtime run at the slowest rate on `pacer`'s clock."""
-    return Engine.create(realtime("delayed", 1, hz=HZ_MIN), InMemoryRunStore(CATALOG), pacer=pacer)
+    return RunEngine.create(
+        realtime("delayed", 1, hz=HZ_MIN), InMemoryRunStore(CATALOG), pacer=pacer
+    )
 
 
-async def _asleep_after_first_tick(pacer: ManualPacer, engine: Engine) -> asyncio.Task[RunStatus]:
+async def _asleep_after_first_tick(
+    pacer: ManualPacer, engine: RunEngine
+) -> asyncio.Task[RunStatus]:
     task = asyncio.create_task(engine.run())
     await pacer.until(lambda: engine.stats.ticks == 1 and pacer.sleeping == 1)
     return task
@@ -597,7 +603,7 @@ def test_a_tick_sleeps_to_near_its_deadline_then_the_rest(
 
 
 def test_episode_end_events_reach_subscribers() -> None:
-    engine = Engine.create(fast("expert", 2, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
+    engine = RunEngine.create(fast("expert", 2, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
     sub = engine.subscribe(maxsize=100)
     asyncio.run(engine.run())
     ended = [ev for ev in sub.drain() if isinstance(ev, EpisodeEnded)]
@@ -607,9 +613,9 @@ def test_episode_end_events_reach_subscribers() -> None:
 def test_acknowledgements_do_not_wait_for_tick_boundaries() -> None:
     """Trainer rewards are acknowledged once logged, not after the previous one applies."""
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 3, hz=2.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("delayed", 3, hz=2.0), store, catalog=CATALOG)
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 1)
         before = e.sim.tick_count
         acks = [await e.reward(0.5, note=str(i)) for i in range(3)]
@@ -625,16 +631,16 @@ def test_acknowledgements_do_not_wait_for_tick_boundaries() -> None:
 
 def test_a_stream_of_rewards_never_holds_a_boundary_open() -> None:
     store = InMemoryRunStore(CATALOG)
-    engine = Engine.create(realtime("delayed", 3, hz=200.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("delayed", 3, hz=200.0), store, catalog=CATALOG)
 
-    async def trainer(e: Engine) -> None:
+    async def trainer(e: RunEngine) -> None:
         while e.status is RunStatus.RUNNING:
             try:
                 await e.reward(0.1)
             except RunStateError:
                 return
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 1)
         async with asyncio.TaskGroup() as tg:
             for _ in range(8):
@@ -673,10 +679,10 @@ def test_an_episode_ending_while_a_reward_waits_for_its_log_resumes_to_the_same_
     """The reward is in the episode's state before it has a log id: its checkpoint waits
     for the log entry and names it, so a resumed run does not apply the reward twice."""
     store = HeldLog(fail=False)
-    engine = Engine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
     held: list[int] = []
 
-    async def script(e: Engine) -> None:
+    async def script(e: RunEngine) -> None:
         await wait_ticks(e, 40)
         await e.reward(1.0)
         slow = asyncio.create_task(e.reward(-0.5))
@@ -697,7 +703,7 @@ def test_an_episode_ending_while_a_reward_waits_for_its_log_resumes_to_the_same_
     assert held == [0], "the episode's checkpoint waited for the reward's log entry"
     ticks = engine.sim.tick_count
     store.set_status(engine.run_id, RunStatus.INTERRUPTED)
-    again = Engine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
+    again = RunEngine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
     assert asyncio.run(again.run(until_tick=ticks)) is RunStatus.STOPPED
     assert again.sim.tick_count == ticks
     assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
@@ -709,7 +715,7 @@ def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward
     fails, the run fails, the reward and those acknowledged after it get the error, and
     nothing of it is stored."""
     store = HeldLog(fail=True)
-    engine = Engine.create(realtime("rp", 1), store, catalog=CATALOG)
+    engine = RunEngine.create(realtime("rp", 1), store, catalog=CATALOG)
 
     async def scenario() -> tuple[int, list[RewardAck | BaseException]]:
         run = asyncio.create_task(engine.run())

@@ -9,7 +9,7 @@ from fakes import InMemoryRunStore
 
 from core.brain.catalog import load_catalog, sensor_definitions
 from core.conditions import get_condition
-from core.engine import Engine
+from core.engine import RunEngine
 from core.errors import CatalogError, UnknownNameError
 from core.ports import Mode, RunSpec, RunStatus
 from core.setup import Setup, default_sensors, network_specs
@@ -21,7 +21,7 @@ OTHER_SENSORS = next(d for d in sensor_definitions() if d != default_sensors())
 """A sensor definition that is not the default."""
 
 
-def pairs(engine: Engine) -> set[tuple[str, str, float, str]]:
+def pairs(engine: RunEngine) -> set[tuple[str, str, float, str]]:
     cat = engine.sim.brain.catalog
     return {
         (cat.stimuli[a.stimulus].name, cat.behaviours[a.behaviour].name, a.strength, a.source)
@@ -32,7 +32,7 @@ def pairs(engine: Engine) -> set[tuple[str, str, float, str]]:
 def test_create_stores_the_defaults_by_name() -> None:
     store = InMemoryRunStore(load_catalog())
 
-    engine = Engine.create(RunSpec("dp", 1, 1), store)
+    engine = RunEngine.create(RunSpec("dp", 1, 1), store)
 
     stored = store.load_run(engine.run_id).spec
     assert (stored.world, stored.sensors) == (default_world(), default_sensors())
@@ -45,7 +45,7 @@ def test_create_runs_in_the_named_world_and_sensor_definition() -> None:
     store = InMemoryRunStore(load_catalog())
     setup = Setup(OTHER_WORLD, OTHER_SENSORS)
 
-    engine = Engine.create(RunSpec("dp", 1, 1, world=OTHER_WORLD, sensors=OTHER_SENSORS), store)
+    engine = RunEngine.create(RunSpec("dp", 1, 1, world=OTHER_WORLD, sensors=OTHER_SENSORS), store)
 
     assert store.load_run(engine.run_id).spec.sensors == OTHER_SENSORS
     assert engine.sim.brain.catalog.definition == OTHER_SENSORS
@@ -59,7 +59,7 @@ def test_create_runs_in_the_named_world_and_sensor_definition() -> None:
 def test_a_named_knowledge_set_is_taken_in_the_definitions_variant() -> None:
     store = InMemoryRunStore(load_catalog())
 
-    engine = Engine.create(RunSpec("kp", 1, 1, network="dp", sensors=OTHER_SENSORS), store)
+    engine = RunEngine.create(RunSpec("kp", 1, 1, network="dp", sensors=OTHER_SENSORS), store)
 
     catalog = load_catalog(sensors=OTHER_SENSORS)
     variant = catalog.knowledge_set(catalog.network_name("dp"))
@@ -71,10 +71,10 @@ def test_a_named_knowledge_set_is_taken_in_the_definitions_variant() -> None:
 def test_a_restored_run_uses_its_stored_world_and_sensor_definition() -> None:
     store = InMemoryRunStore(load_catalog())
     spec = RunSpec("kp", 4, None, Mode.FAST, world=OTHER_WORLD, sensors=OTHER_SENSORS)
-    engine = Engine.create(spec, store)
+    engine = RunEngine.create(spec, store)
     assert asyncio.run(engine.run(until_tick=300)) is RunStatus.STOPPED
 
-    restored = Engine.restore(engine.run_id, store)
+    restored = RunEngine.restore(engine.run_id, store)
 
     preset = load_world(OTHER_WORLD).config
     assert restored.spec.world == OTHER_WORLD and restored.spec.sensors == OTHER_SENSORS
@@ -90,16 +90,18 @@ def test_a_catalogue_of_another_definition_is_refused() -> None:
     store = InMemoryRunStore(load_catalog())
     default, other = default_sensors(), OTHER_SENSORS
     with pytest.raises(CatalogError, match=f"sensor definition '{default}', the run '{other}'"):
-        Engine.create(RunSpec("dp", 1, 1, sensors=other), store, catalog=load_catalog())
-    engine = Engine.create(RunSpec("dp", 1, 1, sensors=other), store)
+        RunEngine.create(RunSpec("dp", 1, 1, sensors=other), store, catalog=load_catalog())
+    engine = RunEngine.create(RunSpec("dp", 1, 1, sensors=other), store)
     with pytest.raises(CatalogError, match="sensor definition"):
-        Engine.restore(engine.run_id, store, catalog=load_catalog())
+        RunEngine.restore(engine.run_id, store, catalog=load_catalog())
 
 
 def test_a_spec_naming_no_definition_takes_the_given_catalogues() -> None:
     store = InMemoryRunStore(load_catalog())
 
-    engine = Engine.create(RunSpec("dp", 1, 1), store, catalog=load_catalog(sensors=OTHER_SENSORS))
+    engine = RunEngine.create(
+        RunSpec("dp", 1, 1), store, catalog=load_catalog(sensors=OTHER_SENSORS)
+    )
 
     assert store.load_run(engine.run_id).spec.sensors == OTHER_SENSORS
     assert engine.sim.brain.catalog.definition == OTHER_SENSORS
@@ -117,5 +119,5 @@ def test_an_unknown_world_or_definition_is_refused_naming_the_known_ones(
 ) -> None:
     store = InMemoryRunStore(load_catalog())
     with pytest.raises(UnknownNameError, match=f"{message} \\(known: "):
-        Engine.create(spec, store)
+        RunEngine.create(spec, store)
     assert store.list_runs() == []

@@ -15,7 +15,7 @@ import os
 import random
 import sys
 
-from core.engine import Engine
+from core.engine import RunEngine
 from core.errors import UnknownRunError
 from core.ports import Mode, RunSpec, RunStatus
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
@@ -30,11 +30,11 @@ async def main(url: str, ack_path: str, seed: int) -> None:
     except UnknownRunError:
         run = None
     if run is None:
-        engine = Engine.create(SPEC, store)
+        engine = RunEngine.create(SPEC, store)
     else:
         if run.status is RunStatus.RUNNING:
             store.set_status(1, RunStatus.INTERRUPTED)
-        engine = Engine.restore(1, store)
+        engine = RunEngine.restore(1, store)
     rng = random.Random(seed)
     fd = os.open(ack_path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
 

@@ -10,7 +10,7 @@ from sqlalchemy import Engine as DbEngine
 
 from core.brain.catalog import Catalog
 from core.conditions import get_condition
-from core.engine import Engine
+from core.engine import RunEngine
 from core.errors import UnknownRunError
 from core.ports import Mode, RunSpec, RunStatus
 from core.runner import run as headless_run
@@ -75,7 +75,7 @@ def test_a_clock_needs_a_tick() -> None:
 def run_stored(
     store: SqlAlchemyRunStore, catalog: Catalog, condition: str, seed: int, n: int
 ) -> int:
-    engine = Engine.create(RunSpec(condition, seed, n, Mode.FAST), store, catalog=catalog)
+    engine = RunEngine.create(RunSpec(condition, seed, n, Mode.FAST), store, catalog=catalog)
     assert asyncio.run(engine.run()) is RunStatus.FINISHED
     return engine.run_id
 

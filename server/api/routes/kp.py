@@ -10,7 +10,7 @@ from starlette.concurrency import run_in_threadpool as io
 from core.brain.catalog import Catalog
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
-from core.engine import Engine
+from core.engine import RunEngine
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
@@ -65,7 +65,7 @@ def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpPro
     )
 
 
-def _live(run_id: int, engine: Engine, kp: KnowledgePropagation) -> KpPublic:
+def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
     """Read on the event loop, between ticks: the engine mutates it only there."""
     sim = engine.sim
     dt_s = kp.dt_s

@@ -10,7 +10,7 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, st
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import Engine
+from core.engine import RunEngine
 from core.errors import UnknownNameError
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.sim.track import TrackGeometry
@@ -48,7 +48,7 @@ def _ms(x: float) -> float | None:
     return None if math.isnan(x) else x * 1000
 
 
-def _live_state(engine: Engine) -> LiveState:
+def _live_state(engine: RunEngine) -> LiveState:
     stats = engine.stats
     return LiveState(
         tick=engine.sim.tick_count,
@@ -92,7 +92,7 @@ def _public(
     )
 
 
-def _of_engine(engine: Engine) -> RunPublic:
+def _of_engine(engine: RunEngine) -> RunPublic:
     """A run's state from its engine, without touching the database."""
     return _public(
         engine.run_id,
@@ -187,7 +187,7 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     return await _run(store, engines, run_id)
 
 
-def _live(engines: EnginesDep, run_id: int) -> Engine:
+def _live(engines: EnginesDep, run_id: int) -> RunEngine:
     engine = engines.get(run_id)
     if engine is None:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
@@ -199,7 +199,7 @@ async def _control(
     store: StoreDep,
     engines: EnginesDep,
     allowed: tuple[str, ...],
-    action: Callable[[Engine], None],
+    action: Callable[[RunEngine], None],
 ) -> RunPublic:
     """Apply `action` to a live run whose status is one of `allowed` (409 otherwise)."""
     await io(store.run_summary, run_id)
@@ -213,13 +213,13 @@ async def _control(
 @router.post("/{run_id}/pause", dependencies=[WriteGuard])
 async def pause_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Stop ticking until resumed."""
-    return await _control(run_id, store, engines, ("running",), Engine.pause)
+    return await _control(run_id, store, engines, ("running",), RunEngine.pause)
 
 
 @router.post("/{run_id}/resume", dependencies=[WriteGuard])
 async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Tick again after a pause."""
-    return await _control(run_id, store, engines, ("paused",), Engine.resume)
+    return await _control(run_id, store, engines, ("paused",), RunEngine.resume)
 
 
 @router.post(
@@ -321,7 +321,7 @@ async def stop_run(
     ended within 10 s (storage slow to take its last writes) gets 202 with its status as
     now; it ends all the same, and GET /api/runs/{id} says when.
     """
-    await _control(run_id, store, engines, ("running", "paused"), Engine.stop)
+    await _control(run_id, store, engines, ("running", "paused"), RunEngine.stop)
     if not await engines.ended(run_id, STOP_WAIT_S):
         response.status_code = status.HTTP_202_ACCEPTED
     return await _run(store, engines, run_id)
