@@ -1,16 +1,28 @@
 """What the engine needs from the outside: storage and event sinks, as Protocols.
 
-`server/persistence` implements `RunStore` with SQLAlchemy; `tests/fakes.py` with memory.
+`server/persistence` implements `RunStore` and `NetworkRepository` with SQLAlchemy;
+`tests/fakes.py` with memory.
 Every method is synchronous and durable when it returns; the engine calls them from a
 worker thread so the event loop never blocks on I/O.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:  # core.networks imports this module's values
+    from core.networks import (
+        AssociationChange,
+        NetworkEdit,
+        NetworkSnapshot,
+        NetworkSummary,
+        NetworkVersion,
+        Precondition,
+        StoredNetwork,
+    )
 
 
 class RunStatus(StrEnum):
@@ -275,4 +287,122 @@ class EventSink(Protocol):
 
     def offer(self, event: object) -> bool:
         """Take an event without blocking; False when it had to be dropped."""
+        ...
+
+
+class NetworkRepository(Protocol):
+    """Stored networks (the S-R editor's subject), their associations and edit history.
+
+    Each method is one transaction that applies `core.networks`' rules. Unknown networks,
+    versions and addressed pairs raise `UnknownNameError`; invalid input raises `ValueError`
+    or `CatalogError`; conflicts (a taken name, a built-in network, an existing pair) raise
+    `NetworkConflictError`, a locked association changed without `force`
+    `LockedAssociationError`, and a write whose `expected` is no longer current
+    `StaleVersionError`. A write that changes nothing makes no version.
+    """
+
+    def summaries(self) -> tuple[NetworkSummary, ...]:
+        """Every network without its associations: built-in ones first, then by name."""
+        ...
+
+    def get(self, name: str) -> StoredNetwork:
+        """A network with its associations, in catalogue order."""
+        ...
+
+    def pairs(self, name: str) -> tuple[NetworkPair, ...]:
+        """A network's associations in the order they were stored (a run's start)."""
+        ...
+
+    def create(
+        self,
+        name: str,
+        *,
+        description: str = "",
+        base: str | None = "innate",
+        associations: Iterable[NetworkPair] = (),
+        note: str = "",
+    ) -> StoredNetwork:
+        """A new, editable network at version 1: `base` (None: empty) with `associations`."""
+        ...
+
+    def delete(self, name: str, *, expected: Precondition | None = None) -> None:
+        """Delete an editable network and its history."""
+        ...
+
+    def add_association(
+        self,
+        name: str,
+        pair: NetworkPair,
+        *,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
+        """Add an association the network lacks."""
+        ...
+
+    def put_association(
+        self,
+        name: str,
+        stimulus: str,
+        behaviour: str,
+        *,
+        strength: float | None = None,
+        source: str | None = None,
+        locked: bool | None = None,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
+        """Set an association (insert or update); None keeps a value."""
+        ...
+
+    def remove_association(
+        self,
+        name: str,
+        stimulus: str,
+        behaviour: str,
+        *,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
+        """Remove an association."""
+        ...
+
+    def versions(self, name: str) -> tuple[NetworkVersion, ...]:
+        """A network's edit history, oldest first."""
+        ...
+
+    def snapshot(self, name: str, version: int) -> NetworkSnapshot:
+        """The network as it was at `version`."""
+        ...
+
+    def diff(self, name: str, from_version: int, to_version: int) -> tuple[AssociationChange, ...]:
+        """What changed between two versions of a network (either order)."""
+        ...
+
+    def revert(
+        self,
+        name: str,
+        version: int,
+        *,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
+        """Make the network what it was at `version`, as a new version."""
+        ...
+
+    def import_network(
+        self,
+        name: str,
+        associations: Iterable[NetworkPair],
+        *,
+        description: str = "",
+        replace: bool = False,
+        force: bool = False,
+        note: str = "",
+        expected: Precondition | None = None,
+    ) -> NetworkEdit:
+        """Store an imported network: a new one, or with `replace` a new version of one."""
         ...
