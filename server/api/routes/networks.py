@@ -10,29 +10,19 @@ tick boundary; without it running robots are untouched.
 
 from __future__ import annotations
 
-import asyncio
-import logging
 import re
-from collections.abc import Callable, Iterable, Sequence
-from typing import Annotated, Any, TypeVar, cast
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Annotated, Any, cast
 
 from fastapi import APIRouter, Depends, Header, Path, Query, Response, status
 from fastapi.exceptions import RequestValidationError
-from starlette.concurrency import run_in_threadpool
 
 from core.brain.catalog import Catalog, Source
-from core.commands import EditAssociation
-from core.engine import Engine
-from core.errors import RunStateError, StorageError
-from core.ports import NetworkPair, RunStatus
-from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, WriteGuard
+from core.networks import Precondition, ReadOnlyNetworkError, StoredNetwork
+from core.ports import NetworkPair
+from server.api.deps import NetworksDep, StateDep, WriteGuard
 from server.api.errors import ErrorPublic, StalePublic
-from server.persistence.networks import (
-    AssociationChange,
-    NetworkEdit,
-    Precondition,
-    StoredNetwork,
-)
 from server.schemas import (
     NETWORK_FORMAT,
     NETWORK_NAME,
@@ -54,10 +44,9 @@ from server.schemas import (
     NetworkVersionsPublic,
     NetworkWritten,
 )
+from server.services.networks import NetworkService, Written
 
-log = logging.getLogger("srlab.networks")
 router = APIRouter(prefix="/networks", tags=["networks"])
-_T = TypeVar("_T")
 
 NetworkName = Annotated[str, Path(max_length=100, description="a stored network's name")]
 StimulusName = Annotated[str, Path(max_length=100, description="a stimulus name")]
@@ -127,13 +116,30 @@ def _precondition(
 Expected = Annotated[Precondition | None, Depends(_precondition)]
 
 
+def _service(state: StateDep) -> NetworkService:
+    return NetworkService(state.networks, state.engines, state.run_networks)
+
+
+Service = Annotated[NetworkService, Depends(_service)]
+
+
+@contextmanager
+def _answers() -> Iterator[None]:
+    """The core's refusals as the API words them: a built-in network names its copy's request."""
+    try:
+        yield
+    except ReadOnlyNetworkError as e:
+        name, what = e.network, e.what
+        raise ReadOnlyNetworkError(
+            name,
+            what,
+            f"network {name!r} is built in and cannot be {what}: copy it first with "
+            f'POST /api/networks {{"name": "my-{name}", "base": "{name}"}} and edit the copy',
+        ) from e
+
+
 def _tag(response: Response, network: StoredNetwork) -> None:
     response.headers["ETag"] = network.etag
-
-
-async def _call(fn: Callable[..., _T], *args: Any, **kwargs: Any) -> _T:
-    """A repository call off the event loop, so ticking runs never wait on the database."""
-    return await run_in_threadpool(fn, *args, **kwargs)
 
 
 def _association(p: NetworkPair) -> AssociationPublic:
@@ -193,55 +199,6 @@ def _check_names(
         raise RequestValidationError(errors)
 
 
-def _edit(change: AssociationChange) -> EditAssociation:
-    after = change.after
-    if after is None:
-        return EditAssociation(change.stimulus, change.behaviour, None)
-    return EditAssociation(
-        change.stimulus, change.behaviour, after.strength, after.source, after.locked
-    )
-
-
-async def _push(engine: Engine, edits: Sequence[EditAssociation]) -> bool:
-    # Queued together, the edits land at the same tick boundary, in order.
-    results = await asyncio.gather(*(engine.edit(e) for e in edits), return_exceptions=True)
-    failed = [r for r in results if isinstance(r, BaseException)]
-    for r in failed:
-        if not isinstance(r, RunStateError | StorageError):
-            raise r
-        log.warning("live edit of run %s not applied: %s", engine.run_id, r)
-    return not failed
-
-
-def started_from(state: AppState, engine: Engine, network: StoredNetwork) -> bool:
-    """Whether a run was started from this very network (not an earlier one of its name).
-
-    A run keeps its network's id (`RunSpec.network_id`, stored with the run); deleting the
-    network clears it, in the store (its foreign key) and here for the engines running
-    (SQLite may give the id to the next network).
-    """
-    if engine.spec.network != network.name:
-        return False
-    network_id = state.run_networks.get(engine.run_id, engine.spec.network_id)
-    return network_id is not None and network_id == network.id
-
-
-async def _live(
-    state: AppState, network: StoredNetwork, changes: Iterable[AssociationChange], live: bool
-) -> list[int]:
-    """Give every running run started from `network` the same changes."""
-    edits = [_edit(c) for c in changes]
-    if not live or not edits:
-        return []
-    targets = [
-        e
-        for e in state.engines.engines()
-        if e.status in (RunStatus.RUNNING, RunStatus.PAUSED) and started_from(state, e, network)
-    ]
-    reached = await asyncio.gather(*(_push(e, edits) for e in targets))
-    return sorted(e.run_id for e, ok in zip(targets, reached, strict=True) if ok)
-
-
 @router.get("")
 def list_networks(networks: NetworksDep) -> NetworksPublic:
     """Every stored network, built-in ones first, with its version and size."""
@@ -270,15 +227,14 @@ def list_networks(networks: NetworksDep) -> NetworksPublic:
     },
 )
 async def create_network(
-    body: NetworkCreate, networks: NetworksDep, state: StateDep, note: Note = ""
+    body: NetworkCreate, service: Service, state: StateDep, note: Note = ""
 ) -> NetworkPublic:
     """Create an editable network: a copy of `base` (innate by default, null for none).
 
     This is how a built-in network is edited: copy it and change the copy.
     """
     _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
-    created = await _call(
-        networks.create,
+    created = await service.create(
         body.name,
         description=body.description,
         base=body.base,
@@ -305,8 +261,7 @@ async def create_network(
 async def import_network(
     body: NetworkDocument,
     response: Response,
-    networks: NetworksDep,
-    engines: EnginesDep,
+    service: Service,
     state: StateDep,
     expected: Expected,
     name: Annotated[
@@ -323,21 +278,21 @@ async def import_network(
     """Import a document GET .../export gave: 201 as a new network, 200 when replacing one."""
     target = name or body.name
     _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
-    edit: NetworkEdit = await _call(
-        networks.import_network,
-        target,
-        [_pair(a) for a in body.associations],
-        description=body.description,
-        replace=replace,
-        force=force,
-        note=note,
-        expected=expected,
-    )
-    if not edit.created:
+    with _answers():
+        written = await service.import_network(
+            target,
+            [_pair(a) for a in body.associations],
+            description=body.description,
+            replace=replace,
+            force=force,
+            note=note,
+            expected=expected,
+            live=live,
+        )
+    if not written.edit.created:
         response.status_code = status.HTTP_200_OK
-    _tag(response, edit.network)
-    live_runs = await _live(state, edit.network, () if edit.created else edit.changes, live)
-    return _written(edit.network, live_runs)
+    _tag(response, written.edit.network)
+    return _written(written.edit.network, written.live_runs)
 
 
 @router.get("/{name}", responses={**_NOT_FOUND, 200: {"headers": _ETAG}})
@@ -359,18 +314,13 @@ def get_network(name: NetworkName, networks: NetworksDep, response: Response) ->
         **_STALE,
     },
 )
-async def delete_network(
-    name: NetworkName, networks: NetworksDep, state: StateDep, expected: Expected
-) -> Response:
+async def delete_network(name: NetworkName, service: Service, expected: Expected) -> Response:
     """Delete a network and its history; built-in networks cannot be deleted.
 
     Runs started from it keep the copy they started with; live edits no longer reach them.
     """
-    network = await _call(networks.get, name)
-    await _call(networks.delete, name, expected=expected)
-    for engine in state.engines.engines():
-        if started_from(state, engine, network):
-            state.run_networks[engine.run_id] = None  # its network is gone
+    with _answers():
+        await service.delete(name, expected=expected)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
@@ -385,10 +335,8 @@ def list_associations(
     return NetworkAssociationsPublic(data=data, count=len(data), version=n.version)
 
 
-def _association_written(
-    edit: NetworkEdit, stimulus: str, behaviour: str, live_runs: list[int]
-) -> AssociationWritten:
-    n = edit.network
+def _association_written(written: Written, stimulus: str, behaviour: str) -> AssociationWritten:
+    n, live_runs = written.edit.network, written.live_runs
     pair = next(p for p in n.associations if (p.stimulus, p.behaviour) == (stimulus, behaviour))
     return AssociationWritten(
         **_association(pair).model_dump(), network=n.name, version=n.version, live_runs=live_runs
@@ -412,7 +360,7 @@ def _association_written(
 async def add_association(
     name: NetworkName,
     body: AssociationCreate,
-    networks: NetworksDep,
+    service: Service,
     state: StateDep,
     response: Response,
     expected: Expected,
@@ -421,10 +369,12 @@ async def add_association(
 ) -> AssociationWritten:
     """Add an association the network does not have yet (PUT changes one it has)."""
     _check_names(state.catalog, [body], ("body",), many=False)
-    edit = await _call(networks.add_association, name, _pair(body), note=note, expected=expected)
-    _tag(response, edit.network)
-    live_runs = await _live(state, edit.network, edit.changes, live)
-    return _association_written(edit, body.stimulus, body.behaviour, live_runs)
+    with _answers():
+        written = await service.add_association(
+            name, _pair(body), note=note, expected=expected, live=live
+        )
+    _tag(response, written.edit.network)
+    return _association_written(written, body.stimulus, body.behaviour)
 
 
 @router.put(
@@ -441,8 +391,7 @@ async def put_association(
     stimulus: StimulusName,
     behaviour: BehaviourName,
     body: AssociationUpdate,
-    networks: NetworksDep,
-    state: StateDep,
+    service: Service,
     response: Response,
     expected: Expected,
     force: Force = False,
@@ -455,25 +404,21 @@ async def put_association(
     with `force=true`. With `live=true` running runs get the association as it now is, even
     when the stored network did not change (a way to push a stored edit to them later).
     """
-    edit = await _call(
-        networks.put_association,
-        name,
-        stimulus,
-        behaviour,
-        strength=body.strength,
-        source=body.source,
-        locked=body.locked,
-        force=force,
-        note=note,
-        expected=expected,
-    )
-    _tag(response, edit.network)
-    pair = next(
-        p for p in edit.network.associations if (p.stimulus, p.behaviour) == (stimulus, behaviour)
-    )
-    current = AssociationChange(stimulus, behaviour, None, pair)
-    live_runs = await _live(state, edit.network, [current], live)
-    return _association_written(edit, stimulus, behaviour, live_runs)
+    with _answers():
+        written = await service.put_association(
+            name,
+            stimulus,
+            behaviour,
+            strength=body.strength,
+            source=body.source,
+            locked=body.locked,
+            force=force,
+            note=note,
+            expected=expected,
+            live=live,
+        )
+    _tag(response, written.edit.network)
+    return _association_written(written, stimulus, behaviour)
 
 
 @router.delete(
@@ -505,28 +450,22 @@ async def remove_association(
     name: NetworkName,
     stimulus: StimulusName,
     behaviour: BehaviourName,
-    networks: NetworksDep,
-    state: StateDep,
+    service: Service,
     expected: Expected,
     force: Force = False,
     live: Live = False,
     note: Note = "",
 ) -> Response:
     """Remove an association; a locked one only with `force=true`."""
-    edit = await _call(
-        networks.remove_association,
-        name,
-        stimulus,
-        behaviour,
-        force=force,
-        note=note,
-        expected=expected,
-    )
-    live_runs = await _live(state, edit.network, edit.changes, live)
+    with _answers():
+        written = await service.remove_association(
+            name, stimulus, behaviour, force=force, note=note, expected=expected, live=live
+        )
+    network = written.edit.network
     headers = {
-        "ETag": edit.network.etag,
-        VERSION_HEADER: str(edit.network.version),
-        LIVE_RUNS_HEADER: ",".join(map(str, live_runs)),
+        "ETag": network.etag,
+        VERSION_HEADER: str(network.version),
+        LIVE_RUNS_HEADER: ",".join(map(str, written.live_runs)),
     }
     return Response(status_code=status.HTTP_204_NO_CONTENT, headers=headers)
 
@@ -619,8 +558,7 @@ def diff_versions(
 async def revert_network(
     name: NetworkName,
     body: NetworkRevert,
-    networks: NetworksDep,
-    state: StateDep,
+    service: Service,
     response: Response,
     expected: Expected,
     force: Force = False,
@@ -631,11 +569,12 @@ async def revert_network(
 
     Changing or removing locked associations needs `force=true`.
     """
-    edit = await _call(
-        networks.revert, name, body.version, force=force, note=note, expected=expected
-    )
-    _tag(response, edit.network)
-    return _written(edit.network, await _live(state, edit.network, edit.changes, live))
+    with _answers():
+        written = await service.revert(
+            name, body.version, force=force, note=note, expected=expected, live=live
+        )
+    _tag(response, written.edit.network)
+    return _written(written.edit.network, written.live_runs)
 
 
 @router.get("/{name}/export", responses=_NOT_FOUND)

@@ -1,0 +1,1 @@
+"""Application services: what the routes call when a use case is more than one port call."""
