@@ -1,19 +1,16 @@
 """Named networks (the S-R editor's subject) in the database, with their edit history.
 
-Every change is one transaction that bumps `networks.version` and appends the whole
-network to `network_versions`, so any version can be read, compared and reverted to.
-Built-in networks (the catalogue's innate, dp, kp and expert) are read-only: copy one to
-edit it. A locked association changes only when the caller forces it.
+Storage only: the editor's rules (built-ins read-only, locks, versions, an edit that
+changes nothing makes none) are `core.networks`'. Each method is one transaction that
+loads a network's rows, asks the domain for a `Revision` and saves it: a version bumps
+`networks.version` and appends the whole network to `network_versions`, so any version can
+be read, compared and reverted to.
 """
 
 from __future__ import annotations
 
-import hashlib
-import math
-import re
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import AbstractContextManager, suppress
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
@@ -21,13 +18,31 @@ from sqlalchemy import exc as sa_exc
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
-from core.brain.catalog import SOURCES
-from core.errors import (
-    CatalogError,
-    CoreError,
-    LockedAssociationError,
-    RunStateError,
-    UnknownNameError,
+from core import networks as domain
+from core.errors import UnknownNameError
+from core.networks import (
+    NAME_PATTERN,
+    AssociationChange,
+    AssociationExistsError,
+    Key,
+    Network,
+    NetworkConflictError,
+    NetworkEdit,
+    NetworkExistsError,
+    NetworkSnapshot,
+    NetworkSummary,
+    NetworkVersion,
+    Precondition,
+    ReadOnlyNetworkError,
+    Revision,
+    StaleVersionError,
+    StoredNetwork,
+    UnknownVersionError,
+    Vocabulary,
+    changes_between,
+    check_name,
+    check_pair,
+    etag_of,
 )
 from core.ports import NetworkPair
 from server.persistence.db import transaction
@@ -40,199 +55,29 @@ from server.persistence.orm import (
 )
 from server.persistence.seed import SEEDED_NOTE
 
-NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
-"""A network's name: a slug of letters, digits, - and _, 1 to 64 characters."""
-_NAME = re.compile(NAME_PATTERN)
+__all__ = [
+    "FIRST_RECORDED_NOTE",
+    "NAME_PATTERN",
+    "AssociationChange",
+    "AssociationExistsError",
+    "NetworkConflictError",
+    "NetworkEdit",
+    "NetworkExistsError",
+    "NetworkSnapshot",
+    "NetworkSummary",
+    "NetworkVersion",
+    "Precondition",
+    "ReadOnlyNetworkError",
+    "SqlAlchemyNetworkRepository",
+    "StaleVersionError",
+    "StoredNetwork",
+    "UnknownVersionError",
+    "changes_between",
+    "check_name",
+    "check_pair",
+]
+
 FIRST_RECORDED_NOTE = "recorded as found before its first change"
-_Key = tuple[str, str]
-
-
-class NetworkConflictError(RunStateError):
-    """A network write that conflicts with what is stored (answered 409, as RunStateError)."""
-
-
-class NetworkExistsError(NetworkConflictError):
-    """A network of that name exists already."""
-
-
-class ReadOnlyNetworkError(NetworkConflictError):
-    """A write to a built-in network: they are read-only, copy one to edit it."""
-
-
-class AssociationExistsError(NetworkConflictError):
-    """An association added that the network has already (change it instead)."""
-
-
-class UnknownVersionError(UnknownNameError):
-    """A version a network's history does not have."""
-
-
-class StaleVersionError(CoreError):
-    """A write based on a version of the network that is no longer current (HTTP 412)."""
-
-    def __init__(self, message: str, current: int, etag: str) -> None:
-        super().__init__(message)
-        self.current = current
-        self.etag = etag
-
-
-def etag_of(row: NetworkRow, state: Mapping[_Key, NetworkPair]) -> str:
-    """The entity tag of one version of one network, as HTTP's `ETag`.
-
-    The version, and a digest of what makes it this network's version: its row (SQLite
-    gives a deleted network's id to the next one), its creation time and its content.
-    """
-    content = sorted(
-        (p.stimulus, p.behaviour, p.strength, p.source, p.locked) for p in state.values()
-    )
-    identity = [row.id, str(row.created_at), row.version, row.description, content]
-    digest = hashlib.sha256(repr(identity).encode()).hexdigest()[:12]
-    return f'"v{row.version}-{digest}"'
-
-
-@dataclass(frozen=True, slots=True)
-class Precondition:
-    """What a write expects of the network: a version, or one of some entity tags."""
-
-    version: int | None = None
-    etags: tuple[str, ...] | None = None
-    """From If-Match: the tags any of which may be current ("*": any)."""
-
-    def check(self, name: str, version: int, tag: str) -> None:
-        """`StaleVersionError` unless the network (at `version`, tagged `tag`) is expected."""
-        if self.version is not None and self.version != version:
-            raise StaleVersionError(
-                f"network {name!r} is at version {version}, not {self.version}: another "
-                "write came first; read it again (GET) and reapply the change",
-                version,
-                tag,
-            )
-        if self.etags is not None and "*" not in self.etags and tag not in self.etags:
-            raise StaleVersionError(
-                f"network {name!r} is at version {version} ({tag}), which If-Match does not "
-                "name: another write came first; read it again (GET) and reapply the change",
-                version,
-                tag,
-            )
-
-
-@dataclass(frozen=True, slots=True)
-class NetworkSummary:
-    """A stored network without its associations."""
-
-    name: str
-    description: str
-    builtin: bool
-    version: int
-    association_count: int
-    created_at: datetime
-    updated_at: datetime
-
-
-@dataclass(frozen=True, slots=True)
-class StoredNetwork:
-    """A stored network with its associations, in catalogue order."""
-
-    name: str
-    description: str
-    builtin: bool
-    version: int
-    created_at: datetime
-    updated_at: datetime
-    associations: tuple[NetworkPair, ...]
-    id: int = 0
-    """Its row's id (SQLite may give a deleted network's id to a new one)."""
-    etag: str = ""
-    """The entity tag of this version of this network (HTTP `ETag`, see `etag_of`)."""
-
-    @property
-    def summary(self) -> NetworkSummary:
-        """The network without its associations."""
-        return NetworkSummary(
-            self.name,
-            self.description,
-            self.builtin,
-            self.version,
-            len(self.associations),
-            self.created_at,
-            self.updated_at,
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class NetworkVersion:
-    """One entry of a network's edit history."""
-
-    version: int
-    created_at: datetime
-    note: str
-    association_count: int
-
-
-@dataclass(frozen=True, slots=True)
-class NetworkSnapshot:
-    """A network as it was at one version."""
-
-    name: str
-    version: int
-    created_at: datetime
-    note: str
-    description: str
-    associations: tuple[NetworkPair, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class AssociationChange:
-    """What became of one S-R pair: added (no `before`), removed (no `after`) or changed."""
-
-    stimulus: str
-    behaviour: str
-    before: NetworkPair | None
-    after: NetworkPair | None
-
-
-@dataclass(frozen=True, slots=True)
-class NetworkEdit:
-    """A write's outcome: the network as stored now and what changed (empty: nothing)."""
-
-    network: StoredNetwork
-    changes: tuple[AssociationChange, ...]
-    created: bool = False
-
-
-def check_name(name: str) -> str:
-    """`name` if it is a valid network name, else `ValueError`."""
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise ValueError(
-            f"network name {name!r} is not a slug: use 1-64 letters, digits, '-' and '_'"
-        )
-    return name
-
-
-def check_pair(pair: NetworkPair, where: str = "") -> NetworkPair:
-    """`pair` if its values are valid (strength, source, lock), else `ValueError`."""
-    s = pair.strength
-    if isinstance(s, bool) or not isinstance(s, int | float) or not math.isfinite(s):
-        raise ValueError(f"{where}strength must be a finite number, got {s!r}")
-    if not 0.0 <= s <= 1.0:
-        raise ValueError(f"{where}strength must be in [0, 1], got {s!r}")
-    if pair.source not in SOURCES:
-        raise ValueError(f"{where}source must be one of {', '.join(SOURCES)}, got {pair.source!r}")
-    if not isinstance(pair.locked, bool):
-        raise ValueError(f"{where}locked must be true or false, got {pair.locked!r}")
-    return NetworkPair(pair.stimulus, pair.behaviour, float(s), pair.source, pair.locked)
-
-
-def changes_between(
-    before: Mapping[_Key, NetworkPair], after: Mapping[_Key, NetworkPair]
-) -> tuple[AssociationChange, ...]:
-    """The pairs added, removed or changed from `before` to `after`, sorted by name."""
-    out = []
-    for key in sorted(before.keys() | after.keys()):
-        old, new = before.get(key), after.get(key)
-        if old != new:
-            out.append(AssociationChange(key[0], key[1], old, new))
-    return tuple(out)
 
 
 def _utc(value: datetime) -> datetime:
@@ -250,7 +95,7 @@ def _pair_json(p: NetworkPair) -> dict[str, Any]:
     }
 
 
-def _snapshot(name: str, description: str, state: Mapping[_Key, NetworkPair]) -> dict[str, Any]:
+def _snapshot(name: str, description: str, state: Mapping[Key, NetworkPair]) -> dict[str, Any]:
     """A network as `network_versions.snapshot` keeps it (the seed's format)."""
     return {
         "name": name,
@@ -259,7 +104,7 @@ def _snapshot(name: str, description: str, state: Mapping[_Key, NetworkPair]) ->
     }
 
 
-def _from_snapshot(snapshot: Mapping[str, Any]) -> dict[_Key, NetworkPair]:
+def _from_snapshot(snapshot: Mapping[str, Any]) -> dict[Key, NetworkPair]:
     state = {}
     for a in snapshot.get("associations", ()):
         p = NetworkPair(
@@ -291,37 +136,18 @@ class _Catalogue:
                 )
             )
         }
+        self.vocabulary = Vocabulary(
+            {n: p for n, (_, p) in self.stimuli.items()},
+            {n: p for n, (_, p) in self.behaviours.items()},
+        )
 
-    def ids(self, stimulus: str, behaviour: str, where: str | None = None) -> tuple[int, int]:
-        """The ids of a pair's names.
-
-        Names that address an association (`where` None) raise `UnknownNameError`; names
-        given as data (`where`, the field's place) raise `CatalogError`, invalid input.
-        """
-        st = self.stimuli.get(stimulus)
-        be = self.behaviours.get(behaviour)
-        for found, kind, name in ((st, "stimulus", stimulus), (be, "behaviour", behaviour)):
-            if found is None:
-                if where is None:
-                    raise UnknownNameError(f"unknown {kind} {name!r}")
-                raise CatalogError(f"{where}{kind}: unknown {kind} {name!r}")
-        assert st is not None and be is not None
-        return st[0], be[0]
-
-    def order(self, pairs: Iterable[NetworkPair]) -> tuple[NetworkPair, ...]:
-        """`pairs` in catalogue order (stimulus, then behaviour), as the editor's matrix."""
-        end = (1 << 30, 0)
-
-        def key(p: NetworkPair) -> tuple[int, int, str, str]:
-            st = self.stimuli.get(p.stimulus, end)[1]
-            be = self.behaviours.get(p.behaviour, end)[1]
-            return st, be, p.stimulus, p.behaviour
-
-        return tuple(sorted(pairs, key=key))
+    def ids(self, stimulus: str, behaviour: str) -> tuple[int, int]:
+        """The row ids of a pair's names, which the domain checked."""
+        return self.stimuli[stimulus][0], self.behaviours[behaviour][0]
 
 
 class SqlAlchemyNetworkRepository:
-    """Stored networks, their associations and edit history, by name.
+    """`core.ports.NetworkRepository` in SQL: networks, associations and history, by name.
 
     Each method is one transaction. Unknown networks, versions and addressed pairs raise
     `UnknownNameError`; invalid input raises `ValueError` or `CatalogError`; conflicts
@@ -390,31 +216,23 @@ class SqlAlchemyNetworkRepository:
         check_name(name)
         items = list(associations)
         with self._transaction(f"creating network {name!r}", write=True) as s:
-            if self._find(s, name) is not None:
-                raise NetworkExistsError(f"network {name!r} exists already: choose another name")
             cat = _Catalogue(s)
-            state: dict[_Key, NetworkPair] = {}
-            if base is not None:
-                base_row = self._find(s, base)
-                if base_row is None:
-                    raise UnknownNameError(f"unknown base network {base!r}")
-                state = self._state(s, base_row.id)
-            state.update(self._checked(cat, items, "associations"))
-            row = NetworkRow(name=name, description=description, builtin=False, version=1)
-            s.add(row)
-            try:
-                s.flush()
-            except sa_exc.IntegrityError as e:  # made meanwhile by another connection
-                raise NetworkExistsError(f"network {name!r} exists already") from e
-            self._write(s, row.id, cat, {}, state)
-            default = f"created from {base}" if base is not None else "created empty"
-            self._record(s, row, state, note or default)
-            return self._stored(s, row, state, cat)
+            revision = domain.create(
+                name,
+                lambda n: self._network(s, n),
+                cat.vocabulary,
+                description=description,
+                base=base,
+                associations=items,
+                note=note,
+            )
+            return self._insert(s, cat, revision).network
 
     def delete(self, name: str, *, expected: Precondition | None = None) -> None:
         """Delete a network and its history (runs started from it keep their own copy)."""
         with self._transaction(f"deleting network {name!r}", write=True) as s:
-            row = self._writable(s, name, "deleted", expected)
+            row, network = self._load(s, name)
+            network.check_writable("deleted", expected)
             s.delete(row)
 
     def add_association(
@@ -427,17 +245,10 @@ class SqlAlchemyNetworkRepository:
     ) -> NetworkEdit:
         """Add a new association; `AssociationExistsError` if the pair is there already."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name, expected=expected)
+            row, network = self._load(s, name)
             cat = _Catalogue(s)
-            pair = next(iter(self._checked(cat, [pair], None).values()))
-            state = self._state(s, row.id)
-            key = (pair.stimulus, pair.behaviour)
-            if key in state:
-                raise AssociationExistsError(
-                    f"network {name!r} has {key[0]} -> {key[1]} already: change it with PUT"
-                )
-            target = {**state, key: pair}
-            return self._commit(s, row, cat, state, target, note or f"added {key[0]} -> {key[1]}")
+            revision = network.add(pair, cat.vocabulary, note=note, expected=expected)
+            return self._save(s, row, cat, network, revision)
 
     def put_association(
         self,
@@ -458,23 +269,20 @@ class SqlAlchemyNetworkRepository:
         changes nothing is no change and makes no version.
         """
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name, expected=expected)
+            row, network = self._load(s, name)
             cat = _Catalogue(s)
-            cat.ids(stimulus, behaviour)
-            state = self._state(s, row.id)
-            key = (stimulus, behaviour)
-            old = state.get(key) or NetworkPair(stimulus, behaviour, 1.0, "dp", False)
-            new = NetworkPair(
+            revision = network.put(
                 stimulus,
                 behaviour,
-                old.strength if strength is None else strength,
-                old.source if source is None else source,
-                old.locked if locked is None else locked,
+                cat.vocabulary,
+                strength=strength,
+                source=source,
+                locked=locked,
+                force=force,
+                note=note,
+                expected=expected,
             )
-            target = {**state, key: check_pair(new)}
-            verb = "changed" if key in state else "added"
-            default = f"{verb} {stimulus} -> {behaviour}"
-            return self._commit(s, row, cat, state, target, note or default, force=force)
+            return self._save(s, row, cat, network, revision)
 
     def remove_association(
         self,
@@ -488,18 +296,12 @@ class SqlAlchemyNetworkRepository:
     ) -> NetworkEdit:
         """Remove an association (a locked one only with `force`); unknown pair: 404's error."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
-            row = self._writable(s, name, expected=expected)
+            row, network = self._load(s, name)
             cat = _Catalogue(s)
-            cat.ids(stimulus, behaviour)
-            state = self._state(s, row.id)
-            key = (stimulus, behaviour)
-            if key not in state:
-                raise UnknownNameError(
-                    f"network {name!r} has no association {stimulus} -> {behaviour}"
-                )
-            target = {k: v for k, v in state.items() if k != key}
-            default = f"removed {stimulus} -> {behaviour}"
-            return self._commit(s, row, cat, state, target, note or default, force=force)
+            revision = network.remove(
+                stimulus, behaviour, cat.vocabulary, force=force, note=note, expected=expected
+            )
+            return self._save(s, row, cat, network, revision)
 
     def versions(self, name: str) -> tuple[NetworkVersion, ...]:
         """A network's edit history, oldest first."""
@@ -533,7 +335,7 @@ class SqlAlchemyNetworkRepository:
                 _utc(v.created_at),
                 v.note,
                 str(v.snapshot.get("description", "")),
-                _Catalogue(s).order(_from_snapshot(v.snapshot).values()),
+                _Catalogue(s).vocabulary.order(_from_snapshot(v.snapshot).values()),
             )
 
     def diff(self, name: str, from_version: int, to_version: int) -> tuple[AssociationChange, ...]:
@@ -559,22 +361,25 @@ class SqlAlchemyNetworkRepository:
         Changing or removing a locked association needs `force`, as any edit does.
         """
         with self._transaction(f"reverting network {name!r}", write=True) as s:
-            row = self._writable(s, name, expected=expected)
-            self._ensure_history(s, row)
-            snapshot = self._version_row(s, row, version).snapshot
+            row, network = self._load(s, name)
             cat = _Catalogue(s)
-            target = self._checked(cat, _from_snapshot(snapshot).values(), "snapshot.associations")
-            state = self._state(s, row.id)
-            return self._commit(
-                s,
-                row,
-                cat,
-                state,
-                target,
-                note or f"reverted to version {version}",
-                force=force,
-                description=str(snapshot.get("description", row.description)),
+
+            def history(v: int) -> NetworkSnapshot:
+                self._ensure_history(s, row)
+                found = self._version_row(s, row, v)
+                return NetworkSnapshot(
+                    row.name,
+                    found.version,
+                    _utc(found.created_at),
+                    found.note,
+                    str(found.snapshot.get("description", row.description)),
+                    tuple(_from_snapshot(found.snapshot).values()),
+                )
+
+            revision = network.revert(
+                version, history, cat.vocabulary, force=force, note=note, expected=expected
             )
+            return self._save(s, row, cat, network, revision)
 
     def import_network(
         self,
@@ -596,38 +401,23 @@ class SqlAlchemyNetworkRepository:
         items = list(associations)
         with self._transaction(f"importing network {name!r}", write=True) as s:
             cat = _Catalogue(s)
-            target = self._checked(cat, items, "associations")
-            row = self._find(s, name)
-            if row is None:
-                row = NetworkRow(name=name, description=description, builtin=False, version=1)
-                s.add(row)
-                try:
-                    s.flush()
-                except sa_exc.IntegrityError as e:
-                    raise NetworkExistsError(f"network {name!r} exists already") from e
-                self._write(s, row.id, cat, {}, target)
-                self._record(s, row, target, note or "imported")
-                return NetworkEdit(
-                    self._stored(s, row, target, cat), changes_between({}, target), created=True
-                )
-            if not replace:
-                raise NetworkExistsError(
-                    f"network {name!r} exists already: import it under another name, "
-                    "or replace it (replace=true) to make a new version of it"
-                )
-            row = self._writable(s, name, "replaced", expected)
-            self._ensure_history(s, row)
-            state = self._state(s, row.id)
-            return self._commit(
-                s,
-                row,
-                cat,
-                state,
-                target,
-                note or "imported",
-                force=force,
+            found = self._find(s, name, lock=True)
+            network = None if found is None else self._aggregate(s, found)
+            revision = domain.import_network(
+                name,
+                network,
+                items,
+                cat.vocabulary,
                 description=description,
+                replace=replace,
+                force=force,
+                note=note,
+                expected=expected,
             )
+            if found is None or network is None:
+                return self._insert(s, cat, revision)
+            self._ensure_history(s, found)
+            return self._save(s, found, cat, network, revision)
 
     # --- within a transaction ---------------------------------------------------------
 
@@ -644,23 +434,31 @@ class SqlAlchemyNetworkRepository:
             raise UnknownNameError(f"unknown network {name!r}")
         return row
 
-    def _writable(
-        self, s: Session, name: str, what: str = "edited", expected: Precondition | None = None
-    ) -> NetworkRow:
+    def _aggregate(self, s: Session, row: NetworkRow) -> Network:
+        """The domain's network of a row, with its stored associations and entity tag."""
+        state = self._state(s, row.id)
+        return Network(
+            row.name,
+            row.description,
+            row.builtin,
+            row.version,
+            tuple(state.values()),
+            etag_of(row.id, row.created_at, row.version, row.description, state.values()),
+        )
+
+    def _load(self, s: Session, name: str) -> tuple[NetworkRow, Network]:
+        """A network to write, its row locked; `UnknownNameError` when there is none."""
         row = self._row(s, name, lock=True)
-        if expected is not None:
-            expected.check(name, row.version, etag_of(row, self._state(s, row.id)))
-        if row.builtin:
-            raise ReadOnlyNetworkError(
-                f"network {name!r} is built in and cannot be {what}: copy it first with "
-                f'POST /api/networks {{"name": "my-{name}", "base": "{name}"}} and edit the copy'
-            )
-        return row
+        return row, self._aggregate(s, row)
+
+    def _network(self, s: Session, name: str) -> Network | None:
+        row = self._find(s, name)
+        return None if row is None else self._aggregate(s, row)
 
     @staticmethod
     def _state(
         s: Session, network_id: int, *, ordered_by_id: bool = False
-    ) -> dict[_Key, NetworkPair]:
+    ) -> dict[Key, NetworkPair]:
         query = (
             select(
                 StimulusRow.name,
@@ -680,24 +478,8 @@ class SqlAlchemyNetworkRepository:
         }
 
     @staticmethod
-    def _checked(
-        cat: _Catalogue, pairs: Iterable[NetworkPair], field: str | None
-    ) -> dict[_Key, NetworkPair]:
-        """Validated pairs by key, a later one of a pair replacing an earlier one.
-
-        `field` names them in errors (None: a single body's).
-        """
-        out: dict[_Key, NetworkPair] = {}
-        for i, p in enumerate(pairs):
-            where = "" if field is None else f"{field}[{i}]."
-            cat.ids(p.stimulus, p.behaviour, where)
-            out.pop((p.stimulus, p.behaviour), None)
-            out[p.stimulus, p.behaviour] = check_pair(p, where)
-        return out
-
-    @staticmethod
     def _stored(
-        s: Session, row: NetworkRow, state: Mapping[_Key, NetworkPair], cat: _Catalogue
+        s: Session, row: NetworkRow, state: Mapping[Key, NetworkPair], cat: _Catalogue
     ) -> StoredNetwork:
         s.flush()
         return StoredNetwork(
@@ -707,9 +489,9 @@ class SqlAlchemyNetworkRepository:
             row.version,
             _utc(row.created_at),
             _utc(row.updated_at),
-            cat.order(state.values()),
+            cat.vocabulary.order(state.values()),
             row.id,
-            etag_of(row, state),
+            etag_of(row.id, row.created_at, row.version, row.description, state.values()),
         )
 
     @staticmethod
@@ -740,7 +522,7 @@ class SqlAlchemyNetworkRepository:
             self._record(s, row, self._state(s, row.id), note)
 
     @staticmethod
-    def _record(s: Session, row: NetworkRow, state: Mapping[_Key, NetworkPair], note: str) -> None:
+    def _record(s: Session, row: NetworkRow, state: Mapping[Key, NetworkPair], note: str) -> None:
         s.add(
             NetworkVersionRow(
                 network_id=row.id,
@@ -753,16 +535,12 @@ class SqlAlchemyNetworkRepository:
 
     @staticmethod
     def _write(
-        s: Session,
-        network_id: int,
-        cat: _Catalogue,
-        state: Mapping[_Key, NetworkPair],
-        target: Mapping[_Key, NetworkPair],
-    ) -> tuple[AssociationChange, ...]:
-        """Make the stored associations `target`, changing rows in place (never re-adding)."""
-        changes = changes_between(state, target)
+        s: Session, network_id: int, cat: _Catalogue, changes: Iterable[AssociationChange]
+    ) -> None:
+        """Store what changed, changing rows in place (never re-adding)."""
+        changes = tuple(changes)
         if not changes:
-            return changes
+            return
         rows = {
             (st, be): r
             for r, st, be in s.execute(
@@ -792,35 +570,35 @@ class SqlAlchemyNetworkRepository:
                 r = rows[key]
                 r.strength, r.source, r.locked = c.after.strength, c.after.source, c.after.locked
         s.flush()
-        return changes
 
-    def _commit(
-        self,
-        s: Session,
-        row: NetworkRow,
-        cat: _Catalogue,
-        state: Mapping[_Key, NetworkPair],
-        target: Mapping[_Key, NetworkPair],
-        note: str,
-        *,
-        force: bool = False,
-        description: str | None = None,
+    def _insert(self, s: Session, cat: _Catalogue, revision: Revision) -> NetworkEdit:
+        """Store a new network's first version."""
+        network = revision.network
+        row = NetworkRow(
+            name=network.name,
+            description=network.description,
+            builtin=False,
+            version=network.version,
+        )
+        s.add(row)
+        try:
+            s.flush()
+        except sa_exc.IntegrityError as e:  # made meanwhile by another connection
+            raise NetworkExistsError(f"network {network.name!r} exists already") from e
+        self._write(s, row.id, cat, revision.changes)
+        self._record(s, row, network.state, revision.note)
+        return NetworkEdit(self._stored(s, row, network.state, cat), revision.changes, created=True)
+
+    def _save(
+        self, s: Session, row: NetworkRow, cat: _Catalogue, before: Network, revision: Revision
     ) -> NetworkEdit:
-        """Store `target` as the network's next version, unless it changes nothing."""
-        description = row.description if description is None else description
-        changes = changes_between(state, target)
-        if not force:
-            for c in changes:
-                if c.before is not None and c.before.locked:
-                    raise LockedAssociationError(
-                        f"association {c.stimulus} -> {c.behaviour} of network {row.name!r} "
-                        "is locked: repeat with force=true to change or remove it"
-                    )
-        if not changes and description == row.description:
-            return NetworkEdit(self._stored(s, row, state, cat), ())
+        """Store a revision of a network as its next version, unless it makes none."""
+        if not revision.versioned:
+            return NetworkEdit(self._stored(s, row, before.state, cat), ())
+        after = revision.network
         self._ensure_history(s, row)
-        self._write(s, row.id, cat, state, target)
-        row.version += 1
-        row.description = description
-        self._record(s, row, target, note)
-        return NetworkEdit(self._stored(s, row, target, cat), changes)
+        self._write(s, row.id, cat, revision.changes)
+        row.version = after.version
+        row.description = after.description
+        self._record(s, row, after.state, revision.note)
+        return NetworkEdit(self._stored(s, row, after.state, cat), revision.changes)
