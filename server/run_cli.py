@@ -19,10 +19,11 @@ from rich.table import Table
 from core.engine import RunEngine
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
-from core.ports import Mode, RunSpec, RunStatus, StoredRun
+from core.ports import Mode, RunStatus, StoredRun
 from server.persistence import SqlAlchemyRunStore, database_url, make_engine, make_sessionmaker
 from server.persistence.migrate import downgrade, upgrade
 from server.persistence.seed import SeedReport
+from server.runspec import run_spec
 from server.tables import print_table
 
 
@@ -77,17 +78,17 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 params["eta"] = args.eta
             if args.epsilon is not None:
                 params["epsilon"] = args.epsilon
-            spec = RunSpec(
+            spec = run_spec(
                 condition=args.condition,
                 seed=args.seed,
                 episodes=args.episodes,
-                mode=Mode(args.mode),
+                mode=args.mode,
                 hz=args.hz,
                 network=args.network,
                 params=params,
                 # The parser may not offer these yet: the defaults then.
-                world=getattr(args, "world", None) or "",
-                sensors=getattr(args, "sensors", None) or "",
+                world=getattr(args, "world", None),
+                sensors=getattr(args, "sensors", None),
             )
             engine = RunEngine.create(spec, store)
         return asyncio.run(_run(engine, args.quiet, stdout, stderr))

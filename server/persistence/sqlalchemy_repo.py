@@ -43,6 +43,7 @@ from server.persistence.orm import (
     RunRow,
     StimulusRow,
 )
+from server.runspec import run_spec
 
 _FINAL = frozenset({RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.INTERRUPTED, RunStatus.FAILED})
 _Pair = tuple[str, str]
@@ -672,15 +673,15 @@ def _summary(run: RunRow) -> StoredRun:
 
 
 def _spec(run: RunRow) -> RunSpec:
-    return RunSpec(
+    return run_spec(
         condition=run.condition,
         seed=run.seed,
         episodes=run.episodes,
-        mode=Mode(run.mode),
+        mode=run.mode,
         hz=run.hz,
         network=run.network,
         network_id=run.network_id,
-        params=dict(run.params),
+        params=run.params,
         world=run.world,
         sensors=run.sensors,
     )

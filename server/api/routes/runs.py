@@ -18,6 +18,7 @@ from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
+from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
     EpisodeDetail,
@@ -127,16 +128,16 @@ async def create_run(
     """
     params = {k: v for k, v in body.params.model_dump().items() if v not in (None, False)}
     stored = None if body.network is None else await io(networks.get, body.network)
-    spec = RunSpec(
+    spec = run_spec(
         condition=body.condition,
         seed=body.seed,
         episodes=body.episodes,
-        mode=Mode(body.mode),
+        mode=body.mode,
         hz=body.hz,
         network=body.network,
         params=params,
-        world=body.world or "",
-        sensors=body.sensors or "",
+        world=body.world,
+        sensors=body.sensors,
         # A past version's run is not today's network's: live edits of it skip the run.
         network_id=None if stored is None or body.network_version is not None else stored.id,
     )
