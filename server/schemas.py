@@ -106,6 +106,8 @@ class BehaviourPublic(BaseModel):
 
 
 class SensorPublic(BaseModel):
+    model_config = ConfigDict(from_attributes=True)  # read from a core or store object
+
     name: str
     physical: list[str]
     processing: str
@@ -348,6 +350,8 @@ class MemoryPublic(BaseModel):
 
 
 class AssociationPublic(BaseModel):
+    model_config = ConfigDict(from_attributes=True)  # read from a core or store object
+
     stimulus: str
     behaviour: str
     strength: float
@@ -361,6 +365,8 @@ class RunNetworkPublic(BaseModel):
 
 
 class EpisodePublic(BaseModel):
+    model_config = ConfigDict(from_attributes=True)  # read from a core or store object
+
     episode: int
     outcome: OutcomeName
     cause: CauseName | None
@@ -716,6 +722,8 @@ class KpProvenancePublic(BaseModel):
 
 class RltmPointPublic(BaseModel):
     """One Eq. (1) step of the pair's RLTM reliability."""
+
+    model_config = ConfigDict(from_attributes=True)  # read from a core or store object
 
     after_tick: int
     reward: float

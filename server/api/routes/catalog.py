@@ -114,20 +114,7 @@ def list_behaviours(state: StateDep) -> list[BehaviourPublic]:
 @router.get("/sensors")
 def list_sensors(state: StateDep) -> list[SensorPublic]:
     """Every logical sensor as declared in data, under the default sensor definition."""
-    return [
-        SensorPublic(
-            name=s.name,
-            physical=list(s.physical),
-            processing=s.processing,
-            objective=s.objective,
-            level=s.level,
-            priority=s.priority,
-            weight=s.weight,
-            stimuli=list(s.stimuli),
-            definition=s.definition,
-        )
-        for s in state.catalog.sensors
-    ]
+    return [SensorPublic.model_validate(s, from_attributes=True) for s in state.catalog.sensors]
 
 
 @router.get("/sensor-definitions")

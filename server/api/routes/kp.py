@@ -113,10 +113,7 @@ def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
                 synthesized=cat.behaviours[be].synthesized,
                 provenance=[_provenance(kp, p, dt_s) for p in log.provenances],
                 history=[
-                    RltmPointPublic(
-                        after_tick=h.after_tick, reward=h.reward, before=h.before, after=h.after
-                    )
-                    for h in log.history
+                    RltmPointPublic.model_validate(h, from_attributes=True) for h in log.history
                 ],
                 runs=[KpRunSpanPublic(first_tick=a, last_tick=z) for a, z in log.runs],
                 reasoned=log.reasoned,

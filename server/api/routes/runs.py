@@ -352,12 +352,8 @@ def get_rltm(run_id: RunId, store: StoreDep) -> MemoryPublic:
 def get_run_network(run_id: RunId, store: StoreDep) -> RunNetworkPublic:
     """The run's behaviour network: its design plus what it learned."""
     data = [
-        AssociationPublic(
-            stimulus=p.stimulus, behaviour=p.behaviour, strength=p.strength,
-            source=p.source, locked=p.locked,
-        )
-        for p in store.network(run_id)
-    ]  # fmt: skip
+        AssociationPublic.model_validate(p, from_attributes=True) for p in store.network(run_id)
+    ]
     return RunNetworkPublic(data=data, count=len(data))
 
 
@@ -370,13 +366,7 @@ def list_episodes(
     It reads the page only, never a trace (GET .../episodes/{n} has one episode's).
     """
     page, total = store.episode_summaries_page(run_id, offset, limit)
-    data = [
-        EpisodePublic(
-            episode=e.episode, outcome=e.outcome, cause=e.cause, ticks=e.ticks,
-            start_tick=e.start_tick, rewards=e.rewards,
-        )
-        for e in page
-    ]  # fmt: skip
+    data = [EpisodePublic.model_validate(e, from_attributes=True) for e in page]
     return EpisodesPublic(data=data, count=total)
 
 
