@@ -3,7 +3,7 @@
 Run as ``.venv/bin/python -m bench.viewer`` (``make bench``; about 7 minutes, ``--seconds
 10 --rounds 1`` for a quick check). It starts ``srlab serve`` itself on 127.0.0.1 (free
 ports, a temporary SQLite database) and Debian's Chromium twice (Playwright, the flags of
-tests/browser.py), then measures in one run, ``--rounds`` times in turn:
+bench/browser.py), then measures in one run, ``--rounds`` times in turn:
 
 * **none**: a realtime ``kp`` run at ``--hz`` (20) for ``--seconds`` (40), no browser on
   the 3D view's port;
@@ -56,9 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
-
+from bench.browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
 from bench.service import (
     HOST,
     RawClient,
