@@ -168,8 +168,10 @@ def anyio_backend() -> str:
 # --- browser tests (tests/web) -------------------------------------------------------
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Browser]:
+    """Chromium for one module: Playwright's sync API holds an asyncio loop in this thread
+    while it is open, so it must close before a worker (pytest-xdist) runs an anyio test."""
     with chromium() as b:
         yield b
 
