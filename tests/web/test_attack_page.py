@@ -13,6 +13,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 import viser
+from conftest import BROWSER_WAIT_MS
 from liveserver import LiveServer, free_port, wait_status
 from playwright.sync_api import Browser
 from reliability_report import record
@@ -94,6 +95,7 @@ def test_a_page_of_another_origin_can_change_nothing(
     # Its own context: the refused socket is a console error this page is expected to show.
     context = browser.new_context()
     page = context.new_page()
+    page.set_default_timeout(BROWSER_WAIT_MS)
     page.goto(url)
     outcome = page.evaluate("window.attack()")
     # no-cors requests are sent (the browser hides the answer); the socket never opens.

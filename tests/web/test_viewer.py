@@ -18,6 +18,7 @@ import httpx
 import numpy as np
 import pytest
 from browser import artifact
+from conftest import BROWSER_WAIT_MS
 from liveserver import LiveServer, free_port, start_server, stop_server, wait_status
 from PIL import Image
 from playwright.sync_api import Browser, Page
@@ -32,7 +33,7 @@ PANEL_LEFT = 900
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """A live server of this module's own (`browser` is the session's, tests/conftest.py)."""
+    """A live server of this module's own (`browser` is the module's, tests/conftest.py)."""
     live = start_server(tmp_path_factory.mktemp("viewer") / "viewer.db")
     try:
         yield live
@@ -54,6 +55,7 @@ def open_view(browser: Browser, server: LiveServer) -> Page:
     port = server.client.get("/api/health").json()["viser_port"]
     assert isinstance(port, int)
     page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+    page.set_default_timeout(BROWSER_WAIT_MS)
     page.goto(f"http://127.0.0.1:{port}/")
     page.get_by_text("srlab 3D view").wait_for(timeout=90_000)
     # The notice that WebGL runs in software covers a corner of the scene: hide it.
@@ -195,6 +197,7 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
     env = {"SRLAB_VISER_PORT": str(free_port())}  # the same view port after the restart
     first = start_server(database, env=env)
     page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+    page.set_default_timeout(BROWSER_WAIT_MS)
     try:
         api = first.client
         body = {"condition": "kp", "mode": "realtime", "hz": 5, "seed": 21}
