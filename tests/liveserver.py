@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -19,12 +20,38 @@ import httpx
 ROOT = Path(__file__).resolve().parents[1]
 
 
+EPHEMERAL_PORTS = Path("/proc/sys/net/ipv4/ip_local_port_range")
+
+
+def _below_ephemeral() -> range:
+    """Ports below the kernel's ephemeral range (none where it is unknown or starts low)."""
+    try:
+        low = int(EPHEMERAL_PORTS.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return range(0)
+    return range(max(1024, low - 12_000), low)
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now."""
+    """A TCP port on 127.0.0.1 that nothing listens on right now.
+
+    It is taken below the ephemeral range, which the kernel draws on for every client
+    connection and every bind to port 0: a server restarted on its port finds it free even
+    while other processes (pytest-xdist's workers) open connections all the time.
+    """
+    candidates = _below_ephemeral()
+    for _ in range(50 if candidates else 0):
+        port = candidates[secrets.randbelow(len(candidates))]
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
+        any_port: int = s.getsockname()[1]
+        return any_port
 
 
 @dataclass
@@ -97,11 +124,14 @@ def start_server(
     client = httpx.Client(base_url=url, timeout=10, headers=headers)
     try:
         _wait_healthy(client, process)
-    except BaseException:
+    except BaseException as e:
         process.kill()
-        process.wait()
+        _, err = process.communicate()
         client.close()
-        raise
+        if not isinstance(e, AssertionError):
+            raise
+        said = log.read_text(errors="replace") if log is not None else err.decode(errors="replace")
+        raise AssertionError(f"{e}; its stderr ends with:\n{said[-3000:]}") from None
     return LiveServer(url, port, database, process, client, log)
 
 
