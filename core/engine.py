@@ -1368,10 +1368,6 @@ def _pair(sim: Simulation, a: Association) -> NetworkPair:
     )
 
 
-Engine = RunEngine
-"""The old name, kept only for server/api/routes/networks.py and server/services/networks.py
-while they are rewritten (issue 19): import `RunEngine`; `Engine` is SQLAlchemy's word."""
-
 __all__ = [
     "HZ_MAX",
     "HZ_MIN",

@@ -282,14 +282,6 @@ class RunStore(Protocol):
         ...
 
 
-class EventSink(Protocol):
-    """A subscriber to the engine's events (live stream, 3D view, metrics)."""
-
-    def offer(self, event: object) -> bool:
-        """Take an event without blocking; False when it had to be dropped."""
-        ...
-
-
 class NetworkRepository(Protocol):
     """Stored networks (the S-R editor's subject), their associations and edit history.
 
