@@ -16,6 +16,9 @@ from liveserver import LiveServer, live_server
 from playwright.sync_api import Browser, ConsoleMessage, Error, Page, expect
 from sqlalchemy import Engine, create_engine, text
 from sqlalchemy.engine import make_url
+from xdist.remote import Producer
+from xdist.scheduler import LoadScopeScheduling
+from xdist.scheduler.protocol import Scheduling
 
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
@@ -220,3 +223,126 @@ def page(browser: Browser) -> Iterator[Page]:
     """A fresh 1280x800 page; a JavaScript error in it fails the test."""
     with sized_page(browser) as page:
         yield page
+
+
+# --- markers, and the order of a parallel run ----------------------------------------
+# The markers are registered in pyproject.toml; `make test-unit` deselects all five. Most are
+# given here, by directory, module or fixture; a slow test in an otherwise quick module
+# carries `@pytest.mark.slow` itself.
+
+TESTS = Path(__file__).resolve().parent
+DIRECTORY_MARKERS = {"web": "browser", "reliability": "reliability", "deploy": "docker"}
+PG_FIXTURES = frozenset(
+    {"postgres_url", "postgres_database", "postgres_engine", "clean_postgres_engine"}
+)
+"""A test that uses one of these, or a parameter "postgresql" (the storage back-ends), is `pg`."""
+SLOW_FIXTURES = frozenset({"server", "browser", "image"})
+"""A live `srlab serve` (conftest's and two modules' own), Chromium, the rebuilt image."""
+SLOW_MODULES = frozenset(
+    {
+        "core/test_deep_curve.py",  # a script in a subprocess
+        "reliability/test_crash.py",
+        "reliability/test_load.py",
+        "reliability/test_long_day.py",
+        "reliability/test_serve_kill.py",
+        "reliability/test_sigterm.py",
+        "reliability/test_storage_errors.py",
+        "server/test_e2e_serve.py",
+        "server/test_proxy.py",
+        "server/test_ray_backend.py",
+        "server/test_schemathesis.py",
+        "server/test_slow_clients.py",
+        "server/test_viewer_serve.py",
+    }
+)
+"""Modules whose every test starts a server, a subprocess or Ray, or fuzzes the API."""
+
+
+@pytest.hookimpl(tryfirst=True)  # before `-m` deselects and xdist groups
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        module = item.path.resolve().relative_to(TESTS).as_posix()
+        params = getattr(item, "callspec", None)
+        names = set(getattr(item, "fixturenames", ()))
+        if marker := DIRECTORY_MARKERS.get(module.split("/", 1)[0]):
+            item.add_marker(marker)
+        if names & PG_FIXTURES or (params and "postgresql" in params.params.values()):
+            item.add_marker("pg")
+        if module in SLOW_MODULES or names & SLOW_FIXTURES:
+            item.add_marker("slow")
+    if hasattr(config, "workerinput"):  # a pytest-xdist worker: the longest units first
+        items.sort(key=_first_rank)
+
+
+# Under `pytest -n N --dist loadfile` (make test) this file's scheduler hands the workers
+# units of work: a module's tests go together (its module fixtures are set up once), like
+# loadfile's, except the tests below, which are units of their own; and the long units
+# start first, so that no long test starts late and ends the run alone.
+
+ALONE = frozenset(
+    {
+        "tests/reliability/test_load.py",
+        "tests/reliability/test_long_day.py",
+        "tests/reliability/test_serve_kill.py",
+        "tests/reliability/test_storage_errors.py",
+        "tests/server/test_proxy.py",
+        "tests/server/test_viewer_serve.py",
+        "tests/server/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
+        # Browser tests with a server of their own, in modules that share one.
+        "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
+        "tests/web/test_console_trainer.py::"
+        "test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back",
+        "tests/web/test_editor_day.py::test_runs_wait_for_a_free_slot_and_say_so",
+        "tests/web/test_viewer.py::test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart",
+    }
+)
+"""Modules whose tests are units one by one, and single tests (all their parameters)."""
+LONGEST_FIRST = (
+    "tests/reliability/test_crash.py",
+    "tests/server/test_schemathesis.py",
+    "tests/web/test_viewer.py",
+    "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
+    "tests/web/test_console.py",
+    "tests/reliability/test_serve_kill.py",
+    "tests/reliability/test_sigterm.py",
+    "tests/reliability/test_long_day.py",
+    "tests/web/test_console_trainer.py::"
+    "test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back",
+    "tests/web/test_editor_day.py",
+    "tests/reliability/test_storage_errors.py",
+    "tests/deploy/test_docker.py",
+    "tests/server/test_viewer_serve.py",
+    "tests/server/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
+    "tests/web/test_console_trainer.py",
+    "tests/reliability/test_load.py",
+    "tests/server/test_proxy.py",
+)
+"""Modules and tests in the order their units start, longest first (a module's own unit
+goes with its first entry); the rest follow in collection order. From the durations of a
+full run (`--durations=0`)."""
+
+
+def _module_and_test(nodeid: str) -> tuple[str, str]:
+    module, _, rest = nodeid.partition("::")
+    return module, f"{module}::{rest.split('[', 1)[0]}"
+
+
+def _first_rank(item: pytest.Item) -> int:
+    ranks = [LONGEST_FIRST.index(u) for u in _module_and_test(item.nodeid) if u in LONGEST_FIRST]
+    return min(ranks, default=len(LONGEST_FIRST))
+
+
+class ModulesLongestFirst(LoadScopeScheduling):  # type: ignore[misc]  # xdist is untyped
+    """`--dist loadfile` with the units of `ALONE`, in the workers' (sorted) order."""
+
+    def __init__(self, config: pytest.Config, log: Producer | None = None) -> None:
+        super().__init__(config, log)
+        config.option.loadscopereorder = False  # keep the order the workers collected
+
+    def _split_scope(self, nodeid: str) -> str:
+        module, test = _module_and_test(nodeid)
+        return nodeid if module in ALONE or test in ALONE else module
+
+
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Producer) -> Scheduling | None:
+    return ModulesLongestFirst(config, log) if config.getvalue("dist") == "loadfile" else None

@@ -174,6 +174,7 @@ def test_serve_with_an_unreachable_database_exits_2_with_a_message(
     assert "secret" not in err
 
 
+@pytest.mark.slow
 def test_console_script_exits_2_without_a_traceback() -> None:
     script = REPO / ".venv" / "bin" / "srlab"
     argv = [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
@@ -191,6 +192,7 @@ def test_console_script_exits_2_without_a_traceback() -> None:
     assert done.stdout == ""
 
 
+@pytest.mark.slow
 def test_module_entry_point_runs_a_json_simulation() -> None:
     done = run_cli("simulate", "--condition", "expert", "--episodes", "1", "--json")
     assert done.returncode == 0, done.stderr

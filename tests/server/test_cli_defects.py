@@ -29,6 +29,7 @@ def db_url(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
     return url
 
 
+@pytest.mark.slow
 def test_run_realtime_prints_progress_as_it_goes(db_url: str) -> None:
     # stderr is a pipe here: plain lines, one per realtime episode (a terminal gets a live
     # line instead). 1000 Hz keeps it short; the lines do not depend on how fast it runs.

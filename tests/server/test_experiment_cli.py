@@ -33,6 +33,7 @@ def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_experiment_writes_every_report_file(report: Path) -> None:
     names = {p.name for p in report.iterdir()}
     assert names == {
@@ -45,6 +46,7 @@ def test_experiment_writes_every_report_file(report: Path) -> None:
     }
 
 
+@pytest.mark.slow
 def test_experiment_reports_held_out_evaluation_and_the_probe(report: Path) -> None:
     doc = json.loads((report / "summary.json").read_text())
     assert doc["params"]["eval_episodes"] == 2
@@ -61,6 +63,7 @@ def test_experiment_reports_held_out_evaluation_and_the_probe(report: Path) -> N
     assert "held-out, frozen" in md
 
 
+@pytest.mark.slow
 def test_experiment_summary_json(report: Path) -> None:
     doc = json.loads((report / "summary.json").read_text())
     params = doc["params"]
@@ -86,6 +89,7 @@ def test_experiment_summary_json(report: Path) -> None:
     assert doc["conditions"]["kp"]["camera_memory"] == "rltm"
 
 
+@pytest.mark.slow
 def test_experiment_summary_json_agrees_with_runs_jsonl(report: Path) -> None:
     doc = json.loads((report / "summary.json").read_text())
     rows = [json.loads(line) for line in (report / "runs.jsonl").read_text().splitlines()]
@@ -96,6 +100,7 @@ def test_experiment_summary_json_agrees_with_runs_jsonl(report: Path) -> None:
     assert doc["params"]["ticks"] == sum(r["ticks"] for r in rows)
 
 
+@pytest.mark.slow
 def test_experiment_runs_jsonl_has_one_line_per_episode(report: Path) -> None:
     lines = (report / "runs.jsonl").read_text().splitlines()
     assert len(lines) == 2 * 2 * 3
@@ -109,6 +114,7 @@ def test_experiment_runs_jsonl_has_one_line_per_episode(report: Path) -> None:
         assert r["ticks"] > 0
 
 
+@pytest.mark.slow
 def test_experiment_summary_md(report: Path) -> None:
     md = (report / "summary.md").read_text()
     assert md.startswith("# srlab experiment\n")
@@ -127,6 +133,7 @@ def test_experiment_summary_md(report: Path) -> None:
     assert "%)" in met  # encounters per seed (success rate of the episodes they were met in)
 
 
+@pytest.mark.slow
 def test_experiment_summary_counts_what_ran_and_what_was_met(report: Path) -> None:
     doc = json.loads((report / "summary.json").read_text())
     assert (doc["params"]["world"], doc["params"]["sensors"]) == ("soft-obstacle", "path")
@@ -139,6 +146,7 @@ def test_experiment_summary_counts_what_ran_and_what_was_met(report: Path) -> No
         assert met["encounters_per_seed"] > 0 and 1 <= met["seeds"] <= 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["learning_curves.png", "reliability.png", "knowledge.png"])
 def test_experiment_plots_are_pngs(report: Path, name: str) -> None:
     path = report / name
@@ -222,6 +230,7 @@ def test_qlambda_sweep_bad_grid_exits_2(
     assert f"srlab: error: {message}" in err
 
 
+@pytest.mark.slow
 def test_experiment_with_a_failed_task_reports_it_and_exits_1(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

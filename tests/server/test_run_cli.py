@@ -159,6 +159,7 @@ def wait_running(db: Path, child: subprocess.Popen[str], timeout_s: float = 60) 
     pytest.fail(f"run 1 was not running within {timeout_s:g} s")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes(
     db_url: str, tmp_path: Path, sig: signal.Signals, capsys: pytest.CaptureFixture[str]

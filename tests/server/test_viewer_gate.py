@@ -258,6 +258,7 @@ def shows(session: Session, run_id: int) -> bool:
     return session.controller.state.run_id == run_id
 
 
+@pytest.mark.slow
 async def test_a_socket_on_a_runs_url_shows_that_run_again_after_a_restart(
     tmp_path: Path,
 ) -> None:

@@ -119,6 +119,7 @@ async def test_a_watched_live_run_is_drawn_and_an_unwatched_one_costs_nothing(
         await client.post(f"/api/runs/{run_id}/stop")
 
 
+@pytest.mark.slow
 async def test_the_view_link_chooses_the_run_and_it_stays_chosen(tmp_path: Path) -> None:
     port = free_port()
     settings = settings_for(tmp_path, viser=True, viser_port=port)
