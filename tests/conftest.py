@@ -288,12 +288,12 @@ ALONE = frozenset(
         "tests/server/test_proxy.py",
         "tests/server/test_viewer_serve.py",
         "tests/server/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
+        "tests/web/test_viewer.py",  # 1-2 minutes a test: a server each pays
         # Browser tests with a server of their own, in modules that share one.
         "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
         "tests/web/test_console_trainer.py::"
         "test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back",
         "tests/web/test_editor_day.py::test_runs_wait_for_a_free_slot_and_say_so",
-        "tests/web/test_viewer.py::test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart",
     }
 )
 """Modules whose tests are units one by one, and single tests (all their parameters)."""
