@@ -6,17 +6,19 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-baselines run test test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-baselines run test test-unit test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | test | test-fast | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
 
 # With the optional ray extra (srlab[ray]): the tests run the Ray backend on a local instance.
+# Bytecode is compiled once here: every `srlab serve` and CLI the tests start would
+# otherwise compile its imports again where .pyc files are not written (~3 s a process).
 $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
-	$(UV) sync --frozen --extra ray --quiet
+	$(UV) sync --frozen --extra ray --compile-bytecode --quiet
 	@touch $@
 
 install: $(BIN)/srlab
@@ -45,12 +47,20 @@ typecheck: install
 # script installs them as root, or says what to install.
 # The storage tests run on SQLite and on a throwaway PostgreSQL server on 127.0.0.1, which
 # the script installs (as root) when missing, starts for pytest and stops afterwards.
+# The suite runs on $(WORKERS) pytest-xdist workers (its tests mostly wait on servers and pages,
+# so more workers than cores pay); tests/conftest.py's scheduler keeps a module's tests on
+# one worker and starts the longest first. `make test WORKERS=0` runs it in one process.
+WORKERS ?= 4
 test: lint typecheck
 	bash scripts/system-deps.sh
-	bash scripts/pg-test-server.sh run -- $(BIN)/pytest
+	bash scripts/pg-test-server.sh run -- $(BIN)/pytest -n $(WORKERS) --dist loadfile
 
-test-fast: install
-	$(BIN)/pytest tests/core -q
+# The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL or Docker.
+UNIT := not slow and not browser and not reliability and not pg and not docker
+test-unit: install
+	$(BIN)/pytest -m "$(UNIT)" -n 3 -q
+
+test-fast: test-unit
 
 test-baselines: install-baselines
 	$(BIN)/pytest tests/baselines -q
