@@ -195,6 +195,10 @@ def nearest_primitive(
     return best
 
 
+SAME_HEADING_RAD = 1e-9
+"""Headings closer than this are one heading (a vector sum's rounding, not a new turn)."""
+
+
 def synthesized_behaviour(angle_rad: float, speed_mps: float, dt_s: float) -> Behaviour:
     """A new steer primitive towards `angle_rad` at 150 deg/s or less (id set on insertion)."""
     deg = math.degrees(angle_rad)
@@ -322,7 +326,11 @@ class KnowledgePropagation:
             return (nearest, "snapped", *workings)
         new = synthesized_behaviour(angle, speed, dt)
         for b in catalog.behaviours:
-            if b.name == new.name:
+            # The same heading is the same behaviour, whatever its rounded name: a source
+            # at 2.5 deg is `kp_left2`, and its vector sum, 2.5000000000000004 deg, would
+            # be named `kp_left3`.
+            same = b.synthesized and abs(steer_angle(b, dt) - angle) <= SAME_HEADING_RAD
+            if same or b.name == new.name:
                 return (b, "reused", *workings)
         added = self._add_behaviour(new)
         self.catalog = self._catalog_after(added)
