@@ -58,7 +58,7 @@ test: lint typecheck
 # The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL or Docker.
 UNIT := not slow and not browser and not reliability and not pg and not docker
 test-unit: install
-	$(BIN)/pytest -m "$(UNIT)" -n 3 -q
+	$(BIN)/pytest -m "$(UNIT)" -n 2 -q
 
 test-fast: test-unit
 
