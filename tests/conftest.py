@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 from browser import chromium
 from fakes import InMemoryRunStore, InspectableRunStore
+from hypothesis import settings
 from liveserver import LiveServer, live_server
 from playwright.sync_api import Browser, ConsoleMessage, Error, Page, expect
 from sqlalchemy import Engine, create_engine, text
@@ -23,6 +24,13 @@ from xdist.scheduler.protocol import Scheduling
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
+
+# CI runs the property tests on the same examples every time (seeded from each test), so a
+# submission is judged on its code, not on the examples a random search happened to draw;
+# a local run keeps searching afresh. `SRLAB_HYPOTHESIS_PROFILE=ci` gives CI's locally.
+settings.register_profile("ci", derandomize=True, database=None)
+if os.environ.get("SRLAB_HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") == "true" else ""):
+    settings.load_profile(os.environ.get("SRLAB_HYPOTHESIS_PROFILE") or "ci")
 
 
 @pytest.fixture(scope="session", autouse=True)
