@@ -67,6 +67,10 @@ class ReadOnlyNetworkError(NetworkConflictError):
         self.network = network
         self.what = what
 
+    def __reduce__(self) -> tuple[type[ReadOnlyNetworkError], tuple[str, str, str]]:
+        """Pickled with its fields (the store process sends errors to the service)."""
+        return type(self), (self.network, self.what, str(self))
+
 
 class AssociationExistsError(NetworkConflictError):
     """An association added that the network has already (change it instead)."""
@@ -83,6 +87,10 @@ class StaleVersionError(CoreError):
         super().__init__(message)
         self.current = current
         self.etag = etag
+
+    def __reduce__(self) -> tuple[type[StaleVersionError], tuple[str, int, str]]:
+        """Pickled with its fields (the store process sends errors to the service)."""
+        return type(self), (str(self), self.current, self.etag)
 
 
 # --- values ------------------------------------------------------------------------------

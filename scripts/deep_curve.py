@@ -166,10 +166,10 @@ def main(argv: Sequence[str] | None = None) -> None:
     out.write(f"{title}; wall time {wall:.0f} s on {args.jobs} processes\n")
     out.write(f"{'learner':8}  success, last {late} episodes [95% CI]   seconds per seed\n")
     for n in learners:
-        e = summary[n][f"success_last{late}"]
-        assert isinstance(e, dict)
+        ci = summary[n][f"success_last{late}"]
+        assert isinstance(ci, dict)
         out.write(
-            f"{n:8}  {e['mean']:6.1%} [{e['low']:6.1%}, {e['high']:6.1%}]"
+            f"{n:8}  {ci['mean']:6.1%} [{ci['low']:6.1%}, {ci['high']:6.1%}]"
             f"            {np.mean(seconds[n]):7.1f}\n"
         )
     out.write(f"wrote {args.out / 'curve.png'} and {args.out / 'curve.json'}\n")

@@ -44,6 +44,11 @@ class Settings(BaseSettings):
             name the client in X-Forwarded-For and X-Forwarded-Proto; empty (the default)
             ignores those headers. Behind a proxy, this is what keeps each trainer's reward
             rate limit their own instead of one shared by everybody behind the proxy.
+        store_process: run the database work in a process of its own
+            (`server.persistence.process`), so it takes another core than the event loop
+            that paces realtime ticks. `srlab serve` turns it on unless
+            ``SRLAB_STORE_PROCESS`` says otherwise; `create_app` alone keeps storage in the
+            service's process (quick to start, as tests want).
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -66,6 +71,7 @@ class Settings(BaseSettings):
     viser: bool = True
     viser_port: int = Field(8080, ge=1, le=65535)
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    store_process: bool = False
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
     @classmethod

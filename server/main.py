@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import logging
 import os
@@ -15,6 +16,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
+from sqlalchemy import Engine
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -38,7 +40,9 @@ from server.config import Settings
 from server.engines import EngineManager, TooManyRunsError
 from server.guard import CrossSiteGuard, SitePolicy
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
+from server.persistence.db import DatabaseCheck
 from server.persistence.networks import SqlAlchemyNetworkRepository, StaleVersionError
+from server.persistence.process import StoreProcess
 from server.ratelimit import RateLimiter
 from server.timeouts import BodyTimeout
 
@@ -104,9 +108,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        engine = make_engine(settings.database_url)
-        sessions = make_sessionmaker(engine)
-        store = SqlAlchemyRunStore(sessions)
+        engine: Engine | None = None
+        storage: StoreProcess | None = None
+        if settings.store_process:
+            storage = await asyncio.to_thread(StoreProcess, settings.database_url)
+            store, networks, database = storage.runs, storage.networks, storage.database
+        else:
+            engine = make_engine(settings.database_url)
+            sessions = make_sessionmaker(engine)
+            store = SqlAlchemyRunStore(sessions)
+            networks = SqlAlchemyNetworkRepository(sessions)
+            database = DatabaseCheck(engine)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
         manager = EngineManager(
             store,
@@ -156,9 +168,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.state.srlab = AppState(
             settings=settings,
             catalog=catalog,
-            sessions=sessions,
+            database=database,
             store=store,
-            networks=SqlAlchemyNetworkRepository(sessions),
+            networks=networks,
             engines=manager,
             rewards_limiter=rewards_limiter,
             viewer=viewer,
@@ -169,7 +181,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             if viewer is not None:
                 await viewer.stop()
             await manager.shutdown()
-            engine.dispose()
+            if engine is not None:
+                engine.dispose()
+            if storage is not None:
+                await asyncio.to_thread(storage.stop)
 
     app = FastAPI(
         title="srlab",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import faulthandler
 import logging
+import os
 import socket
 
 import uvicorn
@@ -47,6 +48,10 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         overrides["host"] = host
     if port is not None:
         overrides["port"] = port
+    # Storage in a process of its own (another core than the ticks' loop), unless the
+    # environment says otherwise.
+    if "SRLAB_STORE_PROCESS" not in os.environ:
+        overrides["store_process"] = True
     settings = Settings.load(**overrides)
     settings.check()
     upgrade(settings.database_url)

@@ -24,6 +24,7 @@ from xdist.scheduler.protocol import Scheduling
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
+from server.persistence.process import StoreProcess
 
 # CI runs the property tests on the same examples every time (seeded from each test), so a
 # submission is judged on its code, not on the examples a random search happened to draw;
@@ -160,11 +161,41 @@ def clean_postgres_engine(postgres_engine: Engine) -> Engine:
     return postgres_engine
 
 
-@pytest.fixture(params=["memory", "sqlite", "postgresql"])
+@pytest.fixture(scope="module")
+def store_process(
+    migrated_sqlite: Path, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[StoreProcess]:
+    """A store process (as `srlab serve` runs) on a copy of the migrated SQLite database."""
+    path = tmp_path_factory.mktemp("store-process") / "srlab.db"
+    shutil.copyfile(migrated_sqlite, path)
+    process = StoreProcess(f"sqlite:///{path}")
+    yield process
+    process.stop()
+
+
+@pytest.fixture
+def clean_store_process(store_process: StoreProcess) -> StoreProcess:
+    """The module's store process with no run or network an earlier test made."""
+    engine = make_engine(store_process.url)
+    with engine.begin() as c:
+        c.execute(text("DELETE FROM runs"))
+        c.execute(text("DELETE FROM networks WHERE NOT builtin"))
+    engine.dispose()
+    return store_process
+
+
+@pytest.fixture(params=["memory", "sqlite", "postgresql", "sqlite-process"])
 def store(request: pytest.FixtureRequest, catalog: Catalog) -> InspectableRunStore:
-    """Each implementation of `RunStore`, for the one contract suite they all pass."""
+    """Each implementation of `RunStore`, for the one contract suite they all pass.
+
+    ``sqlite-process``: the SQL store through the store process's proxy, as `srlab serve`
+    uses it (every argument, result and error crosses a process boundary).
+    """
     if request.param == "memory":
         return InMemoryRunStore(catalog)
+    if request.param == "sqlite-process":
+        process: StoreProcess = request.getfixturevalue("clean_store_process")
+        return process.runs
     engine_fixture = "sqlite_engine" if request.param == "sqlite" else "clean_postgres_engine"
     engine: Engine = request.getfixturevalue(engine_fixture)
     return SqlAlchemyRunStore(make_sessionmaker(engine))

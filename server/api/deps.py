@@ -7,12 +7,12 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Annotated
 
 from fastapi import Depends, HTTPException, Request, status
-from sqlalchemy.orm import Session, sessionmaker
 
 from core.brain.catalog import Catalog
 from server.config import Settings
 from server.engines import EngineManager
 from server.persistence import SqlAlchemyRunStore
+from server.persistence.db import DatabaseCheck
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.ratelimit import RateLimiter
 
@@ -26,7 +26,7 @@ class AppState:
 
     settings: Settings
     catalog: Catalog
-    sessions: sessionmaker[Session]
+    database: DatabaseCheck
     store: SqlAlchemyRunStore
     networks: SqlAlchemyNetworkRepository
     engines: EngineManager

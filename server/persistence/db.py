@@ -11,7 +11,7 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Engine, create_engine, event, text
 from sqlalchemy import exc as sa_exc
 from sqlalchemy.engine import URL, Connection, make_url
 from sqlalchemy.orm import Session, sessionmaker
@@ -298,3 +298,18 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
         session.close()
         if writer is not None:
             writer.release()
+
+
+class DatabaseCheck:
+    """What /api/health asks of the database: a read, and the dialect's name."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+        self._sessions = make_sessionmaker(engine)
+        self._dialect = engine.dialect.name
+
+    def check(self) -> str:
+        """Read one row in a transaction (the SQLite file's identity checked); the dialect."""
+        with transaction(self._sessions, "checking the database", write=False) as s:
+            s.execute(text("select 1"))
+        return self._dialect

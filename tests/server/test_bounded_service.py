@@ -20,7 +20,7 @@ pytestmark = pytest.mark.anyio
 def statements(app: FastAPI) -> Iterator[list[str]]:
     """The SQL the app's database engine runs inside the block."""
     seen: list[str] = []
-    bind = app.state.srlab.sessions.kw["bind"]
+    bind = app.state.srlab.database.engine
 
     def record(_conn: Any, _cursor: Any, sql: str, *_: Any) -> None:
         seen.append(" ".join(sql.split()).lower())

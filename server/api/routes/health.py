@@ -5,10 +5,8 @@ from __future__ import annotations
 from importlib.metadata import version
 
 from fastapi import APIRouter
-from sqlalchemy import text
 
 from server.api.deps import StateDep
-from server.persistence.db import transaction
 from server.schemas import Health
 
 router = APIRouter(tags=["health"])
@@ -21,12 +19,11 @@ def health(state: StateDep) -> Health:
     A SQLite file deleted or replaced since the service opened it, or its WAL index cut,
     is a 503 that says which: the runs fail with the same error, and no write is taken.
     """
-    with transaction(state.sessions, "checking the database", write=False) as s:
-        s.execute(text("select 1"))
+    dialect = state.database.check()
     return Health(
         status="ok",
         version=version("srlab"),
-        database=state.sessions.kw["bind"].dialect.name,
+        database=dialect,
         runs_active=state.engines.running(),
         viser_port=state.viewer.port if state.viewer is not None else None,
     )
