@@ -3,10 +3,12 @@
 Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one run:
 
 1. ticks/s of the plain headless loop (`core.runner.run`) against the engine in fast mode
-   committing everything to SQLite (goal: at least 2/3);
+   committing everything to SQLite, with the store in the engine's process (worker
+   threads) and in a store process as `srlab serve` has it
+   (`server.persistence.process`), alternated seed by seed (goal: at least 0.8);
 2. a realtime run at 20 Hz for ``--seconds`` (default 60) with storage writes going on (the
-   reinforcement program's rewards, trainer rewards injected 5 times a second, episodes):
-   tick lateness p99 and max, overruns, and per-reward commit p99
+   reinforcement program's rewards, trainer rewards injected 5 times a second, episodes),
+   once with each store: tick lateness p99 and max, overruns, and per-reward commit p99
    (goals: p99 <= 5 ms, max <= 25 ms, 0 overruns; commit p99 <= 5 ms).
 """
 
@@ -22,45 +24,71 @@ from pathlib import Path
 from core.brain.catalog import load_catalog
 from core.conditions import get_condition
 from core.engine import EngineStats, RunEngine
-from core.ports import Mode, RunSpec
+from core.ports import Mode, RunSpec, RunStore
 from core.runner import run
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
+from server.persistence.process import StoreProcess
 from server.tuning import configure_process
 
-
-def _store(folder: Path, name: str) -> SqlAlchemyRunStore:
-    url = f"sqlite:///{folder / name}"
-    upgrade(url)
-    return SqlAlchemyRunStore(make_sessionmaker(make_engine(url)))
+STORES = ("threads", "process")
+"""Where the store runs: in the engine's process (its worker threads) or in a store process."""
 
 
-def fast(folder: Path, condition: str, episodes: int, repeats: int) -> tuple[float, float, int]:
-    """Median ticks/s of the plain loop and of the engine with storage, alternated."""
+class Stores:
+    """One SQLite database per store kind; the store processes stop on `close`."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = folder
+        self.processes: list[StoreProcess] = []
+
+    def open(self, kind: str, name: str) -> RunStore:
+        """A store of `kind` on a new, migrated database `name`."""
+        url = f"sqlite:///{self.folder / f'{kind}-{name}'}"
+        upgrade(url)
+        if kind == "process":
+            process = StoreProcess(url)
+            self.processes.append(process)
+            return process.runs
+        return SqlAlchemyRunStore(make_sessionmaker(make_engine(url)))
+
+    def close(self) -> None:
+        """Stop the store processes."""
+        for process in self.processes:
+            process.stop()
+
+
+def fast(
+    stores: Stores, condition: str, episodes: int, repeats: int
+) -> tuple[float, dict[str, float], int]:
+    """Median ticks/s of the plain loop and of the engine with each store, alternated."""
     catalog = load_catalog()
-    store = _store(folder, "fast.db")
-    run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of both paths
-    asyncio.run(RunEngine.create(RunSpec(condition, 0, 3, Mode.FAST), store, catalog=catalog).run())
-    plain_rates, engine_rates = [], []
+    opened = {kind: stores.open(kind, "fast.db") for kind in STORES}
+    run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of every path
+    for store in opened.values():
+        spec = RunSpec(condition, 0, 3, Mode.FAST)
+        asyncio.run(RunEngine.create(spec, store, catalog=catalog).run())
+    plain_rates: list[float] = []
+    engine_rates: dict[str, list[float]] = {kind: [] for kind in STORES}
     ticks = 0
     for seed in range(1, repeats + 1):
         started = time.perf_counter()
         plain = run(get_condition(condition), seed, episodes, catalog=catalog)
         plain_rates.append(plain.ticks / (time.perf_counter() - started))
-        engine = RunEngine.create(
-            RunSpec(condition, seed, episodes, Mode.FAST), store, catalog=catalog
-        )
-        started = time.perf_counter()
-        asyncio.run(engine.run())
-        engine_rates.append(engine.totals.ticks / (time.perf_counter() - started))
-        assert engine.totals.ticks == plain.ticks, "the engine ran what the plain loop ran"
+        for kind, store in opened.items():
+            engine = RunEngine.create(
+                RunSpec(condition, seed, episodes, Mode.FAST), store, catalog=catalog
+            )
+            started = time.perf_counter()
+            asyncio.run(engine.run())
+            engine_rates[kind].append(engine.totals.ticks / (time.perf_counter() - started))
+            assert engine.totals.ticks == plain.ticks, "the engine ran what the plain loop ran"
         ticks += plain.ticks
-    return statistics.median(plain_rates), statistics.median(engine_rates), ticks
+    medians = {kind: statistics.median(rates) for kind, rates in engine_rates.items()}
+    return statistics.median(plain_rates), medians, ticks
 
 
-def realtime(folder: Path, seconds: float, hz: float) -> EngineStats:
-    engine = RunEngine.create(
-        RunSpec("rp", 2, None, Mode.REALTIME, hz=hz), _store(folder, "realtime.db")
-    )
+def realtime(store: RunStore, seconds: float, hz: float) -> EngineStats:
+    engine = RunEngine.create(RunSpec("rp", 2, None, Mode.REALTIME, hz=hz), store)
 
     async def trainer() -> None:
         end = time.monotonic() + seconds
@@ -92,17 +120,32 @@ def main() -> None:
     args = parser.parse_args()
     configure_process()  # as `srlab run` and `srlab serve` do
     with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        plain, engine, ticks = fast(folder, args.condition, args.episodes, args.repeats)
-        print(
-            f"fast mode, {args.condition}, {args.repeats} x {args.episodes} episodes "
-            f"({ticks:,} ticks each way), medians:"
-        )
-        print(f"  plain headless loop        {plain:10,.0f} ticks/s")
-        print(f"  engine + SQLite storage    {engine:10,.0f} ticks/s")
-        print(f"  ratio                      {engine / plain:10.2f}   (goal: >= 0.67)")
-        stats = realtime(folder, args.seconds, args.hz)
-    print(f"realtime, rp at {args.hz:g} Hz for {args.seconds:g} s with storage writes:")
+        stores = Stores(Path(tmp))
+        try:
+            plain, engine, ticks = fast(stores, args.condition, args.episodes, args.repeats)
+            print(
+                f"fast mode, {args.condition}, {args.repeats} x {args.episodes} episodes "
+                f"({ticks:,} ticks each way), medians:"
+            )
+            print(f"  plain headless loop          {plain:10,.0f} ticks/s")
+            for kind in STORES:
+                print(f"  engine + SQLite, {kind:9}   {engine[kind]:10,.0f} ticks/s")
+            for kind in STORES:
+                ratio = engine[kind] / plain
+                print(f"  ratio, {kind:9}             {ratio:10.2f}   (goal: >= 0.8)")
+            for kind in STORES:
+                print_realtime(
+                    kind,
+                    realtime(stores.open(kind, "realtime.db"), args.seconds, args.hz),
+                    args.hz,
+                    args.seconds,
+                )
+        finally:
+            stores.close()
+
+
+def print_realtime(kind: str, stats: EngineStats, hz: float, seconds: float) -> None:
+    print(f"realtime, rp at {hz:g} Hz for {seconds:g} s with storage writes, store in {kind}:")
     print(f"  ticks                      {stats.ticks:10,}")
     print(f"  tick lateness p50          {ms(stats.lateness_s.percentile(50))}")
     print(f"  tick lateness p99          {ms(stats.lateness_s.percentile(99))}   (goal: <= 5 ms)")
