@@ -441,6 +441,8 @@ class RunEngine:
         self._ack_queue: asyncio.Queue[object] = asyncio.Queue()
         self._steps: deque[asyncio.Future[int]] = deque()
         """Single-tick steps asked of the paused run, answered with the tick they ran."""
+        self._status_waiters: list[asyncio.Future[RunStatus]] = []
+        """`next_status` futures, answered by the next status change."""
 
     # --- construction ---------------------------------------------------------------
 
@@ -834,7 +836,17 @@ class RunEngine:
 
     def _set_status(self, status: RunStatus) -> None:
         self.status = status
+        waiters, self._status_waiters = self._status_waiters, []
+        for waiter in waiters:
+            if not waiter.done():
+                waiter.set_result(status)
         self._publish(StatusChanged(self.run_id, status, self.error))
+
+    def next_status(self) -> asyncio.Future[RunStatus]:
+        """A future answered with the run's next status (cancel it to stop waiting)."""
+        waiter: asyncio.Future[RunStatus] = asyncio.get_running_loop().create_future()
+        self._status_waiters.append(waiter)
+        return waiter
 
     def _publish(self, event: object) -> None:
         for sub in self._subscribers:

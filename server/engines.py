@@ -194,7 +194,11 @@ class EngineManager:
             while engine.status in (RunStatus.CREATED, RunStatus.INTERRUPTED, RunStatus.STOPPED):
                 if task.done():
                     return
-                await asyncio.sleep(0.001)
+                change = engine.next_status()
+                try:
+                    await asyncio.wait((task, change), return_when=asyncio.FIRST_COMPLETED)
+                finally:
+                    change.cancel()
 
     async def ended(self, run_id: int, timeout_s: float) -> bool:
         """Wait up to `timeout_s` for a run's task to end; whether it has."""

@@ -740,3 +740,24 @@ def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward
     assert engine.status is RunStatus.FAILED
     assert all(isinstance(a, StorageError) for a in answers), answers
     assert [r.record.note for r in store.rewards(engine.run_id)] == ["first"]
+
+
+def test_next_status_answers_each_change_and_a_cancelled_wait_is_skipped() -> None:
+    engine = RunEngine.create(realtime("delayed", 5, hz=500.0), InMemoryRunStore(CATALOG))
+
+    async def main() -> list[RunStatus]:
+        given_up = engine.next_status()
+        given_up.cancel()
+        first = engine.next_status()
+        runner = asyncio.create_task(engine.run())
+        seen = [await first]
+        second = engine.next_status()
+        engine.pause()
+        seen.append(await second)
+        third = engine.next_status()
+        engine.stop()
+        seen.append(await third)
+        await runner
+        return seen
+
+    assert asyncio.run(main()) == [RunStatus.RUNNING, RunStatus.PAUSED, RunStatus.STOPPED]
