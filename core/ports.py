@@ -282,6 +282,66 @@ class RunStore(Protocol):
         ...
 
 
+class RunQueries(RunStore, Protocol):
+    """A `RunStore` with the reads the service answers from: each reads only what it returns.
+
+    Pages are in id (or episode number) order with the total count beside them; an unknown
+    run raises `UnknownRunError`.
+    """
+
+    def ltm(self, run_id: int) -> dict[tuple[str, str], float]:
+        """The run's LTM reliabilities by (stimulus, behaviour)."""
+        ...
+
+    def rltm(self, run_id: int) -> dict[tuple[str, str], float]:
+        """The run's RLTM (KP) reliabilities by (stimulus, behaviour)."""
+        ...
+
+    def network(self, run_id: int) -> tuple[NetworkPair, ...]:
+        """The run's behaviour network as stored."""
+        ...
+
+    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]:
+        """The behaviours the run synthesised (KP), in the order they were added."""
+        ...
+
+    def list_runs(self) -> list[StoredRun]:
+        """Every run, by id."""
+        ...
+
+    def run_summary(self, run_id: int) -> StoredRun:
+        """A run's spec, status and totals, without its checkpoint or log."""
+        ...
+
+    def run_summaries(self, offset: int = 0, limit: int = 100) -> tuple[list[StoredRun], int]:
+        """A page of runs by id, as `run_summary`, and how many runs are stored."""
+        ...
+
+    def rewards_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[StoredReward], int]:
+        """A page of the run's reward log in log order, and the log's length."""
+        ...
+
+    def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:
+        """One episode with its trace, None if the run has no such episode."""
+        ...
+
+    def episode_summaries(self, run_id: int) -> list[EpisodeRecord]:
+        """The run's episodes by number, without their traces."""
+        ...
+
+    def episode_summaries_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[EpisodeRecord], int]:
+        """A page of the run's episodes without traces, and how many it has."""
+        ...
+
+    def interrupt_active(self) -> int:
+        """Mark every run stored as running or paused interrupted (its process died)."""
+        ...
+
+
 class NetworkRepository(Protocol):
     """Stored networks (the S-R editor's subject), their associations and edit history.
 

@@ -12,6 +12,7 @@ import httpx
 from asgi_lifespan import LifespanManager
 from fastapi import FastAPI
 
+from server.bootstrap import StorageFactory, open_storage
 from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
@@ -30,10 +31,12 @@ def settings_for(tmp_path: Path, **overrides: Any) -> Settings:
 
 @asynccontextmanager
 async def client_for(
-    settings: Settings, headers: dict[str, str] | None = None
+    settings: Settings,
+    headers: dict[str, str] | None = None,
+    storage: StorageFactory = open_storage,
 ) -> AsyncIterator[tuple[httpx.AsyncClient, FastAPI]]:
     """An httpx client on the app with its lifespan running (ASGITransport skips it)."""
-    app = create_app(settings)
+    app = create_app(settings, storage)
     # Hang guards, not timings: a cold start on a busy machine takes more than 5 s.
     async with LifespanManager(app, startup_timeout=60, shutdown_timeout=60) as manager:
         transport = httpx.ASGITransport(app=manager.app)

@@ -40,9 +40,9 @@ from core.ports import (
     NetworkPair,
     RewardCommit,
     RewardRecord,
+    RunQueries,
     RunSpec,
     RunStatus,
-    RunStore,
     RunTotals,
     StoredCommand,
     StoredReward,
@@ -429,18 +429,61 @@ class InMemoryRunStore:
         """Every run, by id."""
         return [self._stored(i, r) for i, r in sorted(self._runs.items())]
 
+    # --- the service's reads (`core.ports.RunQueries`) ------------------------------
 
-class InspectableRunStore(RunStore, Protocol):
-    """A `RunStore` with the read helpers `InMemoryRunStore` and `SqlAlchemyRunStore` share."""
+    def _summary(self, run_id: int, run: _MemoryRun) -> StoredRun:
+        return replace(
+            self._stored(run_id, run), checkpoint=None, rewards_after=(), commands_after=()
+        )
 
-    def ltm(self, run_id: int) -> dict[tuple[str, str], float]: ...
-    def rltm(self, run_id: int) -> dict[tuple[str, str], float]: ...
-    def network(self, run_id: int) -> tuple[NetworkPair, ...]: ...
-    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]: ...
+    def run_summary(self, run_id: int) -> StoredRun:
+        """A run's spec, status and totals, without its checkpoint or log."""
+        return self._summary(run_id, self._run(run_id))
+
+    def run_summaries(self, offset: int = 0, limit: int = 100) -> tuple[list[StoredRun], int]:
+        """A page of runs by id, as `run_summary`, and how many runs are stored."""
+        ids = sorted(self._runs)
+        page = ids[offset : offset + limit]
+        return [self._summary(i, self._runs[i]) for i in page], len(ids)
+
+    def rewards_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[StoredReward], int]:
+        """A page of the run's reward log in log order, and the log's length."""
+        log = self.rewards(run_id)
+        return log[offset : offset + limit], len(log)
+
+    def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:
+        """One episode with its trace, None if the run has no such episode."""
+        return self._run(run_id).episodes.get(episode)
+
+    def episode_summaries(self, run_id: int) -> list[EpisodeRecord]:
+        """The run's episodes by number, without their traces."""
+        return [replace(e, trace=b"") for e in self.episodes(run_id)]
+
+    def episode_summaries_page(
+        self, run_id: int, offset: int = 0, limit: int = 100
+    ) -> tuple[list[EpisodeRecord], int]:
+        """A page of the run's episodes without traces, and how many it has."""
+        summaries = self.episode_summaries(run_id)
+        return summaries[offset : offset + limit], len(summaries)
+
+    def interrupt_active(self) -> int:
+        """Mark every run stored as running or paused interrupted (its process died)."""
+        active = [
+            r for r in self._runs.values() if r.status in (RunStatus.RUNNING, RunStatus.PAUSED)
+        ]
+        for run in active:
+            run.status = RunStatus.INTERRUPTED
+        return len(active)
+
+
+class InspectableRunStore(RunQueries, Protocol):
+    """The service's store (`RunQueries`) with the whole logs, which only tests read."""
+
     def rewards(self, run_id: int) -> list[StoredReward]: ...
     def commands(self, run_id: int) -> list[StoredCommand]: ...
     def episodes(self, run_id: int) -> list[EpisodeRecord]: ...
-    def list_runs(self) -> list[StoredRun]: ...
 
 
 class ManualPacer:

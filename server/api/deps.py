@@ -9,14 +9,13 @@ from typing import TYPE_CHECKING, Annotated
 from fastapi import Depends, HTTPException, Request, status
 
 from core.brain.catalog import Catalog
+from core.ports import NetworkRepository, RunQueries
 from server.config import Settings
 from server.engines import EngineManager
-from server.persistence import SqlAlchemyRunStore
-from server.persistence.db import DatabaseCheck
-from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.ratelimit import RateLimiter
 
 if TYPE_CHECKING:
+    from server.bootstrap import DatabaseProbe
     from server.viewer import Viewer
 
 
@@ -26,9 +25,9 @@ class AppState:
 
     settings: Settings
     catalog: Catalog
-    database: DatabaseCheck
-    store: SqlAlchemyRunStore
-    networks: SqlAlchemyNetworkRepository
+    database: DatabaseProbe
+    store: RunQueries
+    networks: NetworkRepository
     engines: EngineManager
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
@@ -49,17 +48,17 @@ def _engines(state: StateDep) -> EngineManager:
     return state.engines
 
 
-def _store(state: StateDep) -> SqlAlchemyRunStore:
+def _store(state: StateDep) -> RunQueries:
     return state.store
 
 
-def _networks(state: StateDep) -> SqlAlchemyNetworkRepository:
+def _networks(state: StateDep) -> NetworkRepository:
     return state.networks
 
 
 EnginesDep = Annotated[EngineManager, Depends(_engines)]
-NetworksDep = Annotated[SqlAlchemyNetworkRepository, Depends(_networks)]
-StoreDep = Annotated[SqlAlchemyRunStore, Depends(_store)]
+NetworksDep = Annotated[NetworkRepository, Depends(_networks)]
+StoreDep = Annotated[RunQueries, Depends(_store)]
 
 
 def bearer(request: Request) -> str | None:

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import viser
 
 from core.brain.catalog import Catalog
+from core.ports import RunQueries
 from core.sim.world import WorldConfig
 from core.worlds import load_world
 from server.engines import EngineManager
 from server.guard import SitePolicy
-from server.persistence import SqlAlchemyRunStore
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
 from server.viewer.gate import Gate, Peer
@@ -192,7 +192,7 @@ class Viewer:
         host: str,
         port: int,
         manager: EngineManager,
-        store: SqlAlchemyRunStore,
+        store: RunQueries,
         catalog: Catalog,
         limiter: RateLimiter,
         writable: bool,

@@ -21,11 +21,10 @@ from core.commands import RewardSource
 from core.engine import RunEngine, StatusChanged, SubscriptionClosed, TickPublished
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
-from core.ports import Mode, RunStatus
+from core.ports import Mode, RunQueries, RunStatus
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
 from server.engines import EngineManager
-from server.persistence import SqlAlchemyRunStore
 from server.ratelimit import RateLimiter
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
 from server.viewer.replay import ReplayClock, load_replay
@@ -112,7 +111,7 @@ class Controller:
         self,
         inbox: Inbox,
         manager: EngineManager,
-        store: SqlAlchemyRunStore,
+        store: RunQueries,
         catalog: Catalog,
         limiter: RateLimiter,
         *,

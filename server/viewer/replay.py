@@ -8,12 +8,11 @@ from dataclasses import dataclass, field, replace
 
 from core.brain.catalog import Catalog
 from core.errors import UnknownNameError
-from core.ports import NetworkPair
+from core.ports import NetworkPair, RunQueries
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig, episode_layout
 from core.trace import TraceRow, unpack
 from core.worlds import load_world
-from server.persistence import SqlAlchemyRunStore
 from server.viewer.scene import TickView
 
 log = logging.getLogger("srlab.viewer")
@@ -172,7 +171,7 @@ def kp_pairs(network: tuple[NetworkPair, ...]) -> set[tuple[str, str]]:
 
 
 def load_replay(
-    store: SqlAlchemyRunStore,
+    store: RunQueries,
     catalog: Catalog,
     run_id: int,
     episode: int,

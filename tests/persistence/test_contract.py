@@ -478,6 +478,41 @@ def test_runs_keep_their_learning_apart(store: InspectableRunStore) -> None:
     assert store.ltm(a) == {("Red", "stop"): 0.9}
 
 
+def test_the_service_reads_page_and_summarise_what_is_stored(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    ids = [store.log_reward(run_id, reward(t)) for t in (10, 20, 30)]
+    for n in range(3):
+        store.end_episode(
+            run_id, episode(n, 100 * n), Checkpoint(n, 100 * n + 50, b"s"), RunTotals(n + 1, 1, 50)
+        )
+    store.set_status(run_id, RunStatus.RUNNING)
+    other = new_run(store)
+
+    summary = store.run_summary(run_id)
+    assert (summary.id, summary.status, summary.totals) == (
+        run_id,
+        RunStatus.RUNNING,
+        RunTotals(3, 1, 50),
+    )
+    assert summary.checkpoint is None and summary.rewards_after == () == summary.commands_after
+    page, total = store.run_summaries(offset=1, limit=5)
+    assert total == 2 and [r.id for r in page] == [other]
+    rewards, count = store.rewards_page(run_id, offset=1, limit=1)
+    assert count == 3 and [r.id for r in rewards] == ids[1:2]
+    assert store.episode(run_id, 1) == episode(1, 100)
+    assert store.episode(run_id, 7) is None
+    assert [e.episode for e in store.episode_summaries(run_id)] == [0, 1, 2]
+    assert all(e.trace == b"" for e in store.episode_summaries(run_id))
+    episodes, many = store.episode_summaries_page(run_id, offset=2, limit=10)
+    assert many == 3 and [(e.episode, e.trace) for e in episodes] == [(2, b"")]
+
+    assert store.interrupt_active() == 1
+    assert store.run_summary(run_id).status is RunStatus.INTERRUPTED
+    assert store.run_summary(other).status is RunStatus.CREATED
+
+
 UNKNOWN = 987_654
 CALLS: dict[str, Callable[[InspectableRunStore], object]] = {
     "load_run": lambda s: s.load_run(UNKNOWN),
@@ -496,6 +531,11 @@ CALLS: dict[str, Callable[[InspectableRunStore], object]] = {
     "rewards": lambda s: s.rewards(UNKNOWN),
     "commands": lambda s: s.commands(UNKNOWN),
     "episodes": lambda s: s.episodes(UNKNOWN),
+    "run_summary": lambda s: s.run_summary(UNKNOWN),
+    "rewards_page": lambda s: s.rewards_page(UNKNOWN),
+    "episode": lambda s: s.episode(UNKNOWN, 0),
+    "episode_summaries": lambda s: s.episode_summaries(UNKNOWN),
+    "episode_summaries_page": lambda s: s.episode_summaries_page(UNKNOWN),
 }
 
 

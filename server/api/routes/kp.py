@@ -11,10 +11,10 @@ from core.brain.catalog import Catalog
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
 from core.engine import RunEngine
+from core.ports import RunQueries
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
-from server.persistence import SqlAlchemyRunStore
 from server.schemas import (
     KpAssociationPublic,
     KpPerceptPublic,
@@ -144,7 +144,7 @@ def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
 
 
 def _stored_runs(
-    store: SqlAlchemyRunStore, run_id: int, catalog: Catalog
+    store: RunQueries, run_id: int, catalog: Catalog
 ) -> dict[tuple[str, str], list[tuple[int, int]]]:
     """Spans of consecutive ticks where each kp association ran, from the latest traces."""
     stimuli = [s.name for s in catalog.stimuli]

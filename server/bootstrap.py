@@ -1,0 +1,152 @@
+"""The composition root: what the service is made of, built in one place.
+
+`create_app`'s lifespan calls `service(settings, storage)`: storage first (SQLAlchemy in
+this process, or in a store process as `srlab serve` runs it), then the runs' manager,
+the reward rate limiter and the 3D view over it. Tests give another `storage` factory,
+e.g. the in-memory fakes of `tests/fakes.py`, and drive the same routes and engines.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import os
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from typing import Protocol
+
+import anyio.to_thread
+
+from core.ports import NetworkRepository, RunQueries
+from core.setup import Setup
+from server.api.deps import AppState
+from server.config import Settings
+from server.engines import EngineManager
+from server.guard import SitePolicy
+from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
+from server.persistence.db import DatabaseCheck
+from server.persistence.networks import SqlAlchemyNetworkRepository
+from server.persistence.process import StoreProcess
+from server.ratelimit import RateLimiter
+
+REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
+"""Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
+
+
+class DatabaseProbe(Protocol):
+    """What /api/health asks of storage."""
+
+    def check(self) -> str:
+        """Read from the database (a `StorageError` if it cannot); the dialect's name."""
+        ...
+
+
+@dataclass(frozen=True)
+class Storage:
+    """Where the service keeps runs and networks, and how it lets them go."""
+
+    runs: RunQueries
+    networks: NetworkRepository
+    database: DatabaseProbe
+    close: Callable[[], None]
+    """Blocking: called once, after the last write."""
+
+
+StorageFactory = Callable[[Settings], Storage]
+"""Blocking: opens the storage `settings` name (called in a thread)."""
+
+
+def open_storage(settings: Settings) -> Storage:
+    """SQLAlchemy on `settings.database_url`, in a store process if `store_process`."""
+    if settings.store_process:
+        process = StoreProcess(settings.database_url)
+        return Storage(process.runs, process.networks, process.database, process.stop)
+    engine = make_engine(settings.database_url)
+    sessions = make_sessionmaker(engine)
+    return Storage(
+        SqlAlchemyRunStore(sessions),
+        SqlAlchemyNetworkRepository(sessions),
+        DatabaseCheck(engine),
+        engine.dispose,
+    )
+
+
+@asynccontextmanager
+async def service(
+    settings: Settings, storage: StorageFactory = open_storage
+) -> AsyncIterator[AppState]:
+    """Everything the routes share, for as long as the service runs; then a clean stop.
+
+    On the way out: the 3D view closes, every run is interrupted at a tick boundary (and
+    stays resumable), then storage closes after the runs' last writes.
+    """
+    opened = await asyncio.to_thread(storage, settings)
+    try:
+        catalog = Setup().catalog()  # the default definition's, shared with its runs
+        manager = EngineManager(
+            opened.runs,
+            catalog,
+            settings.max_runs,
+            max_streams=settings.max_streams,
+            max_streams_per_run=settings.max_streams_per_run,
+        )
+        await _warm_up()
+        # Routes run their blocking work in threads, which take the GIL from the event loop
+        # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
+        # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
+        # them short (tests/reliability/test_load.py).
+        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+        # A run stored as running or paused lost its process: it can be resumed from its
+        # checkpoint and log.
+        await asyncio.to_thread(opened.runs.interrupt_active)
+        limiter = RateLimiter(
+            settings.reward_rate_per_s,
+            settings.reward_burst,
+            run_rate=settings.reward_run_rate_per_s,
+            run_burst=settings.reward_run_burst,
+        )
+        viewer = None
+        if settings.viser:
+            from server.viewer import Viewer
+
+            viewer = await Viewer.start(
+                host=settings.host,
+                port=settings.viser_port,
+                manager=manager,
+                store=opened.runs,
+                catalog=catalog,
+                limiter=limiter,
+                writable=not settings.writes_need_token,
+                policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
+            )
+        try:
+            yield AppState(
+                settings=settings,
+                catalog=catalog,
+                database=opened.database,
+                store=opened.runs,
+                networks=opened.networks,
+                engines=manager,
+                rewards_limiter=limiter,
+                viewer=viewer,
+            )
+        finally:
+            if viewer is not None:
+                await viewer.stop()
+            await manager.shutdown()
+    finally:
+        await asyncio.to_thread(opened.close)
+
+
+async def _warm_up() -> None:
+    """Load the sensing kernel's machine code now, not in the first run's first tick.
+
+    Then keep everything loaded so far (it lives as long as the process) out of the cyclic
+    collector's way, so a full collection does not stall realtime ticks.
+    """
+    from core.sim.world import PymunkWorld
+
+    await asyncio.to_thread(lambda: PymunkWorld().reset(0, 0))
+    gc.collect()
+    gc.freeze()
