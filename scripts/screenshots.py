@@ -73,10 +73,15 @@ def main() -> None:
             page.set_viewport_size({"width": 1440, "height": 1100})
             page.goto(f"{server.url}/#/console/{live['id']}")
             page.wait_for_selector("#competition .bar-row", timeout=60_000)
-            for key in ("+", "-", "+"):
-                page.keyboard.press(key)
+            # A reward credits the STM records before it: before the robot's first turn
+            # there may be none, so the trainer goes on rewarding until one has credit.
+            credited = page.locator("#reward-effect table")
+            for n in range(40):
+                page.keyboard.press("+-"[n % 3 == 1])
                 page.wait_for_timeout(1500)
-            page.wait_for_selector("#reward-effect table", timeout=10_000)
+                if n >= 2 and credited.count():
+                    break
+            credited.wait_for(timeout=10_000)
             page.wait_for_timeout(800)
             page.screenshot(path=str(OUT / "console.png"))
             print(f"saved {OUT / 'console.png'}")  # noqa: T201
