@@ -81,7 +81,7 @@ def main() -> None:
                 page.wait_for_timeout(1500)
                 if n >= 2 and credited.count():
                     break
-            credited.wait_for(timeout=10_000)
+            credited.first.wait_for(timeout=10_000)
             page.wait_for_timeout(800)
             page.screenshot(path=str(OUT / "console.png"))
             print(f"saved {OUT / 'console.png'}")  # noqa: T201
