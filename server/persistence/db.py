@@ -306,10 +306,9 @@ class DatabaseCheck:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
         self._sessions = make_sessionmaker(engine)
-        self._dialect = engine.dialect.name
 
     def check(self) -> str:
         """Read one row in a transaction (the SQLite file's identity checked); the dialect."""
         with transaction(self._sessions, "checking the database", write=False) as s:
             s.execute(text("select 1"))
-        return self._dialect
+        return self.engine.dialect.name

@@ -23,7 +23,6 @@ every call fails with a `StorageError` that says so, and the service stays up to
 from __future__ import annotations
 
 import faulthandler
-import logging
 import multiprocessing
 import os
 import signal
@@ -31,35 +30,27 @@ import threading
 from collections.abc import Callable
 from functools import partial
 from multiprocessing.managers import BaseManager, BaseProxy
-from typing import Any, TypeVar, cast
-
-from sqlalchemy import Engine
+from typing import Any, cast
 
 from core.errors import StorageError
 from server.persistence.db import DatabaseCheck, make_engine, make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
 
-log = logging.getLogger("srlab.store")
-
-_T = TypeVar("_T")
-
 # --------------------------------------------------------------------------- in the child
 
-_engine: Engine | None = None
 _stores: dict[str, object] = {}
 
 
 def _open(url: str) -> None:
     """The store process's start: one engine and the objects the service calls."""
-    global _engine
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the service stops us after its last write
     faulthandler.enable()
-    _engine = make_engine(url)
-    sessions = make_sessionmaker(_engine)
+    engine = make_engine(url)
+    sessions = make_sessionmaker(engine)
     _stores["runs"] = SqlAlchemyRunStore(sessions)
     _stores["networks"] = SqlAlchemyNetworkRepository(sessions)
-    _stores["database"] = DatabaseCheck(_engine)
+    _stores["database"] = DatabaseCheck(engine)
     parent = multiprocessing.parent_process()
     if parent is not None:
         threading.Thread(target=_exit_with, args=(parent,), daemon=True).start()
@@ -96,8 +87,8 @@ class StoreProcess:
         self.url = url
         self._manager = _Manager(ctx=multiprocessing.get_context("spawn"))
         self._manager.start(initializer=_open, initargs=(url,))
-        process = self._manager._process  # type: ignore[attr-defined]
-        self.pid: int = process.pid
+        self._process: multiprocessing.process.BaseProcess = self._manager._process  # type: ignore[attr-defined]
+        self.pid: int = self._process.pid
         self.runs = cast(SqlAlchemyRunStore, self._proxy("runs"))
         self.networks = cast(SqlAlchemyNetworkRepository, self._proxy("networks"))
         self.database = cast(DatabaseCheck, self._proxy("database"))
@@ -108,8 +99,7 @@ class StoreProcess:
 
     def alive(self) -> bool:
         """Whether the store process still runs."""
-        process = self._manager._process  # type: ignore[attr-defined]
-        return bool(process.is_alive())
+        return self._process.is_alive()
 
     def stop(self) -> None:
         """Stop the store process (after the service's last write)."""
@@ -117,7 +107,7 @@ class StoreProcess:
 
     def gone(self, error: BaseException) -> StoreProcessError:
         """The error a call gets when the store process cannot answer."""
-        code = self._manager._process.exitcode  # type: ignore[attr-defined]
+        code = self._process.exitcode
         how = f"exit code {code}" if code is not None else f"{type(error).__name__}: {error}"
         return StoreProcessError(
             f"the store process ({self.pid}) is gone ({how}): nothing more is stored "
@@ -142,5 +132,5 @@ class _Guarded:
     def _call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         try:
             return self._proxy._callmethod(name, args, kwargs)
-        except (EOFError, ConnectionError, BrokenPipeError) as e:
+        except (EOFError, ConnectionError) as e:
             raise self._owner.gone(e) from None
