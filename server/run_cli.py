@@ -125,7 +125,7 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
         # in realtime mode can be minutes apart.
         return (
             f"episode {ended}{planned} done, {successes} successes, tick "
-            f"{engine.sim.tick_count:,} ({engine.status.value})"
+            f"{engine.totals.ticks:,} ({engine.status.value})"
         )
 
     def take(events: list[object]) -> bool:

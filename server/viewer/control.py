@@ -58,15 +58,15 @@ LIMITER_KEY = "3d-view"
 
 def tick_view(engine: RunEngine, snap: Snapshot) -> TickView:
     """A live snapshot as the view shows it (call on the engine's event loop)."""
-    brain = engine.sim.brain
-    cat = brain.catalog
+    view = engine.view()
+    cat = view.catalog
     stimuli = tuple(cat.stimuli[i].name for i in snap.stimuli)
     b = snap.behaviour
     behaviour = cat.behaviours[b].name if 0 <= b < len(cat.behaviours) else None
     kp = False
     if snap.how.value == "released" and behaviour is not None:
         for s in snap.stimuli:
-            a = brain.network.get(s, b)
+            a = view.network.get(s, b)
             if a is not None and a.source == "kp":
                 kp = True
                 break
@@ -391,14 +391,14 @@ class Controller:
                     # A run that ended here: show where it stopped.
                     shown = engine
                     with contextlib.suppress(SimulationStateError):
-                        self.inbox.push(tick_view(engine, engine.sim.snapshot))
+                        self.inbox.push(tick_view(engine, engine.view().snapshot))
                 await asyncio.sleep(0.5)
                 continue
             sub = engine.subscribe(maxsize=64, tick_hz=MAX_HZ)
             try:
                 self._publish(live=self._live_info(run_id))
                 with contextlib.suppress(SimulationStateError):  # not reset yet
-                    self.inbox.push(tick_view(engine, engine.sim.snapshot))
+                    self.inbox.push(tick_view(engine, engine.view().snapshot))
                 while True:
                     try:
                         event = await sub.get()

@@ -39,7 +39,8 @@ CLOCK_CALLS = {
 }
 NUMPY_SEEDED = {"default_rng", "SeedSequence", "Generator", "PCG64", "BitGenerator"}
 """numpy.random names that build an instance RNG rather than use the global one."""
-ENGINE = CORE / "engine.py"
+ENGINE = CORE / "engine"
+"""The engine's package: the one part of core that paces by the clock."""
 
 
 def core_files() -> list[Path]:
@@ -105,7 +106,8 @@ def test_core_files_are_found() -> None:
 @pytest.mark.parametrize("path", core_files(), ids=lambda p: str(p.relative_to(CORE)))
 def test_core_module_is_pure(path: Path) -> None:
     label = str(path.relative_to(CORE.parent))
-    assert violations(path.read_text(encoding="utf-8"), label, is_engine=path == ENGINE) == []
+    source = path.read_text(encoding="utf-8")
+    assert violations(source, label, is_engine=ENGINE in path.parents) == []
 
 
 @pytest.mark.parametrize(
@@ -245,3 +247,33 @@ def test_importing_the_brain_loads_no_physics() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout == ""
+
+
+OUTSIDE_CORE = ("server", "bench", "scripts")
+
+
+def engine_sim_reads(source: str, label: str) -> list[str]:
+    """Every `<x>.sim` attribute read in `source`: outside core, a run is read by its view."""
+    tree = ast.parse(source, filename=label)
+    return [
+        f"{label}:{node.lineno}: {dotted(node) or node.attr}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and node.attr == "sim"
+    ]
+
+
+def test_nothing_outside_core_reaches_into_an_engines_simulation() -> None:
+    root = CORE.parent
+    found = [
+        hit
+        for package in OUTSIDE_CORE
+        for path in sorted((root / package).rglob("*.py"))
+        if "__pycache__" not in path.parts
+        for hit in engine_sim_reads(path.read_text(encoding="utf-8"), str(path.relative_to(root)))
+    ]
+    assert found == [], "read a run through RunEngine.view(), not engine.sim"
+
+
+def test_the_sim_check_catches_a_read() -> None:
+    assert engine_sim_reads("tick = engine.sim.tick_count", "probe.py") != []
+    assert engine_sim_reads("import core.sim.world\nview = engine.view()", "probe.py") == []

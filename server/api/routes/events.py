@@ -175,9 +175,9 @@ async def stream_events(
                 engine = engine or engines.get(run_id)  # fed from the run's start on
                 if engine is None:
                     continue
-                brain = engine.sim.brain
+                view = engine.view()
                 # The brain's catalogue of now: it grows when KP synthesises a behaviour.
-                encoded = encode(event, brain.catalog, brain.selector)
+                encoded = encode(event, view.catalog, view.selector)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()

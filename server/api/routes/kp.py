@@ -67,12 +67,11 @@ def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpPro
 
 def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
     """Read on the event loop, between ticks: the engine mutates it only there."""
-    sim = engine.sim
     dt_s = kp.dt_s
     cat = kp.catalog
     s = [x.name for x in cat.stimuli]
     b = [x.name for x in cat.behaviours]
-    tick = sim.tick_count
+    tick = engine.view().tick
     window = kp.config.window_ticks
     rstm = [
         RstmPublic(
@@ -186,7 +185,7 @@ async def get_run_kp(
     """
     engine = engines.get(run_id)
     if engine is not None:
-        kp = engine.sim.brain.kp
+        kp = engine.view().kp
         if kp is None:
             return KpPublic(
                 run=run_id,

@@ -50,17 +50,18 @@ def _ms(x: float) -> float | None:
 
 
 def _live_state(engine: RunEngine) -> LiveState:
-    stats = engine.stats
+    view = engine.view()
+    stats = view.stats
     return LiveState(
-        tick=engine.sim.tick_count,
-        episode=max(engine.sim.episode, 0),
-        hz=engine.hz,
+        tick=view.tick,
+        episode=view.episode,
+        hz=view.hz,
         ticks_run=stats.ticks,
         lateness_p99_ms=_ms(stats.lateness_s.percentile(99)),
         lateness_max_ms=_ms(stats.lateness_s.max),
         overruns=stats.overruns,
         reward_ack_p99_ms=_ms(stats.reward_ack_s.percentile(99)),
-        ticks_by_origin=dict(engine.sim.ticks_by_origin),
+        ticks_by_origin=dict(view.ticks_by_origin),
     )
 
 

@@ -1,60 +1,70 @@
-"""The engine: the paper's two threads as two asyncio tasks around one simulation.
+"""A run's engine: the paper's two threads as two asyncio tasks around one simulation.
 
-The **tick task** paces ticks (realtime: drift-free deadlines; fast: no sleeping) and at
-each tick boundary makes sure every reward stamped with that boundary has been applied,
-then applies commands (association edits), then runs the tick (sense, perceive, select,
-KP percept, motor, STM). The **reward task** takes rewards off a queue in order and
-applies them (pop STM, Eq. (1), network insertions, KP). Around them, writer tasks keep
-storage in step without holding either up: trainers' rewards are logged durably on arrival
-(that is the acknowledgement), what each applied reward and edit changed is committed in
-the order it happened, and episodes with their checkpoints after the rewards before them.
+The **tick task** paces ticks (realtime: drift-free deadlines behind a `Pacer`; fast: no
+sleeping) and at each tick boundary makes sure every reward stamped with that boundary has
+been applied, then applies commands (association edits), then runs the tick (sense,
+perceive, select, KP percept, motor, STM). The **reward task** takes rewards off a queue in
+order and applies them (pop STM, Eq. (1), network insertions, KP).
 
-A reward is stamped with the boundary it arrives before and credits exactly the STM
-records of earlier ticks, so a run is reproducible from its seed and command log: in fast
-mode it gives the same LTM as the plain headless loop, and a resumed run replays its log
-from the last checkpoint. Storage is reached only through `core.ports.RunStore`, from a
-worker thread; subscribers read events through bounded queues that drop their oldest
-event rather than ever block the tick task.
+The one hand-over between them is the **boundary**: a reward is stamped with the boundary
+it arrives before (`_due`, in stamp order, or `_held` while that boundary is being settled)
+and queued for the reward task, which applies it only once the tick task releases it
+there (`RewardJob.release`), and the tick task waits for it (`RewardJob.applied`) before
+the tick after. So a reward credits exactly the STM records of earlier ticks and a run is
+reproducible from its seed and command log: in fast mode it gives the same LTM as the plain
+headless loop, and a resumed run replays its log from the last checkpoint (`replay`).
+
+Around the two tasks, the writer's tasks (`writer`) keep storage in step without holding
+either up, and subscribers read events through bounded queues (`bus`). The service reads a
+run through `RunEngine.view()` (`view`).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Awaitable, Callable
-from dataclasses import dataclass, field, replace
-from typing import Any, Protocol, TypeVar
+from dataclasses import replace
 
 from core.brain.brain import BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog
 from core.brain.network import Association, BehaviourNetwork
 from core.checkpoint import decode, encode, export_state, restore_simulation
-from core.commands import INTERNAL_SOURCES, EditAssociation, InjectReward, RewardSource
+from core.commands import EditAssociation, InjectReward, RewardSource
 from core.conditions import Condition, get_condition
-from core.errors import CatalogError, RunStateError, StorageError
-from core.events import (
-    AssociationDemoted,
-    AssociationPromoted,
-    EpisodeEnded,
-    Outcome,
-    RewardApplied,
-    RewardDue,
+from core.engine.bus import EventBus, StatusChanged, Subscription, TickPublished
+from core.engine.jobs import (
+    CLOSE,
+    CommandJob,
+    EpisodeJob,
+    RewardAck,
+    RewardFeed,
+    RewardJob,
+    RewardWrite,
 )
-from core.latency import LatencyHistogram
+from core.engine.learning import apply_edit, learning_update, pair
+from core.engine.pacing import (
+    APPROACH_S,
+    HZ_MAX,
+    HZ_MIN,
+    MonotonicPacer,
+    Pacer,
+    check_hz,
+    sleep_until,
+)
+from core.engine.replay import ReplayLog
+from core.engine.stats import EngineStats
+from core.engine.view import RunView
+from core.engine.writer import RunWriter, reward_record
+from core.errors import CatalogError, RunStateError, StorageError
+from core.events import EpisodeEnded, Outcome, RewardDue
 from core.params import applicable, configure
 from core.ports import (
-    BehaviourSpec,
     Checkpoint,
-    CommandRecord,
     EpisodeRecord,
-    LearningUpdate,
     Mode,
-    NetworkPair,
     RewardCommit,
-    RewardRecord,
     RunSpec,
     RunStatus,
     RunStore,
@@ -66,300 +76,8 @@ from core.sim.world import WorldConfig
 from core.simulation import Simulation, Snapshot
 from core.trace import TraceRecorder
 
-_T = TypeVar("_T")
-
-EPISODE_BATCH_S = 0.05
-"""How long the episode writer gathers episodes before it commits them together."""
-EPISODE_BATCH_MAX = 64
-"""The most episodes it commits in one transaction."""
-
-WRITE_BATCH_S = 0.05
-"""In fast mode, how long the learning writer gathers rewards before it commits them."""
-WRITE_BATCH_MAX = 256
-"""The most rewards it commits in one transaction."""
-
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
-
-APPROACH_S = 0.005
-"""A realtime tick first sleeps until this long before its deadline (at most a quarter of
-the period), then sleeps the rest: see `sleep_until`."""
-
-HZ_MIN = 0.5
-"""The slowest realtime tick rate: a tick at least every 2 s, so a reward is applied and a
-run answers its controls within a couple of seconds even before `Pacer` wakes it."""
-HZ_MAX = 1000.0
-"""The fastest realtime tick rate."""
-
-
-def check_hz(hz: float) -> float:
-    """`hz` if it is a realtime tick rate from `HZ_MIN` to `HZ_MAX`, else `ValueError`."""
-    if isinstance(hz, bool) or not isinstance(hz, int | float) or not HZ_MIN <= hz <= HZ_MAX:
-        raise ValueError(f"hz must be a number from {HZ_MIN:g} to {HZ_MAX:g}, got {hz!r}")
-    return float(hz)
-
-
-class Pacer(Protocol):
-    """The realtime tick task's clock: the time, and sleeps that a wake-up cuts short."""
-
-    def now(self) -> float:
-        """Seconds on a monotonic clock."""
-        ...
-
-    async def sleep(self, seconds: float, wake: asyncio.Event) -> None:
-        """Sleep `seconds`, or until `wake` is set if that comes first."""
-        ...
-
-
-class MonotonicPacer:
-    """`time.monotonic` and the event loop's timers: the engine's pacer outside tests.
-
-    time.monotonic, not loop.time(): uvloop's clock ticks in whole milliseconds.
-    """
-
-    def now(self) -> float:
-        """`time.monotonic()`."""
-        return time.monotonic()
-
-    async def sleep(self, seconds: float, wake: asyncio.Event) -> None:
-        """Wait for `wake` at most `seconds`."""
-        if wake.is_set():
-            return
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(max(0.0, seconds)):
-                await wake.wait()
-
-
-@dataclass(frozen=True, slots=True)
-class RewardAck:
-    """What a trainer's reward was stored as."""
-
-    id: int
-    tick: int
-    episode: int
-    value: float
-
-
-@dataclass(frozen=True, slots=True)
-class StatusChanged:
-    """The run's status changed."""
-
-    run_id: int
-    status: RunStatus
-    error: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class TickPublished:
-    """A tick's snapshot, as subscribers see it (throttled to their rate).
-
-    With what a top-down view draws besides the pose: the sonars' readings of that tick
-    (in the robot's sonar order, noisy as the robot read them) and the obstacle's centre
-    (None: the episode has none). Read only when a tick is published, never per tick.
-    """
-
-    run_id: int
-    snapshot: Snapshot
-    sonar_m: tuple[float, ...] = ()
-    obstacle: tuple[float, float] | None = None
-
-
-class SubscriptionClosed(Exception):
-    """A subscription has ended and every event it held has been read."""
-
-
-class Subscription:
-    """A bounded queue of engine events; when full, the oldest event is dropped.
-
-    A reader waiting in `get` is woken when the subscription closes, so a stream never outlives
-    its run: once closed and drained, `get` raises `SubscriptionClosed` and iteration stops.
-
-    Args:
-        maxsize: how many events it holds.
-        tick_hz: at most this many tick snapshots per second (0: none).
-    """
-
-    def __init__(self, maxsize: int = 256, tick_hz: float = 0.0) -> None:
-        if maxsize < 1:
-            raise ValueError(f"a subscription holds at least one event, not {maxsize}")
-        self._events: deque[object] = deque(maxlen=maxsize)
-        self._ready = asyncio.Event()
-        self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
-        self.next_tick_at = 0.0
-        self.tick_sent = -1
-        """The tick of the last snapshot it was offered (-1: none yet)."""
-        self.dropped = 0
-        self.closed = False
-
-    @property
-    def pending(self) -> int:
-        """How many events wait to be read."""
-        return len(self._events)
-
-    @property
-    def ended(self) -> bool:
-        """Closed, and every event read."""
-        return self.closed and not self._events
-
-    def offer(self, event: object) -> bool:
-        """Queue an event without blocking; False when an older one had to go."""
-        dropped = len(self._events) == self._events.maxlen
-        self.dropped += dropped
-        self._events.append(event)
-        self._ready.set()
-        return not dropped
-
-    def close(self) -> None:
-        """No more events; a waiting reader gets what is left, then `SubscriptionClosed`."""
-        self.closed = True
-        self._ready.set()
-
-    def drain(self) -> list[object]:
-        """Every waiting event, without blocking."""
-        out = list(self._events)
-        self._events.clear()
-        return out
-
-    async def get(self) -> object:
-        """The next event; raises `SubscriptionClosed` once closed and drained."""
-        while not self._events:
-            if self.closed:
-                raise SubscriptionClosed
-            self._ready.clear()
-            await self._ready.wait()
-        return self._events.popleft()
-
-    async def __aiter__(self) -> AsyncIterator[object]:
-        while True:
-            try:
-                yield await self.get()
-            except SubscriptionClosed:
-                return
-
-
-@dataclass
-class EngineStats:
-    """Pacing and storage figures, for benchmarks and the live view.
-
-    The latencies are histograms (`core.latency`): reading them costs the same whatever
-    the run's age.
-    """
-
-    ticks: int = 0
-    overruns: int = 0
-    """Tick periods skipped because a tick ran past its deadline."""
-    lateness_s: LatencyHistogram = field(default_factory=LatencyHistogram)
-    """How late each realtime tick started after its deadline."""
-    reward_commit_s: LatencyHistogram = field(default_factory=LatencyHistogram)
-    """Time from applying each reward to committing its learning (queueing included)."""
-    reward_ack_s: LatencyHistogram = field(default_factory=LatencyHistogram)
-    """Time from a trainer's reward arriving to its acknowledgement."""
-
-
-@dataclass
-class _RewardJob:
-    stamp: int
-    episode: int
-    reward: InjectReward
-    external: bool
-    release: asyncio.Event = field(default_factory=asyncio.Event)
-    """Set by the tick task at the job's boundary: only then is it applied."""
-    applied: asyncio.Event = field(default_factory=asyncio.Event)
-    committed: asyncio.Event = field(default_factory=asyncio.Event)
-    ack: asyncio.Future[RewardAck] | None = None
-    arrived: float = 0.0
-    logged_id: int | None = None
-    logged: asyncio.Event = field(default_factory=asyncio.Event)
-    """Set once the reward is in the log (external rewards are logged by the ack task)."""
-    committed_before: bool = False
-    """Its learning is already in storage (a replayed reward applied before a crash)."""
-
-
-@dataclass
-class _CommandJob:
-    stamp: int
-    command: EditAssociation
-    ack: asyncio.Future[int] | None = None
-    update: LearningUpdate | None = None
-
-
-@dataclass
-class _EpisodeJob:
-    record: EpisodeRecord
-    next_episode: int
-    tick: int
-    state: dict[str, Any]
-    """The learning state after the episode: encoded only if it is a batch's last."""
-    totals: RunTotals
-    after: _RewardJob | None
-    """The last reward applied before the checkpoint: it is committed first."""
-    external: _RewardJob | None
-    """The last trainer's reward applied before the checkpoint: once `after` is committed
-    it is in the log, and its id tells a replay which logged rewards the state holds."""
-
-
-@dataclass
-class _RewardWrite:
-    job: _RewardJob
-    commit: RewardCommit
-    queued: float
-    """perf_counter() when it was handed to the writer."""
-
-
-_CLOSE = object()
-
-
-async def sleep_until(
-    deadline: float,
-    approach_s: float,
-    clock: Callable[[], float],
-    sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
-) -> None:
-    """Sleep until `clock()` reaches `deadline`: to `approach_s` before it, then the rest.
-
-    One long sleep can overshoot by as long as its event-loop iteration goes on running
-    after the sleep is set: libuv (uvloop) works out how long to wait for a timer from a
-    clock it reads once per iteration, and the tick's iteration goes on with other
-    callbacks and waits for the GIL while the 3D view draws the tick. The second sleep is
-    set at the start of a quiet iteration, so it is exact, and it is short.
-    """
-    now = clock()
-    if now < deadline - approach_s:
-        await sleep(deadline - approach_s - now)
-        now = clock()
-    if now < deadline:
-        await sleep(deadline - now)
-
-
-async def _gather(
-    queue: asyncio.Queue[object], window_s: float, limit: int
-) -> tuple[list[object], bool]:
-    """The next item of `queue` and those arriving within `window_s` after it.
-
-    At most `limit` items; the flag says whether `_CLOSE` came (it ends the gathering and
-    is not returned).
-    """
-    item = await queue.get()
-    deadline = asyncio.get_running_loop().time() + window_s
-    batch: list[object] = []
-    while True:
-        if item is _CLOSE:
-            return batch, True
-        batch.append(item)
-        if len(batch) >= limit:
-            return batch, False
-        if not queue.empty():
-            item = queue.get_nowait()
-            continue
-        if window_s <= 0:
-            return batch, False
-        try:
-            # asyncio.timeout, not wait_for: 3.11's wait_for can swallow the cancellation
-            # of a task group whose other task failed.
-            async with asyncio.timeout_at(deadline):
-                item = await queue.get()
-        except TimeoutError:
-            return batch, False
 
 
 class RunEngine:
@@ -381,6 +99,7 @@ class RunEngine:
         totals: RunTotals | None = None,
         trace: bool = True,
         pacer: Pacer | None = None,
+        last_external_id: int = 0,
     ) -> None:
         self.run_id = run_id
         self.spec = spec
@@ -391,7 +110,9 @@ class RunEngine:
         self.error: str | None = None
         self.end_stored = False
         """The run has ended and storage holds its final status."""
-        self._replay = replay
+        self._replay = None if replay is None else ReplayLog(replay, last_external_id)
+        self._replaying: ReplayLog | None = None
+        """The log being replayed, whose internal rewards the replayed ticks match."""
         t = totals or RunTotals(0, 0, sim.tick_count)
         self._episodes_done = t.episodes
         self._successes = t.successes
@@ -403,16 +124,20 @@ class RunEngine:
         """Set by stop, pause, interrupt and rate changes: a sleeping tick task wakes now."""
         self._rate_changed = False
         self._trace = TraceRecorder() if trace else None
-        self._due: deque[_RewardJob] = deque()
-        self._commands: deque[_CommandJob] = deque()
-        self._unlogged: list[_CommandJob] = []
-        """Edits applied whose log entry the writer has yet to commit."""
-        self._queue: asyncio.Queue[object] = asyncio.Queue()
-        self._episode_queue: asyncio.Queue[object] = asyncio.Queue()
-        self._write_queue: asyncio.Queue[object] = asyncio.Queue()
-        self._last_reward_job: _RewardJob | None = None
-        self._subscribers: list[Subscription] = []
-        self._tick_subscribers = 0
+        self._due: deque[RewardJob] = deque()
+        self._commands: deque[CommandJob] = deque()
+        self._queue = RewardFeed()
+        """The tick task's hand-over to the reward task: rewards, then applied edits."""
+        self._writer = RunWriter(
+            run_id,
+            store,
+            self.stats,
+            batch=spec.mode is Mode.FAST,
+            last_external_id=last_external_id,
+        )
+        self.bus = EventBus()
+        self._view = RunView(self)
+        self._last_reward_job: RewardJob | None = None
         self._last_snap: Snapshot | None = None
         self._paused = False
         self._resumed = asyncio.Event()
@@ -421,24 +146,18 @@ class RunEngine:
         self._interrupt = False
         self._episode_start_tick = sim.tick_count
         self._need_reset = True
-        self._logged_internal: dict[tuple[int, str, float], deque[Any]] = {}
         self._until_tick: int | None = None
-        self._last_external_id = 0
-        """The newest trainer's reward in the state restored from the checkpoint."""
-        self._last_external_job: _RewardJob | None = None
-        """The newest trainer's reward applied since (its log id may come later)."""
-        self._unacked: deque[_RewardJob] = deque()
-        """Trainers' rewards not acknowledged yet, in arrival order (applied ones too)."""
-        self._replay_skip_upto = 0
+        self._last_external_job: RewardJob | None = None
+        """The newest trainer's reward applied since the checkpoint (its log id may come
+        later)."""
         self._closing = False
         self._settling = 0
         """The boundary being settled (0: none)."""
         self._replayed = asyncio.Event()
         """Set once a resumed run has replayed its log (at once for a new run)."""
-        self._held: list[_RewardJob] = []
+        self._held: list[RewardJob] = []
         if replay is None:
             self._replayed.set()
-        self._ack_queue: asyncio.Queue[object] = asyncio.Queue()
         self._steps: deque[asyncio.Future[int]] = deque()
         """Single-tick steps asked of the paused run, answered with the tick they ran."""
         self._status_waiters: list[asyncio.Future[RunStatus]] = []
@@ -529,7 +248,7 @@ class RunEngine:
         setup = setup.resolved()
         spec = replace(spec, world=setup.world, sensors=setup.sensors)
         sim = cls._new_simulation(spec, catalog, world_config or setup.world_config(), network)
-        pairs = tuple(_pair(sim, a) for a in sim.brain.network)
+        pairs = tuple(pair(sim, a) for a in sim.brain.network)
         run_id = store.create_run(spec, pairs)
         # A checkpoint before the first tick: a run can be rebuilt whatever network it
         # started from (an edited one may change later) and however early it stopped.
@@ -581,12 +300,17 @@ class RunEngine:
         else:  # stored before runs got a checkpoint at creation
             sim = cls._new_simulation(spec, catalog, world_config, None)
             totals = RunTotals(0, 0, 0)
-        engine = cls(
-            run_id, spec, store, sim, replay=stored, totals=totals, trace=trace, pacer=pacer
+        return cls(
+            run_id,
+            spec,
+            store,
+            sim,
+            replay=stored,
+            totals=totals,
+            trace=trace,
+            pacer=pacer,
+            last_external_id=skip,
         )
-        engine._replay_skip_upto = skip
-        engine._last_external_id = skip
-        return engine
 
     # --- the outside's calls --------------------------------------------------------
 
@@ -596,16 +320,15 @@ class RunEngine:
 
     def attach(self, sub: Subscription) -> Subscription:
         """Feed an existing subscription (one made while the run had no engine)."""
-        self._subscribers.append(sub)
-        self._tick_subscribers += sub.tick_period < math.inf
-        return sub
+        return self.bus.attach(sub)
 
     def unsubscribe(self, sub: Subscription) -> None:
         """Stop feeding a subscription."""
-        if sub in self._subscribers:
-            self._subscribers.remove(sub)
-            self._tick_subscribers -= sub.tick_period < math.inf
-            sub.close()
+        self.bus.unsubscribe(sub)
+
+    def view(self) -> RunView:
+        """What the service reads of this run (`core.engine.view`)."""
+        return self._view
 
     def close_subscriptions(self) -> None:
         """End every subscription: its reader gets the current status, then the end.
@@ -613,9 +336,7 @@ class RunEngine:
         For a service shutting down: the live streams of a run that is not ticking (created,
         finished) end instead of holding their connections open.
         """
-        for sub in list(self._subscribers):
-            sub.offer(StatusChanged(self.run_id, self.status, self.error))
-            self.unsubscribe(sub)
+        self.bus.end(StatusChanged(self.run_id, self.status, self.error))
 
     async def reward(
         self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
@@ -635,7 +356,7 @@ class RunEngine:
             # That boundary is being settled: a reward arriving now takes the next one, so
             # a stream of rewards can never hold a boundary open.
             stamp = self._settling + 1
-        job = _RewardJob(
+        job = RewardJob(
             stamp,
             self.sim.episode,
             InjectReward(value, note=note, source=source),
@@ -649,9 +370,8 @@ class RunEngine:
             self._held.append(job)
         else:
             self._due.append(job)
-            self._queue.put_nowait(job)
-        self._ack_queue.put_nowait(job)
-        self._unacked.append(job)
+            self._queue.put(job)
+        self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack
 
@@ -664,7 +384,7 @@ class RunEngine:
         cat = self.sim.brain.catalog
         cat.stimulus(command.stimulus)
         cat.behaviour(command.behaviour)
-        job = _CommandJob(
+        job = CommandJob(
             self.sim.tick_count + 1, command, asyncio.get_running_loop().create_future()
         )
         self._commands.append(job)
@@ -780,15 +500,16 @@ class RunEngine:
             raise
 
     async def _run(self) -> RunStatus:
-        await self._io(self.store.set_status, self.run_id, RunStatus.RUNNING, None)
+        await self._writer.set_status(RunStatus.RUNNING, None)
         self._set_status(RunStatus.RUNNING)
         failure: BaseException | None = None
         try:
             async with asyncio.TaskGroup() as tg:
                 tg.create_task(self._reward_task(), name=f"run {self.run_id} rewards")
-                tg.create_task(self._write_task(), name=f"run {self.run_id} learning writer")
-                tg.create_task(self._episode_task(), name=f"run {self.run_id} episodes")
-                tg.create_task(self._ack_task(), name=f"run {self.run_id} acknowledgements")
+                writer = self._writer
+                tg.create_task(writer.learning_task(), name=f"run {self.run_id} learning writer")
+                tg.create_task(writer.episode_task(), name=f"run {self.run_id} episodes")
+                tg.create_task(writer.ack_task(), name=f"run {self.run_id} acknowledgements")
                 tg.create_task(self._tick_task(), name=f"run {self.run_id} ticks")
         except* StorageError as group:
             failure = group.exceptions[0]
@@ -814,25 +535,26 @@ class RunEngine:
     async def _finish(self, status: RunStatus, persist: bool = True) -> None:
         if persist:
             try:
-                await self._io(self.store.set_status, self.run_id, status, self.error)
+                await self._writer.set_status(status, self.error)
                 self.end_stored = True
             except StorageError as e:
                 self.error = self.error or str(e)
                 status = RunStatus.FAILED
         self._set_status(status)
-        for sub in self._subscribers:
-            sub.close()
+        self.bus.close()
 
     def _fail_pending(self, error: BaseException) -> None:
         # Held rewards (stamped while a boundary was being settled) are not due yet, but
         # their senders wait for an answer all the same.
-        # A trainer's reward applied before its log entry failed is in neither.
-        for job in (*self._due, *self._held, *self._unacked):
+        # A trainer's reward applied before its log entry failed is in neither: the
+        # writer answers those, and the edits it has yet to log.
+        for job in (*self._due, *self._held):
             if job.ack is not None and not job.ack.done():
                 job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
-        for c in (*self._commands, *self._unlogged):
+        for c in self._commands:
             if c.ack is not None and not c.ack.done():
                 c.ack.set_exception(StorageError(f"the edit was not stored: {error}"))
+        self._writer.fail_pending(error)
 
     def _set_status(self, status: RunStatus) -> None:
         self.status = status
@@ -849,11 +571,7 @@ class RunEngine:
         return waiter
 
     def _publish(self, event: object) -> None:
-        for sub in self._subscribers:
-            sub.offer(event)
-
-    async def _io(self, fn: Callable[..., _T], *args: Any) -> _T:
-        return await asyncio.to_thread(fn, *args)
+        self.bus.publish(event)
 
     # --- the tick task --------------------------------------------------------------
 
@@ -877,9 +595,8 @@ class RunEngine:
         finally:
             self._closing = True
             self._refuse_steps(RunStateError(f"run {self.run_id} ended before the step"))
-            self._queue.put_nowait(_CLOSE)
-            self._episode_queue.put_nowait(_CLOSE)
-            self._ack_queue.put_nowait(_CLOSE)
+            self._queue.close()
+            self._writer.end_of_ticks()
 
     def _episodes_left(self) -> bool:
         limit = self.spec.episodes
@@ -926,7 +643,7 @@ class RunEngine:
             if self._stop:
                 break
             if self._paused:
-                if self._tick_subscribers and self._last_snap is not None:
+                if self.bus.tick_subscribers and self._last_snap is not None:
                     # The tick the run paused at, to viewers whose throttle skipped it.
                     self._publish_tick(self._last_snap, force=True)
                 await self._resumed.wait()
@@ -981,7 +698,7 @@ class RunEngine:
         if self._trace is not None:
             self._trace.add(snap)
         self._last_snap = snap
-        if self._tick_subscribers:
+        if self.bus.tick_subscribers:
             # A single step of a paused run is always shown: no later tick would replace it.
             self._publish_tick(snap, force=self._paused)
         ended: EpisodeEnded | None = None
@@ -1000,7 +717,7 @@ class RunEngine:
     def _release_held(self) -> None:
         for job in self._held:
             self._due.append(job)
-            self._queue.put_nowait(job)
+            self._queue.put(job)
         self._held.clear()
 
     def _start_episode(self) -> None:
@@ -1011,32 +728,19 @@ class RunEngine:
 
     def _publish_tick(self, snap: Snapshot, force: bool = False) -> None:
         """Offer a tick to the subscribers due one (all tick subscribers when forced)."""
-        now = time.monotonic()
-        event: TickPublished | None = None
-        for sub in self._subscribers:
-            if (
-                sub.tick_period < math.inf
-                and sub.tick_sent != snap.tick
-                and (force or now >= sub.next_tick_at)
-            ):
-                sub.next_tick_at = now + sub.tick_period
-                sub.tick_sent = snap.tick
-                if event is None:  # built once, and only for a tick someone is sent
-                    sim = self.sim
-                    event = TickPublished(
-                        self.run_id, snap, sim.sonar_m(), sim.world.layout.obstacle_center
-                    )
-                sub.offer(event)
+        self.bus.publish_tick(snap, self._tick_event, force)
+
+    def _tick_event(self, snap: Snapshot) -> TickPublished:
+        sim = self.sim
+        return TickPublished(self.run_id, snap, sim.sonar_m(), sim.world.layout.obstacle_center)
 
     def _enqueue_internal(self, e: RewardDue) -> None:
         reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
-        job = _RewardJob(e.tick, e.episode, reward, False)
-        logged = self._logged_internal.get((e.tick, e.source, e.value))
-        if logged:
-            stored = logged.popleft()
-            job.logged_id, job.committed_before = stored.id, stored.applied
+        job = RewardJob(e.tick, e.episode, reward, False)
+        if self._replaying is not None:
+            self._replaying.match(job)
         self._due.append(job)
-        self._queue.put_nowait(job)
+        self._queue.put(job)
 
     async def _settle(
         self, boundary: int, *, internal_only: bool = False, until: float | None = None
@@ -1064,23 +768,9 @@ class RunEngine:
     def _apply_commands(self, boundary: int) -> None:
         while self._commands and self._commands[0].stamp <= boundary:
             job = self._commands.popleft()
-            job.update = self._apply_edit(job.command)
-            self._unlogged.append(job)
-            self._queue.put_nowait(job)
-
-    def _apply_edit(self, edit: EditAssociation) -> LearningUpdate:
-        brain = self.sim.brain
-        s = brain.catalog.stimulus(edit.stimulus).id
-        b = brain.catalog.behaviour(edit.behaviour).id
-        if edit.strength is None:
-            brain.network.remove(s, b, force=True)
-            return LearningUpdate(network_removals=((edit.stimulus, edit.behaviour),))
-        from core.brain.catalog import SOURCES
-
-        source = edit.source if edit.source in SOURCES else "dp"
-        assoc = Association(s, b, edit.strength, source, edit.locked)
-        brain.network.put(assoc, force=True)
-        return LearningUpdate(network_upserts=(_pair(self.sim, assoc),))
+            job.update = apply_edit(self.sim, job.command)
+            self._writer.applied(job)
+            self._queue.put(job)
 
     def _end_episode(self, ended: EpisodeEnded) -> None:
         sim = self.sim
@@ -1097,8 +787,8 @@ class RunEngine:
             trace=trace,
         )
         state = export_state(sim)
-        self._episode_queue.put_nowait(
-            _EpisodeJob(
+        self._writer.episodes.put(
+            EpisodeJob(
                 record,
                 sim.episode + 1,
                 sim.tick_count,
@@ -1113,68 +803,31 @@ class RunEngine:
 
     # --- replay ---------------------------------------------------------------------
 
-    async def _replay_log(self, stored: StoredRun) -> None:
+    async def _replay_log(self, log: ReplayLog) -> None:
         """Re-run the ticks after the checkpoint, applying the log at its stamps.
 
-        Trainer rewards and edits come from the log. The task's and the reinforcement
-        program's rewards are produced again by the replayed ticks and matched with the log,
-        so each is stored once; a logged reward whose learning was never committed (the
-        process died in between) is committed now.
+        Trainers' rewards and edits come from the log; the task's and the program's are
+        produced again by the replayed ticks and matched with their entries (`replay`).
         """
-        skip = self._replay_skip_upto
-        rewards = deque(
-            r
-            for r in stored.rewards_after
-            if r.record.source not in INTERNAL_SOURCES and r.id > skip
-        )
-        self._logged_internal = {}
-        for r in stored.rewards_after:
-            if r.record.source in INTERNAL_SOURCES:
-                key = (r.record.tick, r.record.source, r.record.value)
-                self._logged_internal.setdefault(key, deque()).append(r)
-        commands = deque(stored.commands_after)
-        last = max(
-            [r.record.tick for r in stored.rewards_after] + [c.record.tick for c in commands],
-            default=0,
-        )
+        self._replaying = log
         sim = self.sim
-        while sim.tick_count + 1 <= last and self._more():
-            if self._need_reset:
-                if not self._episodes_left():
-                    break
-                self._start_episode()
-            boundary = sim.tick_count + 1
-            while rewards and rewards[0].record.tick <= boundary:
-                r = rewards.popleft()
-                job = _RewardJob(
-                    r.record.tick,
-                    r.record.episode,
-                    InjectReward(
-                        r.record.value, note=r.record.note, source=RewardSource(r.record.source)
-                    ),
-                    external=True,
-                    logged_id=r.id,
-                    committed_before=r.applied,
-                )
-                self._due.append(job)
-                self._queue.put_nowait(job)
-            while commands and commands[0].record.tick <= boundary:
-                c = commands.popleft()
-                p = c.record.payload
-                strength = p.get("strength")
-                self._apply_edit(
-                    EditAssociation(
-                        str(p["stimulus"]),
-                        str(p["behaviour"]),
-                        None if strength is None else float(strength),
-                        str(p.get("source", "dp")),
-                        bool(p.get("locked", False)),
-                    )
-                )
-            await self._step()
-            if sim.tick_count % FAST_YIELD_TICKS == 0:
-                await asyncio.sleep(0)
-        self._logged_internal = {}
+        try:
+            while sim.tick_count + 1 <= log.last_tick and self._more():
+                if self._need_reset:
+                    if not self._episodes_left():
+                        break
+                    self._start_episode()
+                boundary = sim.tick_count + 1
+                for job in log.rewards_at(boundary):
+                    self._due.append(job)
+                    self._queue.put(job)
+                for edit in log.edits_at(boundary):
+                    apply_edit(sim, edit)
+                await self._step()
+                if sim.tick_count % FAST_YIELD_TICKS == 0:
+                    await asyncio.sleep(0)
+        finally:
+            self._replaying = None
 
     # --- the reward task ------------------------------------------------------------
 
@@ -1182,133 +835,17 @@ class RunEngine:
         try:
             while True:
                 job = await self._queue.get()
-                if job is _CLOSE:
+                if job is CLOSE:
                     break
-                if isinstance(job, _RewardJob):
+                if isinstance(job, RewardJob):
                     await self._process_reward(job)
                 else:  # an edit, applied by the tick task: stored in its place in order
-                    self._write_queue.put_nowait(job)
+                    self._writer.learning.put(job)
         finally:
-            self._write_queue.put_nowait(_CLOSE)
+            self._writer.learning.close()
 
-    async def _write_task(self) -> None:
-        """Commits what applied rewards and edits changed, in the order they happened.
-
-        What queued up while the last commit ran goes into one transaction; in fast mode,
-        where only the episode writer waits for these commits, it also gathers for
-        `WRITE_BATCH_S`, so a fast run commits its learning a few times a second instead
-        of once a reward.
-        """
-        window = WRITE_BATCH_S if self.spec.mode is Mode.FAST else 0.0
-        closing = False
-        while not closing:
-            batch, closing = await _gather(self._write_queue, window, WRITE_BATCH_MAX)
-            rewards: list[_RewardWrite] = []
-            for item in batch:
-                if isinstance(item, _RewardWrite):
-                    rewards.append(item)
-                    continue
-                assert isinstance(item, _CommandJob)
-                await self._commit_rewards(rewards)  # the rewards before it come first
-                rewards = []
-                await self._log_command(item)
-            await self._commit_rewards(rewards)
-
-    async def _commit_rewards(self, writes: list[_RewardWrite]) -> None:
-        if not writes:
-            return
-        for i, w in enumerate(writes):
-            if w.job.external and w.commit.logged_id is None:
-                # Applied before its log entry was written: commit it as that entry.
-                await w.job.logged.wait()
-                writes[i] = replace(w, commit=replace(w.commit, logged_id=w.job.logged_id))
-        ids = await self._io(
-            self.store.commit_rewards, self.run_id, tuple(w.commit for w in writes)
-        )
-        done = time.perf_counter()
-        for w, reward_id in zip(writes, ids, strict=True):
-            w.job.logged_id = reward_id
-            self.stats.reward_commit_s.add(done - w.queued)
-            w.job.committed.set()
-
-    async def _log_command(self, job: _CommandJob) -> None:
-        assert job.update is not None
-        c = job.command
-        record = CommandRecord(
-            job.stamp,
-            "edit_association",
-            {
-                "stimulus": c.stimulus,
-                "behaviour": c.behaviour,
-                "strength": c.strength,
-                "source": c.source,
-                "locked": c.locked,
-            },
-        )
-        command_id = await self._io(self.store.log_command, self.run_id, record, job.update)
-        self._unlogged.remove(job)
-        if job.ack is not None and not job.ack.done():
-            job.ack.set_result(command_id)
-
-    async def _episode_task(self) -> None:
-        """Commits episodes and checkpoints, each after the rewards applied before it.
-
-        Episodes are nobody's acknowledgement and a lost one is replayed from the log, so
-        the writer gathers what arrives within `EPISODE_BATCH_S` and commits it at once:
-        in fast mode that is one transaction for many episodes.
-        """
-        closing = False
-        while not closing:
-            jobs, closing = await _gather(self._episode_queue, EPISODE_BATCH_S, EPISODE_BATCH_MAX)
-            batch = [j for j in jobs if isinstance(j, _EpisodeJob)]
-            if not batch:
-                continue
-            last = batch[-1]
-            if last.after is not None:
-                await last.after.committed.wait()
-            # Trainer rewards stamped with the next boundary may already be in this state;
-            # replay skips those the checkpoint includes. The rewards up to `after` are
-            # committed, so the last trainer's one is logged and has its id.
-            external = last.external
-            if external is not None:
-                assert external.logged_id is not None
-            last.state["last_external_reward_id"] = (
-                self._last_external_id if external is None else external.logged_id
-            )
-            await self._io(self._end_episodes, tuple(j.record for j in batch), last)
-
-    def _end_episodes(self, records: tuple[EpisodeRecord, ...], last: _EpisodeJob) -> None:
-        """Store episodes with the checkpoint after the last (on a worker thread)."""
-        checkpoint = Checkpoint(last.next_episode, last.tick, encode(last.state))
-        self.store.end_episodes(self.run_id, records, checkpoint, last.totals)
-
-    async def _ack_task(self) -> None:
-        """Logs trainers' rewards in arrival order; the log entry is the acknowledgement.
-
-        It never waits for a tick boundary, so acknowledging does not wait for the
-        previous reward to be applied.
-        """
-        while True:
-            job = await self._ack_queue.get()
-            if job is _CLOSE:
-                break
-            assert isinstance(job, _RewardJob)
-            record = RewardRecord(
-                job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
-            )
-            job.logged_id = await self._io(self.store.log_reward, self.run_id, record)
-            job.logged.set()
-            self._unacked.remove(job)
-            if job.ack is not None and not job.ack.done():
-                self.stats.reward_ack_s.add(time.perf_counter() - job.arrived)
-                job.ack.set_result(
-                    RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
-                )
-
-    async def _process_reward(self, job: _RewardJob) -> None:
-        record = RewardRecord(
-            job.stamp, job.episode, job.reward.value, job.reward.source, job.reward.note
-        )
+    async def _process_reward(self, job: RewardJob) -> None:
+        record = reward_record(job)
         # A trainer's reward is applied at its boundary even if the log is slow to take it
         # (the tick waits for it there); only its commit waits for the log entry.
         await job.release.wait()
@@ -1317,11 +854,11 @@ class RunEngine:
             job.committed.set()
             return
         commit = RewardCommit(
-            record, self._learning_update(outcome), len(outcome.credits), job.logged_id
+            record, learning_update(self.sim, outcome), len(outcome.credits), job.logged_id
         )
-        self._write_queue.put_nowait(_RewardWrite(job, commit, time.perf_counter()))
+        self._writer.learning.put(RewardWrite(job, commit, time.perf_counter()))
 
-    def _apply_in_memory(self, job: _RewardJob) -> RewardOutcome:
+    def _apply_in_memory(self, job: RewardJob) -> RewardOutcome:
         self._last_reward_job = job
         if job.external:
             self._last_external_job = job
@@ -1333,65 +870,3 @@ class RunEngine:
         for change in outcome.changes:
             self._publish(change)
         return outcome
-
-    def _learning_update(self, outcome: RewardOutcome) -> LearningUpdate:
-        brain = self.sim.brain
-        cat = brain.catalog
-        s = [x.name for x in cat.stimuli]
-        b = [x.name for x in cat.behaviours]
-        ltm = {
-            (s[c.stimulus], b[c.behaviour]): brain.ltm.reliability(c.stimulus, c.behaviour)
-            for c in outcome.credits
-        }
-        rltm = {(s[p.stimulus], b[p.behaviour]): p.after for p in outcome.propagated}
-        upserts: list[NetworkPair] = []
-        removals: list[tuple[str, str]] = []
-        for ch in outcome.changes:
-            if isinstance(ch, AssociationPromoted):
-                a = brain.network.get(ch.stimulus, ch.behaviour)
-                if a is not None:
-                    upserts.append(_pair(self.sim, a))
-            elif isinstance(ch, AssociationDemoted):
-                removals.append((s[ch.stimulus], b[ch.behaviour]))
-        # Strength changes of pairs already in the network follow their reliability.
-        for (st, be), v in {**ltm, **rltm}.items():
-            a = brain.network.get(cat.stimulus(st).id, cat.behaviour(be).id)
-            if a is not None and a.source in ("learned", "kp") and a.strength == v:
-                pair = _pair(self.sim, a)
-                if pair not in upserts:
-                    upserts.append(pair)
-        added = tuple(
-            BehaviourSpec(x.name, x.family, x.speed_mps, x.turn_dps, x.ticks, x.mode)
-            for p in outcome.propagated
-            if p.synthesized
-            for x in (cat.behaviours[p.behaviour],)
-        )
-        return LearningUpdate(ltm, rltm, tuple(upserts), tuple(removals), added)
-
-
-def _pair(sim: Simulation, a: Association) -> NetworkPair:
-    cat = sim.brain.catalog
-    return NetworkPair(
-        cat.stimuli[a.stimulus].name,
-        cat.behaviours[a.behaviour].name,
-        a.strength,
-        a.source,
-        a.locked,
-    )
-
-
-__all__ = [
-    "HZ_MAX",
-    "HZ_MIN",
-    "MonotonicPacer",
-    "Pacer",
-    "RewardAck",
-    "RunEngine",
-    "StatusChanged",
-    "Subscription",
-    "SubscriptionClosed",
-    "TickPublished",
-    "check_hz",
-    "sleep_until",
-]
-_ = RewardApplied  # re-exported type of published reward events

@@ -1,0 +1,55 @@
+"""The engine: the paper's two threads as two asyncio tasks around one simulation.
+
+A reader can hold its parts one at a time:
+
+- `engine`: `RunEngine`, a run's lifecycle and public calls, the tick task and the reward
+  task, and the boundary between them (the one hand-over: a reward is applied at the tick
+  boundary it was stamped with).
+- `pacing`: the realtime tick rate's bounds, the `Pacer` clock, exact sleeps.
+- `jobs`: what the tasks hand each other (`RewardJob`, `CommandJob`, `EpisodeJob`) on typed
+  queues.
+- `writer`: `RunWriter`, the acknowledgement task, the learning writer and the episode
+  writer; every storage call typed against `core.ports.RunStore`.
+- `learning`: the brain's changes as storage records.
+- `replay`: a resumed run's log after its checkpoint.
+- `bus`: subscriptions, bounded queues that never hold up a tick.
+- `stats`: pacing and storage figures.
+- `view`: `RunView`, what the service reads of a live run.
+"""
+
+from core.engine.bus import (
+    EventBus,
+    StatusChanged,
+    Subscription,
+    SubscriptionClosed,
+    TickPublished,
+)
+from core.engine.engine import FAST_YIELD_TICKS, RunEngine
+from core.engine.jobs import RewardAck
+from core.engine.pacing import HZ_MAX, HZ_MIN, MonotonicPacer, Pacer, check_hz, sleep_until
+from core.engine.stats import EngineStats
+from core.engine.view import RunView
+from core.engine.writer import EPISODE_BATCH_MAX, EPISODE_BATCH_S, WRITE_BATCH_MAX, WRITE_BATCH_S
+
+__all__ = [
+    "EPISODE_BATCH_MAX",
+    "EPISODE_BATCH_S",
+    "FAST_YIELD_TICKS",
+    "HZ_MAX",
+    "HZ_MIN",
+    "WRITE_BATCH_MAX",
+    "WRITE_BATCH_S",
+    "EngineStats",
+    "EventBus",
+    "MonotonicPacer",
+    "Pacer",
+    "RewardAck",
+    "RunEngine",
+    "RunView",
+    "StatusChanged",
+    "Subscription",
+    "SubscriptionClosed",
+    "TickPublished",
+    "check_hz",
+    "sleep_until",
+]

@@ -1,0 +1,179 @@
+"""The run's events to its subscribers: bounded queues that drop their oldest event.
+
+Nothing a subscriber does can hold up the tick task: `EventBus.publish` offers each event
+to every subscription without waiting, and a full subscription drops its oldest event.
+Tick snapshots go only to subscriptions that asked for them, at most at their rate.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import deque
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+
+from core.ports import RunStatus
+from core.simulation import Snapshot
+
+
+@dataclass(frozen=True, slots=True)
+class StatusChanged:
+    """The run's status changed."""
+
+    run_id: int
+    status: RunStatus
+    error: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TickPublished:
+    """A tick's snapshot, as subscribers see it (throttled to their rate).
+
+    With what a top-down view draws besides the pose: the sonars' readings of that tick
+    (in the robot's sonar order, noisy as the robot read them) and the obstacle's centre
+    (None: the episode has none). Read only when a tick is published, never per tick.
+    """
+
+    run_id: int
+    snapshot: Snapshot
+    sonar_m: tuple[float, ...] = ()
+    obstacle: tuple[float, float] | None = None
+
+
+class SubscriptionClosed(Exception):
+    """A subscription has ended and every event it held has been read."""
+
+
+class Subscription:
+    """A bounded queue of engine events; when full, the oldest event is dropped.
+
+    A reader waiting in `get` is woken when the subscription closes, so a stream never outlives
+    its run: once closed and drained, `get` raises `SubscriptionClosed` and iteration stops.
+
+    Args:
+        maxsize: how many events it holds.
+        tick_hz: at most this many tick snapshots per second (0: none).
+    """
+
+    def __init__(self, maxsize: int = 256, tick_hz: float = 0.0) -> None:
+        if maxsize < 1:
+            raise ValueError(f"a subscription holds at least one event, not {maxsize}")
+        self._events: deque[object] = deque(maxlen=maxsize)
+        self._ready = asyncio.Event()
+        self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
+        self.next_tick_at = 0.0
+        self.tick_sent = -1
+        """The tick of the last snapshot it was offered (-1: none yet)."""
+        self.dropped = 0
+        self.closed = False
+
+    @property
+    def wants_ticks(self) -> bool:
+        """Whether it asked for tick snapshots."""
+        return self.tick_period < math.inf
+
+    @property
+    def pending(self) -> int:
+        """How many events wait to be read."""
+        return len(self._events)
+
+    @property
+    def ended(self) -> bool:
+        """Closed, and every event read."""
+        return self.closed and not self._events
+
+    def offer(self, event: object) -> bool:
+        """Queue an event without blocking; False when an older one had to go."""
+        dropped = len(self._events) == self._events.maxlen
+        self.dropped += dropped
+        self._events.append(event)
+        self._ready.set()
+        return not dropped
+
+    def close(self) -> None:
+        """No more events; a waiting reader gets what is left, then `SubscriptionClosed`."""
+        self.closed = True
+        self._ready.set()
+
+    def drain(self) -> list[object]:
+        """Every waiting event, without blocking."""
+        out = list(self._events)
+        self._events.clear()
+        return out
+
+    async def get(self) -> object:
+        """The next event; raises `SubscriptionClosed` once closed and drained."""
+        while not self._events:
+            if self.closed:
+                raise SubscriptionClosed
+            self._ready.clear()
+            await self._ready.wait()
+        return self._events.popleft()
+
+    async def __aiter__(self) -> AsyncIterator[object]:
+        while True:
+            try:
+                yield await self.get()
+            except SubscriptionClosed:
+                return
+
+
+class EventBus:
+    """A run's subscriptions, and the offering of its events to them."""
+
+    def __init__(self) -> None:
+        self._subscribers: list[Subscription] = []
+        self.tick_subscribers = 0
+        """How many subscriptions want tick snapshots (0: a tick publishes nothing)."""
+
+    def attach(self, sub: Subscription) -> Subscription:
+        """Feed a subscription from now on."""
+        self._subscribers.append(sub)
+        self.tick_subscribers += sub.wants_ticks
+        return sub
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        """Stop feeding a subscription and close it."""
+        if sub in self._subscribers:
+            self._subscribers.remove(sub)
+            self.tick_subscribers -= sub.wants_ticks
+            sub.close()
+
+    def end(self, last: object) -> None:
+        """Offer `last` to every subscription, then close and drop them all."""
+        for sub in list(self._subscribers):
+            sub.offer(last)
+            self.unsubscribe(sub)
+
+    def close(self) -> None:
+        """Close every subscription (the run ended); they stay attached."""
+        for sub in self._subscribers:
+            sub.close()
+
+    def publish(self, event: object) -> None:
+        """Offer an event to every subscription."""
+        for sub in self._subscribers:
+            sub.offer(event)
+
+    def publish_tick(
+        self, snap: Snapshot, event_for: Callable[[Snapshot], TickPublished], force: bool = False
+    ) -> None:
+        """Offer a tick to the subscriptions due one (all tick subscriptions when forced).
+
+        `event_for` builds the event once, and only for a tick someone is sent.
+        """
+        now = time.monotonic()
+        event: TickPublished | None = None
+        for sub in self._subscribers:
+            if (
+                sub.wants_ticks
+                and sub.tick_sent != snap.tick
+                and (force or now >= sub.next_tick_at)
+            ):
+                sub.next_tick_at = now + sub.tick_period
+                sub.tick_sent = snap.tick
+                if event is None:
+                    event = event_for(snap)
+                sub.offer(event)
