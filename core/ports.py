@@ -115,6 +115,36 @@ class LearningUpdate:
     network_removals: tuple[tuple[str, str], ...] = ()
     behaviours_added: tuple[BehaviourSpec, ...] = ()
 
+    @classmethod
+    def merged(cls, updates: Sequence[LearningUpdate]) -> LearningUpdate:
+        """One update that leaves storage as applying `updates` in order would.
+
+        The last value of each pair wins; a pair's last network change (an upsert, or a
+        removal after its update's upserts, as `_apply`s do it) is the one kept. Storage
+        commits a batch of rewards' learning with it, one statement per table.
+        """
+        if len(updates) == 1:
+            return updates[0]
+        ltm: dict[tuple[str, str], float] = {}
+        rltm: dict[tuple[str, str], float] = {}
+        network: dict[tuple[str, str], NetworkPair | None] = {}
+        added: list[BehaviourSpec] = []
+        for u in updates:
+            ltm.update(u.ltm)
+            rltm.update(u.rltm)
+            for p in u.network_upserts:
+                network[(p.stimulus, p.behaviour)] = p
+            for key in u.network_removals:
+                network[key] = None
+            added.extend(u.behaviours_added)
+        return cls(
+            ltm,
+            rltm,
+            tuple(p for p in network.values() if p is not None),
+            tuple(key for key, p in network.items() if p is None),
+            tuple(added),
+        )
+
 
 @dataclass(frozen=True, slots=True)
 class RewardRecord:

@@ -356,29 +356,79 @@ class SqlAlchemyRunStore:
         """In one transaction: log an already applied reward and store what it changed."""
         with self._transaction(f"recording a reward for run {run_id}", write=True) as s:
             self._require_run(s, run_id)
-            return self._commit_reward(s, run_id, RewardCommit(reward, update, credited))
+            reward_id = self._insert_reward(s, run_id, reward, True, credited)
+            self._apply(s, run_id, update)
+            return reward_id
 
     def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
-        """In one transaction and in order: each reward applied or recorded, with its learning."""
+        """In one transaction and in order: each reward applied or recorded, with its learning.
+
+        A batch costs one statement per table, not per reward: the new rewards are inserted
+        together (their ids in order), the logged ones marked applied together, and their
+        learning merged into one update that leaves the tables as applying each in turn
+        would (`LearningUpdate.merged`).
+        """
         if not rewards:
             return ()
         what = f"committing {len(rewards)} reward(s) of run {run_id}"
         with self._transaction(what, write=True) as s:
             self._require_run(s, run_id)
-            names = _Names(self, s, run_id)
-            return tuple(self._commit_reward(s, run_id, r, names) for r in rewards)
+            new = [r.record for r in rewards if r.logged_id is None]
+            credited = [r.credited for r in rewards if r.logged_id is None]
+            new_ids = iter(self._insert_rewards(s, run_id, new, credited))
+            logged = [(r.logged_id, r.credited) for r in rewards if r.logged_id is not None]
+            self._mark_all_applied(s, run_id, logged)
+            ids = tuple(next(new_ids) if r.logged_id is None else r.logged_id for r in rewards)
+            self._apply(s, run_id, LearningUpdate.merged([r.update for r in rewards]))
+            return ids
 
-    def _commit_reward(
-        self, s: Session, run_id: int, reward: RewardCommit, names: _Names | None = None
-    ) -> int:
-        """Log (or mark applied) one reward and store its learning, inside a transaction."""
-        reward_id = reward.logged_id
-        if reward_id is None:
-            reward_id = self._insert_reward(s, run_id, reward.record, True, reward.credited)
-        else:
-            self._mark_applied(s, run_id, reward_id, reward.credited)
-        self._apply(s, run_id, reward.update, names)
-        return reward_id
+    @staticmethod
+    def _insert_rewards(
+        s: Session, run_id: int, records: Sequence[RewardRecord], credited: Sequence[int]
+    ) -> list[int]:
+        """Insert applied rewards in one statement; their ids in the records' order."""
+        if len(records) <= 1:
+            return [
+                SqlAlchemyRunStore._insert_reward(s, run_id, r, True, c)
+                for r, c in zip(records, credited, strict=True)
+            ]
+        rows = [
+            {
+                "run_id": run_id,
+                "tick": r.tick,
+                "episode": r.episode,
+                "value": r.value,
+                "source": r.source,
+                "note": r.note,
+                "applied": True,
+                "credited": c,
+            }
+            for r, c in zip(records, credited, strict=True)
+        ]
+        stmt = insert(RewardRow).returning(RewardRow.id, sort_by_parameter_order=True)
+        return list(s.scalars(stmt, rows))
+
+    def _mark_all_applied(self, s: Session, run_id: int, logged: Sequence[tuple[int, int]]) -> None:
+        """Mark logged rewards applied with their credit (`StorageError` for a missing one)."""
+        if len(logged) <= 1:
+            for reward_id, credited in logged:
+                self._mark_applied(s, run_id, reward_id, credited)
+            return
+        ids = [reward_id for reward_id, _ in logged]
+        found = set(
+            s.scalars(select(RewardRow.id).where(RewardRow.run_id == run_id, RewardRow.id.in_(ids)))
+        )
+        for reward_id in ids:
+            if reward_id not in found:
+                raise StorageError(f"run {run_id} has no reward {reward_id}")
+        stmt = (
+            sql_update(RewardRow)
+            .where(RewardRow.id == bindparam("b_id"))
+            .values(applied=True, credited=bindparam("b_credited"))
+        )
+        s.connection().execute(
+            stmt, [{"b_id": reward_id, "b_credited": c} for reward_id, c in logged]
+        )
 
     def _mark_applied(self, s: Session, run_id: int, reward_id: int, credited: int) -> None:
         done = s.execute(

@@ -360,6 +360,66 @@ def test_commit_rewards_applies_and_records_them_in_order(store: InspectableRunS
     assert store.commit_rewards(run_id, ()) == ()
 
 
+def test_a_batch_leaves_storage_as_committing_each_reward_in_turn(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    logged = [store.log_reward(run_id, reward(t)) for t in (2, 3, 4)]
+    strong = NetworkPair("Red", "stop", 0.6, "learned")
+    again = NetworkPair("Red", "stop", 0.7, "learned")
+    other = NetworkPair("Green", "stop", 0.5, "learned")
+    updates = (
+        LearningUpdate(ltm={("Red", "stop"): 0.3}, network_upserts=(strong, other)),
+        LearningUpdate(ltm={("Red", "stop"): 0.1}, network_removals=(("Red", "stop"),)),
+        LearningUpdate(ltm={("Green", "stop"): 0.4}, network_upserts=(again,)),
+        LearningUpdate(network_removals=(("Green", "stop"),)),
+    )
+
+    ids = store.commit_rewards(
+        run_id,
+        (
+            RewardCommit(reward(2), updates[0], 1, logged[0]),
+            RewardCommit(reward(3), updates[1], 2, logged[1]),
+            RewardCommit(reward(3), updates[2], 3),
+            RewardCommit(reward(4), updates[3], 4, logged[2]),
+        ),
+    )
+
+    assert ids[:2] == tuple(logged[:2]) and ids[3] == logged[2] and ids[2] > logged[2]
+    assert [(r.id, r.applied, r.credited) for r in store.rewards(run_id)] == [
+        (logged[0], True, 1),
+        (logged[1], True, 2),
+        (logged[2], True, 4),
+        (ids[2], True, 3),
+    ]
+    assert store.ltm(run_id) == {("Red", "stop"): 0.1, ("Green", "stop"): 0.4}
+    assert again in store.network(run_id)
+    assert all((p.stimulus, p.behaviour) != ("Green", "stop") for p in store.network(run_id))
+
+
+def test_a_batch_naming_a_reward_the_log_lacks_stores_nothing(
+    store: InspectableRunStore,
+) -> None:
+    run_id = new_run(store)
+    logged = [store.log_reward(run_id, reward(t)) for t in (2, 3)]
+
+    with pytest.raises(StorageError, match=f"no reward {logged[1] + 100}"):
+        store.commit_rewards(
+            run_id,
+            (
+                RewardCommit(reward(2), LearningUpdate(ltm={("Red", "stop"): 0.2}), 1, logged[0]),
+                RewardCommit(reward(3), LearningUpdate(), 1, logged[1] + 100),
+                RewardCommit(reward(3), LearningUpdate(), 1, logged[1]),
+            ),
+        )
+
+    assert [(r.id, r.applied) for r in store.rewards(run_id)] == [
+        (logged[0], False),
+        (logged[1], False),
+    ]
+    assert store.ltm(run_id) == {}
+
+
 def test_commit_rewards_is_all_or_nothing(store: InspectableRunStore) -> None:
     run_id = new_run(store)
     trainers = store.log_reward(run_id, reward(3))
