@@ -78,6 +78,16 @@ def _json(value: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+_RUN_EXISTS = select(RunRow.id).where(RunRow.id == bindparam("b_run"))
+"""The hot path's statements are built once: building one costs more than running it."""
+_INSERT_REWARD = insert(RewardRow).returning(RewardRow.id)
+_MARK_APPLIED = (
+    sql_update(RewardRow)
+    .where(RewardRow.id == bindparam("b_id"), RewardRow.run_id == bindparam("b_run"))
+    .values(applied=True, credited=bindparam("b_credited"))
+)
+
+
 class _Names:
     """Stimulus and behaviour names <-> ids within one session, for one run."""
 
@@ -174,7 +184,7 @@ class SqlAlchemyRunStore:
 
     @staticmethod
     def _require_run(session: Session, run_id: int) -> None:
-        if session.scalar(select(RunRow.id).where(RunRow.id == run_id)) is None:
+        if session.connection().execute(_RUN_EXISTS, {"b_run": run_id}).first() is None:
             raise UnknownRunError(f"no run {run_id}")
 
     def _apply(
@@ -319,20 +329,17 @@ class SqlAlchemyRunStore:
     def _insert_reward(
         s: Session, run_id: int, reward: RewardRecord, applied: bool, credited: int
     ) -> int:
-        reward_id: int | None = s.scalar(
-            insert(RewardRow)
-            .values(
-                run_id=run_id,
-                tick=reward.tick,
-                episode=reward.episode,
-                value=reward.value,
-                source=reward.source,
-                note=reward.note,
-                applied=applied,
-                credited=credited,
-            )
-            .returning(RewardRow.id)
-        )
+        row = {
+            "run_id": run_id,
+            "tick": reward.tick,
+            "episode": reward.episode,
+            "value": reward.value,
+            "source": reward.source,
+            "note": reward.note,
+            "applied": applied,
+            "credited": credited,
+        }
+        reward_id: int | None = s.connection().execute(_INSERT_REWARD, row).scalar()
         assert reward_id is not None
         return reward_id
 
@@ -421,22 +428,16 @@ class SqlAlchemyRunStore:
         for reward_id in ids:
             if reward_id not in found:
                 raise StorageError(f"run {run_id} has no reward {reward_id}")
-        stmt = (
-            sql_update(RewardRow)
-            .where(RewardRow.id == bindparam("b_id"))
-            .values(applied=True, credited=bindparam("b_credited"))
-        )
         s.connection().execute(
-            stmt, [{"b_id": reward_id, "b_credited": c} for reward_id, c in logged]
+            _MARK_APPLIED,
+            [{"b_id": i, "b_run": run_id, "b_credited": c} for i, c in logged],
         )
 
     def _mark_applied(self, s: Session, run_id: int, reward_id: int, credited: int) -> None:
-        done = s.execute(
-            sql_update(RewardRow)
-            .where(RewardRow.id == reward_id, RewardRow.run_id == run_id)
-            .values(applied=True, credited=credited)
+        done = s.connection().execute(
+            _MARK_APPLIED, {"b_id": reward_id, "b_run": run_id, "b_credited": credited}
         )
-        if done.rowcount != 1:  # type: ignore[attr-defined]
+        if done.rowcount != 1:
             self._require_run(s, run_id)
             raise StorageError(f"run {run_id} has no reward {reward_id}")
 
