@@ -3,8 +3,9 @@
 A reader can hold its parts one at a time:
 
 - `engine`: `RunEngine`, a run's lifecycle and public calls, the tick task and the reward
-  task, and the boundary between them (the one hand-over: a reward is applied at the tick
-  boundary it was stamped with).
+  task.
+- `boundary`: `Boundary`, the one hand-over between those two tasks (a reward is applied
+  at the tick boundary it was stamped with, and the tick after waits for it).
 - `pacing`: the realtime tick rate's bounds, the `Pacer` clock, exact sleeps.
 - `jobs`: what the tasks hand each other (`RewardJob`, `CommandJob`, `EpisodeJob`) on typed
   queues.

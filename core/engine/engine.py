@@ -6,13 +6,12 @@ been applied, then applies commands (association edits), then runs the tick (sen
 perceive, select, KP percept, motor, STM). The **reward task** takes rewards off a queue in
 order and applies them (pop STM, Eq. (1), network insertions, KP).
 
-The one hand-over between them is the **boundary**: a reward is stamped with the boundary
-it arrives before (`_due`, in stamp order, or `_held` while that boundary is being settled)
-and queued for the reward task, which applies it only once the tick task releases it
-there (`RewardJob.release`), and the tick task waits for it (`RewardJob.applied`) before
-the tick after. So a reward credits exactly the STM records of earlier ticks and a run is
-reproducible from its seed and command log: in fast mode it gives the same LTM as the plain
-headless loop, and a resumed run replays its log from the last checkpoint (`replay`).
+The one hand-over between them is the **boundary** (`boundary`): a reward is stamped with
+the boundary it arrives before and queued for the reward task, which applies it only once
+the tick task releases it there, and the tick task waits until it is applied before the
+tick after. So a reward credits exactly the STM records of earlier ticks and a run is
+reproducible from its seed and command log: in fast mode it gives the same LTM as the
+plain headless loop, and a resumed run replays its log from the last checkpoint (`replay`).
 
 Around the two tasks, the writer's tasks (`writer`) keep storage in step without holding
 either up, and subscribers read events through bounded queues (`bus`). The service reads a
@@ -33,13 +32,13 @@ from core.brain.network import Association, BehaviourNetwork
 from core.checkpoint import decode, encode, export_state, restore_simulation
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.conditions import Condition, get_condition
+from core.engine.boundary import Boundary
 from core.engine.bus import EventBus, StatusChanged, Subscription, TickPublished
 from core.engine.jobs import (
     CLOSE,
     CommandJob,
     EpisodeJob,
     RewardAck,
-    RewardFeed,
     RewardJob,
     RewardWrite,
 )
@@ -124,9 +123,8 @@ class RunEngine:
         """Set by stop, pause, interrupt and rate changes: a sleeping tick task wakes now."""
         self._rate_changed = False
         self._trace = TraceRecorder() if trace else None
-        self._due: deque[RewardJob] = deque()
+        self._boundary = Boundary()
         self._commands: deque[CommandJob] = deque()
-        self._queue = RewardFeed()
         """The tick task's hand-over to the reward task: rewards, then applied edits."""
         self._writer = RunWriter(
             run_id,
@@ -151,11 +149,8 @@ class RunEngine:
         """The newest trainer's reward applied since the checkpoint (its log id may come
         later)."""
         self._closing = False
-        self._settling = 0
-        """The boundary being settled (0: none)."""
         self._replayed = asyncio.Event()
         """Set once a resumed run has replayed its log (at once for a new run)."""
-        self._held: list[RewardJob] = []
         if replay is None:
             self._replayed.set()
         self._steps: deque[asyncio.Future[int]] = deque()
@@ -351,26 +346,16 @@ class RunEngine:
             # would be applied in an order a later replay could not repeat.
             await self._replayed.wait()
             self._check_running()
-        stamp = self.sim.tick_count + 1
-        if self._settling >= stamp:
-            # That boundary is being settled: a reward arriving now takes the next one, so
-            # a stream of rewards can never hold a boundary open.
-            stamp = self._settling + 1
+        next_boundary = self.sim.tick_count + 1
         job = RewardJob(
-            stamp,
+            self._boundary.stamp(next_boundary),
             self.sim.episode,
             InjectReward(value, note=note, source=source),
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
         )
-        if stamp > self.sim.tick_count + 1:
-            # Held until the tick being settled has run: the rewards it produces for the
-            # next boundary come first there, as they do when the log is replayed.
-            self._held.append(job)
-        else:
-            self._due.append(job)
-            self._queue.put(job)
+        self._boundary.add(job, next_boundary)
         self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack
@@ -548,7 +533,7 @@ class RunEngine:
         # their senders wait for an answer all the same.
         # A trainer's reward applied before its log entry failed is in neither: the
         # writer answers those, and the edits it has yet to log.
-        for job in (*self._due, *self._held):
+        for job in self._boundary.waiting():
             if job.ack is not None and not job.ack.done():
                 job.ack.set_exception(StorageError(f"the reward was not stored: {error}"))
         for c in self._commands:
@@ -590,12 +575,12 @@ class RunEngine:
             # No more rewards now; those that arrived after the last tick apply at the
             # boundary after it.
             self._closing = True
-            self._release_held()
+            self._boundary.release_held()
             await self._settle(self.sim.tick_count + 1, until=math.inf)
         finally:
             self._closing = True
             self._refuse_steps(RunStateError(f"run {self.run_id} ended before the step"))
-            self._queue.close()
+            self._boundary.close()
             self._writer.end_of_ticks()
 
     def _episodes_left(self) -> bool:
@@ -612,7 +597,7 @@ class RunEngine:
         n = 0
         while self._more():
             n += 1
-            if n % FAST_YIELD_TICKS == 0 or self._due or self._commands:
+            if n % FAST_YIELD_TICKS == 0 or self._boundary.due or self._commands:
                 await asyncio.sleep(0)
                 if self._paused:
                     await self._resumed.wait()
@@ -624,7 +609,7 @@ class RunEngine:
                 self._start_episode()
             ended = self._tick()
             if ended is not None:
-                if self._due:
+                if self._boundary.due:
                     await self._settle(self.sim.tick_count + 1, internal_only=True)
                 self._end_episode(ended)
 
@@ -680,11 +665,11 @@ class RunEngine:
         sim = self.sim
         if self._need_reset:
             self._start_episode()
-        if self._due or self._commands:
+        if self._boundary.due or self._commands:
             await self._settle(sim.tick_count + 1)
         ended = self._tick()
         if ended is not None:
-            if self._due:
+            if self._boundary.due:
                 # The episode's own rewards (the task's, the program's) apply before it
                 # ends; a trainer's reward arriving now applies after the next reset.
                 await self._settle(sim.tick_count + 1, internal_only=True)
@@ -710,15 +695,9 @@ class RunEngine:
                     ended = e
                 else:
                     self._publish(e)
-        if self._held:
-            self._release_held()
+        if self._boundary.held:
+            self._boundary.release_held()
         return ended
-
-    def _release_held(self) -> None:
-        for job in self._held:
-            self._due.append(job)
-            self._queue.put(job)
-        self._held.clear()
 
     def _start_episode(self) -> None:
         self.sim.reset()
@@ -739,8 +718,7 @@ class RunEngine:
         job = RewardJob(e.tick, e.episode, reward, False)
         if self._replaying is not None:
             self._replaying.match(job)
-        self._due.append(job)
-        self._queue.put(job)
+        self._boundary.queue(job)
 
     async def _settle(
         self, boundary: int, *, internal_only: bool = False, until: float | None = None
@@ -750,18 +728,7 @@ class RunEngine:
         `until` widens the stamps taken (shutdown takes every reward still due).
         """
         limit = boundary if until is None else until
-        due = self._due
-        self._settling = boundary
-        try:
-            while due and due[0].stamp <= limit:
-                job = due[0]
-                if internal_only and job.external:
-                    break
-                job.release.set()
-                await job.applied.wait()
-                due.popleft()
-        finally:
-            self._settling = 0
+        await self._boundary.settle(boundary, internal_only=internal_only, limit=limit)
         if self._commands and not internal_only:
             self._apply_commands(boundary)
 
@@ -770,7 +737,7 @@ class RunEngine:
             job = self._commands.popleft()
             job.update = apply_edit(self.sim, job.command)
             self._writer.applied(job)
-            self._queue.put(job)
+            self._boundary.applied(job)
 
     def _end_episode(self, ended: EpisodeEnded) -> None:
         sim = self.sim
@@ -819,8 +786,7 @@ class RunEngine:
                     self._start_episode()
                 boundary = sim.tick_count + 1
                 for job in log.rewards_at(boundary):
-                    self._due.append(job)
-                    self._queue.put(job)
+                    self._boundary.queue(job)
                 for edit in log.edits_at(boundary):
                     apply_edit(sim, edit)
                 await self._step()
@@ -834,7 +800,7 @@ class RunEngine:
     async def _reward_task(self) -> None:
         try:
             while True:
-                job = await self._queue.get()
+                job = await self._boundary.feed.get()
                 if job is CLOSE:
                     break
                 if isinstance(job, RewardJob):
