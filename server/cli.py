@@ -26,7 +26,7 @@ from core.runner import EpisodeSummary, RunSummary, run
 from core.setup import default_sensors
 from core.simulation import Snapshot
 from core.worlds import default_world, world_names
-from server.ray_backend import BackendError
+from server.backends import BackendError
 from server.sweep_cli import (
     add_backend_arguments,
     add_setup_arguments,

@@ -126,7 +126,7 @@ def open_backend(args: argparse.Namespace, err: Console) -> Iterator[tuple[Backe
     if args.backend == "local":
         yield LocalBackend(args.jobs), f"{args.jobs} local process{'es' * (args.jobs > 1)}"
         return
-    from server.ray_backend import RayBackend
+    from server.backends import RayBackend
 
     backend = RayBackend(args.address, args.jobs, args.ship_code)
     with ExitStack() as stack:
