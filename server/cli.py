@@ -448,7 +448,7 @@ def _experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
     from core.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
     from core.params import tuned_params
     from core.stats import Estimate, pct
-    from server.report import write_report
+    from server.reports.experiment import write_report
 
     conditions = parse_conditions(args.conditions)
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
@@ -707,11 +707,11 @@ def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> 
                     )
                 print_table(stdout, table)
     if args.json:
-        from server.report import clean_json
+        from server.reports.experiment import clean_json
 
         stdout.write(json.dumps(clean_json(report)) + "\n")
     if args.out is not None:
-        from server.report import clean_json, world_check_markdown
+        from server.reports.experiment import clean_json, world_check_markdown
 
         args.out.mkdir(parents=True, exist_ok=True)
         report["command"] = command_line(args)

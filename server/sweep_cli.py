@@ -28,7 +28,7 @@ from core.experiment import Backend, LocalBackend, TaskResult
 from core.params import PARAMETERS
 from core.setup import Setup
 from core.sweep import point_label
-from server.report import _fmt
+from server.reports.experiment import _fmt
 
 
 def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
@@ -212,7 +212,7 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
     """Run `srlab sweep`."""
     from core.experiment import parse_conditions
     from core.sweep import Sweep, format_value, parse_grid, run_sweep, summarise_sweep
-    from server.sweep_report import write_sweep_report
+    from server.reports.sweep import write_sweep_report
 
     plan = Sweep(
         parse_grid(args.param),

@@ -16,7 +16,7 @@ import numpy as np
 from core.experiment import TaskResult
 from core.params import Params, ParamValue
 from core.sweep import Sweep, format_value, point_label
-from server.report import ROLLING, _diff, _fmt, clean_json
+from server.reports.experiment import ROLLING, _diff, _fmt, clean_json
 
 
 def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:

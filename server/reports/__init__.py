@@ -1,0 +1,1 @@
+"""The files the experiment commands write: markdown summaries, JSON, JSON lines and plots."""
