@@ -27,6 +27,7 @@ from core.setup import default_sensors
 from core.simulation import Snapshot
 from core.worlds import default_world, world_names
 from server.backends import BackendError
+from server.reports.base import setup_params
 from server.sweep_cli import (
     add_backend_arguments,
     add_setup_arguments,
@@ -37,7 +38,6 @@ from server.sweep_cli import (
     open_backend,
     progress_display,
     setup_of,
-    setup_params,
     sweep_command,
 )
 from server.tables import print_table
@@ -588,31 +588,10 @@ def _tune(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
         path.write_text(tuned_toml(best, command, setup, previous))
         out.write(f"wrote {path}\n")
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        doc = {
-            "command": command, "seeds": seeds, "episodes": args.episodes,
-            "elapsed_s": elapsed, **setup_params(setup),
-            "learners": {
-                c: [{"point": p.point, "success": p.success, "per_seed": p.per_seed}
-                    for p in points]
-                for c, points in rows.items()
-            },
-        }  # fmt: skip
-        (args.out / "tuning.json").write_text(json.dumps(doc, indent=1) + "\n")
-        lines = [
-            "# srlab tune", "", f"`{command}`", "",
-            f"Every learner's grid on tuning seeds {seeds[0]}-{seeds[-1]} x {args.episodes} "
-            f"episodes (world {setup.world_name}, sensors {setup.sensors_name}, signal "
-            f"{setup.signal}), {elapsed:.0f} s. Mean success over the tuning seeds, best first.",
-        ]  # fmt: skip
-        for c, points in rows.items():
-            names = [n for n, _ in GRIDS[c]]
-            lines += ["", f"## {c}", "", "| " + " | ".join(names) + " | success |",
-                      "|---" * (len(names) + 1) + "|"]  # fmt: skip
-            for p in points:
-                vals = " | ".join(f"{p.point[n]:g}" for n in names)
-                lines.append(f"| {vals} | {p.success:.1%} |")
-        (args.out / "tuning.md").write_text("\n".join(lines) + "\n")
+        from server.reports.tuning import write_tuning
+
+        write_tuning(args.out, rows, command=command, seeds=seeds, episodes=args.episodes,
+                     elapsed_s=elapsed, setup=setup)  # fmt: skip
         out.write(f"wrote {args.out / 'tuning.md'} and tuning.json\n")
     return 0
 
@@ -707,17 +686,13 @@ def _world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> 
                     )
                 print_table(stdout, table)
     if args.json:
-        from server.reports.experiment import clean_json
+        from server.reports.base import clean_json
 
         stdout.write(json.dumps(clean_json(report)) + "\n")
     if args.out is not None:
-        from server.reports.experiment import clean_json, world_check_markdown
+        from server.reports.world_check import write_world_check
 
-        args.out.mkdir(parents=True, exist_ok=True)
-        report["command"] = command_line(args)
-        report = clean_json(report)
-        (args.out / "world-check.json").write_text(json.dumps(report, indent=2) + "\n")
-        (args.out / "world-check.md").write_text(world_check_markdown(report))
+        write_world_check(args.out, {**report, "command": command_line(args)})
         if not args.json:
             console.print(f"wrote {args.out / 'world-check.json'} and world-check.md")
     return 0 if all_hold else 1

@@ -28,7 +28,7 @@ from core.experiment import Backend, LocalBackend, TaskResult
 from core.params import PARAMETERS
 from core.setup import Setup
 from core.sweep import point_label
-from server.reports.experiment import _fmt
+from server.reports.base import fmt, setup_params
 
 
 def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
@@ -196,11 +196,6 @@ def add_sweep_parser(
     add_task_arguments(sweep, positive_int, seed, Path("results/sweep"))
 
 
-def setup_params(setup: Setup) -> dict[str, str]:
-    """The setup as a report's parameters."""
-    return {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
-
-
 def command_line(args: argparse.Namespace) -> str:
     """The command as typed (the arguments `main` was given), for the report."""
     argv = getattr(args, "argv", None)
@@ -263,8 +258,8 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
             for c in conds:
                 row = entry["conditions"][c][i]
                 cells += [
-                    _fmt(row["success_rate"], pct=True),
-                    _fmt(row["success_last10"], pct=True),
+                    fmt(row["success_rate"], pct=True),
+                    fmt(row["success_last10"], pct=True),
                 ]
             table.add_row(*cells)
         console.print(table)

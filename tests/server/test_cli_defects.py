@@ -16,7 +16,7 @@ from core.conditions import CONDITIONS
 from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
 from server import run_cli
 from server.cli import ENGINE_CONDITIONS, build_parser, main
-from server.reports.experiment import _fmt
+from server.reports.base import fmt as _fmt
 from server.schemas import EngineCondition
 
 ROOT = Path(__file__).resolve().parents[2]
