@@ -22,13 +22,14 @@ from core.brain.selection import Strategy
 from core.conditions import CONDITIONS, get_condition
 from core.errors import CoreError
 from core.events import Outcome
-from core.runner import EpisodeSummary, RunSummary, run
+from core.runner import EpisodeSummary, RunSummary
+from core.runner import run as run_headless
 from core.setup import default_sensors
 from core.simulation import Snapshot
 from core.worlds import default_world, world_names
 from server.backends import BackendError
-from server.reports.base import setup_params
-from server.sweep_cli import (
+from server.cli.common import print_table
+from server.cli.sweep import (
     add_backend_arguments,
     add_setup_arguments,
     add_sweep_parser,
@@ -40,7 +41,7 @@ from server.sweep_cli import (
     setup_of,
     sweep_command,
 )
-from server.tables import print_table
+from server.reports.base import setup_params
 
 
 def _number(
@@ -404,7 +405,7 @@ def _simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int
             trace_file = args.trace.open("w", encoding="utf-8")
         started = time.perf_counter()
         with progress:
-            result = run(
+            result = run_headless(
                 condition,
                 args.seed,
                 args.episodes,
@@ -768,11 +769,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "qlambda-sweep":
             return _qlambda_sweep(args, sys.stdout, sys.stderr)
         if args.command == "db":
-            from server import run_cli
+            from server.cli import run as run_cli
 
             return run_cli.db(args, sys.stdout)
         if args.command == "run":
-            from server import run_cli
+            from server.cli import run as run_cli
             from server.tuning import configure_process
 
             configure_process()
@@ -784,7 +785,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return serve(args.host, args.port)
         if args.command == "runs":
-            from server import run_cli
+            from server.cli import run as run_cli
 
             return run_cli.runs(args, sys.stdout)
     except (CoreError, ValueError, OSError, BackendError) as e:

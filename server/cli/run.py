@@ -20,11 +20,11 @@ from core.engine import RunEngine
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
 from core.ports import Mode, RunStatus, StoredRun
+from server.cli.common import print_table
 from server.persistence import SqlAlchemyRunStore, database_url, make_engine, make_sessionmaker
 from server.persistence.migrate import downgrade, upgrade
 from server.persistence.seed import SeedReport
 from server.runspec import run_spec
-from server.tables import print_table
 
 
 def db(args: argparse.Namespace, stdout: IO[str]) -> int:
