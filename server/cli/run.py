@@ -145,8 +145,8 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
     ended = engine.totals.episodes
 
     def progress() -> str:
-        # The engine's live totals, not the stored ones: those move at episode ends only,
-        # which in realtime mode can be minutes apart.
+        # The live tick, not the stored totals: those move at episode ends only, which
+        # in realtime mode can be minutes apart.
         return (
             f"episode {ended}{planned} done, {successes} successes, tick "
             f"{engine.totals.ticks:,} ({engine.status.value})"
