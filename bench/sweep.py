@@ -32,7 +32,7 @@ from ray.cluster_utils import Cluster
 
 from core.experiment import LocalBackend, TaskResult
 from core.sweep import Sweep, parse_grid, run_sweep
-from server.ray_backend import OBJECT_STORE_BYTES, RayBackend
+from server.backends.ray import OBJECT_STORE_BYTES, RayBackend
 
 
 def timed_local(sweep: Sweep, jobs: int) -> tuple[float, list[TaskResult]]:

@@ -306,6 +306,46 @@ def browser_root(before: set[int], after: set[int]) -> int:
     raise RuntimeError("could not find the Chromium that was just started")
 
 
+async def warm_up(client: RawClient) -> None:
+    """Print the load, then run a realtime kp run for 2 s and stop it.
+
+    The service's first run pays for what is loaded and compiled once; no measured run
+    should.
+    """
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    warm = await call(client, "POST", "/api/runs", {"condition": "kp", "mode": "realtime"})
+    await call(client, "POST", f"/api/runs/{warm['id']}/start")
+    await asyncio.sleep(2.0)
+    await stop_run(client, int(warm["id"]))
+
+
+async def launch_pinned(pw: Any, server: Server, args: argparse.Namespace) -> tuple[Any, int, bool]:
+    """Chromium at `--nice`: the browser, its root process and whether it is pinned.
+
+    Pinned (`--pin`, on two cores or more): the server on CPU 0 and Chromium on CPU 1.
+    """
+    pinned = bool(args.pin and (os.cpu_count() or 1) >= 2)
+    if pinned:
+        pin_process(server.pid, 0)
+    before = descendants(os.getpid())
+    browser = await pw.chromium.launch(
+        executable_path=str(chromium_command(server.folder, args.nice, 1 if pinned else None)),
+        args=FLAGS,
+        headless=True,
+    )
+    return browser, browser_root(before, descendants(os.getpid())), pinned
+
+
+async def end_phase(keeper: asyncio.Task[None] | None, page: Any | None) -> None:
+    """Stop keeping Chromium's threads confined, and close the phase's page."""
+    if keeper is not None:
+        keeper.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await keeper
+    if page is not None:
+        await page.close()
+
+
 PHASES = ("none", "viewer", "viewer, small page", "viewer, shared cores")
 SMALL = (64, 64)
 """The small page's viewport: the same messages to handle, next to nothing to render."""
@@ -325,25 +365,10 @@ async def bench_console(args: argparse.Namespace, server: Server) -> None:
         await wait_healthy(client, server, 60.0)
         url = f"http://{HOST}:{server.port}"
         print(f"srlab serve on {HOST}:{server.port}, pid {server.pid}")
-        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-        warm = await call(client, "POST", "/api/runs", {"condition": "kp", "mode": "realtime"})
-        await call(client, "POST", f"/api/runs/{warm['id']}/start")
-        await asyncio.sleep(2.0)
-        await stop_run(client, int(warm["id"]))
+        await warm_up(client)
         phases: list[Phase] = []
         async with async_playwright() as pw:
-            pinned = args.pin and (os.cpu_count() or 1) >= 2
-            if pinned:
-                pin_process(server.pid, 0)
-            before = descendants(os.getpid())
-            browser = await pw.chromium.launch(
-                executable_path=str(
-                    chromium_command(server.folder, args.nice, 1 if pinned else None)
-                ),
-                args=FLAGS,
-                headless=True,
-            )
-            root = browser_root(before, descendants(os.getpid()))
+            browser, root, pinned = await launch_pinned(pw, server, args)
             try:
                 for r in range(args.rounds):
                     for name in CONSOLE_PHASES:
@@ -359,12 +384,7 @@ async def bench_console(args: argparse.Namespace, server: Server) -> None:
                                 viewport={"width": args.width, "height": args.height}
                             )
                         phase = await measure(client, server, page, args, name, url)
-                        if keeper is not None:
-                            keeper.cancel()
-                            with contextlib.suppress(asyncio.CancelledError):
-                                await keeper
-                        if page is not None:
-                            await page.close()
+                        await end_phase(keeper, page)
                         phases.append(phase)
                         print(
                             f"round {r + 1} {name:14} run {phase.run_id:3}: ticks {phase.ticks:5}"
@@ -441,27 +461,11 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
         if port is None:
             raise RuntimeError("the service runs without its 3D view (SRLAB_VISER=false?)")
         print(f"srlab serve on {HOST}:{server.port}, 3D view on port {port}, pid {server.pid}")
-        print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-        warm = await call(client, "POST", "/api/runs", {"condition": "kp", "mode": "realtime"})
-        await call(client, "POST", f"/api/runs/{warm['id']}/start")
-        await asyncio.sleep(2.0)
-        await stop_run(client, int(warm["id"]))
+        await warm_up(client)
         phases: list[Phase] = []
         async with async_playwright() as pw:
-            pinned = args.pin and (os.cpu_count() or 1) >= 2
-            if pinned:
-                pin_process(server.pid, 0)
-            before = descendants(os.getpid())
-            browsers = {
-                "viewer": await pw.chromium.launch(
-                    executable_path=str(
-                        chromium_command(server.folder, args.nice, 1 if pinned else None)
-                    ),
-                    args=FLAGS,
-                    headless=True,
-                )
-            }
-            root = browser_root(before, descendants(os.getpid()))
+            pinned_browser, root, pinned = await launch_pinned(pw, server, args)
+            browsers = {"viewer": pinned_browser}
             browsers["viewer, shared cores"] = await pw.chromium.launch(
                 executable_path=str(chromium_command(server.folder, 0, None)),
                 args=FLAGS,
@@ -487,12 +491,7 @@ async def bench(args: argparse.Namespace, server: Server) -> None:
                             await page.get_by_text("srlab 3D view").wait_for(timeout=60_000)
                             await asyncio.sleep(3.0)  # the page settles before the run
                         phase = await measure(client, server, page, args, name)
-                        if keeper is not None:
-                            keeper.cancel()
-                            with contextlib.suppress(asyncio.CancelledError):
-                                await keeper
-                        if page is not None:
-                            await page.close()
+                        await end_phase(keeper, page)
                         phases.append(phase)
                         shown = (
                             f", the page showed ticks {phase.shown[0]}..{phase.shown[1]}"

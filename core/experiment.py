@@ -353,7 +353,7 @@ TaskFunction = Callable[[Task], TaskResult]
 
 
 class Backend(Protocol):
-    """Where tasks run: local processes (`LocalBackend`) or a cluster (server's Ray backend).
+    """Where tasks run: local processes (`LocalBackend`) or a cluster (`server.backends`).
 
     Results may come in any order; `run_tasks` puts them back in the tasks' order.
     """

@@ -7,22 +7,21 @@ editor-run.png, console.png, console-2d.png and kp.png (Debian's Chromium).
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 from pathlib import Path
 
+from bench.browser import CHROMIUM, chromium
+from bench.liveserver import live_server
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from browser import chromium  # noqa: E402
-from liveserver import live_server  # noqa: E402
-
 OUT = ROOT / "docs" / "img"
 
 
 def main() -> None:
     """Drive the pages and save the screenshots."""
+    if not CHROMIUM.exists():
+        raise SystemExit(f"screenshots: {CHROMIUM} is missing: apt-get install -y chromium")
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp, live_server(Path(tmp) / "shots.db") as server:
         api = server.client

@@ -1,1 +1,16 @@
-"""srlab adapters: the command line, and later the HTTP service, persistence and 3D view."""
+"""srlab's adapters around the pure core: the HTTP service, storage, the 3D view, the CLI.
+
+The rooms: `api/` (the HTTP API's routes and its contract), `services/` (live network
+edits), `persistence/` (SQLAlchemy, migrations, the store process), `viewer/` (the viser
+3D view), `cli/` (the `srlab` command, a module a command), `reports/` (the markdown,
+JSON and plots the experiment commands write) and `backends/` (where experiment tasks
+run besides local processes: Ray).
+
+At the top, the service's own wiring: `main.py` (`create_app`), `bootstrap.py` (what the
+service is made of), `config.py` (settings), `schemas.py` (the HTTP models), `asgi.py`,
+`engines.py` (the runs of this process), `serve.py` (uvicorn), the protections of both
+ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
+and small helpers of the service and the commands: `runspec.py` (a run's spec from a
+request, a command line or a row), `probe_cache.py` (the placement probe's results on
+disk) and `tuning.py` (the interpreter set up for engines).
+"""

@@ -1,4 +1,4 @@
-"""`srlab serve`: migrate, then run the service with uvicorn (one worker)."""
+"""The service under uvicorn: migrate, then serve with one worker (`srlab serve`)."""
 
 from __future__ import annotations
 

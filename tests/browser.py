@@ -8,9 +8,10 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from playwright.sync_api import Browser, sync_playwright
+from playwright.sync_api import Browser
 
-from bench.browser import CHROMIUM, FLAGS
+from bench import browser as bench_browser
+from bench.browser import CHROMIUM
 
 ARTIFACTS = Path(__file__).resolve().parents[1] / "test-artifacts"
 
@@ -29,14 +30,8 @@ def require_chromium() -> None:
 def chromium() -> Iterator[Browser]:
     """A headless Chromium for one test module."""
     require_chromium()
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(
-            executable_path=str(CHROMIUM), args=FLAGS, headless=True
-        )
-        try:
-            yield browser
-        finally:
-            browser.close()
+    with bench_browser.chromium() as launched:
+        yield launched
 
 
 def artifact(name: str) -> Path:

@@ -13,7 +13,6 @@ import pytest
 from browser import chromium
 from fakes import InMemoryRunStore, InspectableRunStore
 from hypothesis import settings
-from liveserver import LiveServer, live_server
 from playwright.sync_api import Browser, ConsoleMessage, Error, Page, expect
 from sqlalchemy import Engine, create_engine, text
 from sqlalchemy.engine import make_url
@@ -21,6 +20,7 @@ from xdist.remote import Producer
 from xdist.scheduler import LoadScopeScheduling
 from xdist.scheduler.protocol import Scheduling
 
+from bench.liveserver import LiveServer, live_server
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import httpx
 from harness import RewardTraffic, rss_kib
-from liveserver import live_server, start_server, wait_status
 from reliability_report import count, record
 
+from bench.liveserver import live_server, start_server, wait_status
 from bench.service import percentile, store_episodes
 
 EPISODES = int(os.environ.get("SRLAB_DAY_EPISODES", "300"))

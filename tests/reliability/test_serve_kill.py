@@ -23,9 +23,9 @@ from pathlib import Path
 import httpx
 import pytest
 from harness import RewardTraffic, check_log, integrity, replay_ltm
-from liveserver import LiveServer, start_server, stop_server, wait_status
 from reliability_report import count, record
 
+from bench.liveserver import LiveServer, start_server, stop_server, wait_status
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 KILLS = {

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import httpx
 from harness import RewardTraffic, check_log, replay_ltm
-from liveserver import LiveServer, start_server, wait_status
 from reliability_report import count, record
 
+from bench.liveserver import LiveServer, start_server, wait_status
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 SIGTERMS = int(os.environ.get("SRLAB_SIGTERMS", "2"))

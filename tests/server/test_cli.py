@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from liveserver import free_port
 
+from bench.liveserver import free_port
 from server.cli import main
 
 REPO = Path(__file__).resolve().parents[2]

@@ -14,9 +14,10 @@ from rich.console import Console
 from core.analysis import mean_ci
 from core.conditions import CONDITIONS
 from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
-from server import run_cli
-from server.cli import ENGINE_CONDITIONS, build_parser, main
-from server.report import _fmt
+from server.cli import build_parser, main
+from server.cli import run as run_cli
+from server.cli.common import ENGINE_CONDITIONS
+from server.reports.base import fmt as _fmt
 from server.schemas import EngineCondition
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 import viser
 from apphelpers import client_for, create, settings_for, until
-from liveserver import free_port
 from reliability_report import record
 
+from bench.liveserver import free_port
 from server.guard import SitePolicy, host_name
 from server.ratelimit import RateLimiter, client_key
 

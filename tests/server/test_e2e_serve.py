@@ -9,7 +9,8 @@ from typing import Any
 
 import httpx
 import pytest
-from liveserver import live_server, wait_status
+
+from bench.liveserver import live_server, wait_status
 
 
 @pytest.fixture(scope="module")

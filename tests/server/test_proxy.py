@@ -10,7 +10,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from liveserver import live_server, wait_status
+
+from bench.liveserver import live_server, wait_status
 
 LIMIT = {"SRLAB_REWARD_RATE_PER_S": "0.05", "SRLAB_REWARD_BURST": "2"}
 

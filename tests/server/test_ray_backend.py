@@ -22,8 +22,8 @@ except ImportError:
     )
 
 from core.experiment import Task, TaskResult, run_task, run_tasks
+from server.backends import RayBackend
 from server.cli import main
-from server.ray_backend import RayBackend
 
 SWEEP = [
     "sweep",

@@ -16,8 +16,8 @@ import pytest
 from core.brain.catalog import sensor_definitions
 from core.setup import default_sensors
 from core.worlds import default_world, world_names
-from server import run_cli
 from server.cli import build_parser, main
+from server.cli import run as run_cli
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -12,8 +12,9 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from liveserver import LiveServer, live_server
 from reliability_report import record
+
+from bench.liveserver import LiveServer, live_server
 
 GIVE_UP_S = 60.0
 

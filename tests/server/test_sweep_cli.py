@@ -10,8 +10,8 @@ from pathlib import Path
 import matplotlib.image
 import pytest
 
+from server.backends import BackendError, RayBackend, check_reachable
 from server.cli import main
-from server.ray_backend import BackendError, RayBackend, check_reachable
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SWEEP = [

@@ -21,11 +21,11 @@ import pytest
 import viser
 from apphelpers import client_for, settings_for
 from fastapi import FastAPI
-from liveserver import free_port
 from viser._messages import ViewerCameraMessage
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.typing import Subprotocol
 
+from bench.liveserver import free_port
 from server.guard import SitePolicy
 from server.viewer import Viewer
 from server.viewer.app import Session

@@ -17,8 +17,8 @@ import httpx
 import pytest
 from apphelpers import client_for, settings_for
 from fastapi import FastAPI
-from liveserver import free_port
 
+from bench.liveserver import free_port
 from core.brain.selection import ORIGINS
 from core.ports import RunStatus
 from core.worlds import default_world, load_world, world_names

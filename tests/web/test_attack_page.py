@@ -14,9 +14,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 import pytest
 import viser
 from conftest import BROWSER_WAIT_MS
-from liveserver import LiveServer, free_port, wait_status
 from playwright.sync_api import Browser
 from reliability_report import record
+
+from bench.liveserver import LiveServer, free_port, wait_status
 
 ATTACK = """<!doctype html><html><body>
 <iframe name="sink"></iframe>

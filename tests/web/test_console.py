@@ -8,9 +8,10 @@ from typing import Any
 
 import pytest
 from browser import artifact
-from liveserver import LiveServer, start_server, stop_server, wait_status
 from playwright.sync_api import Browser, Page, expect
 from webpage import cell, eventually, open_view
+
+from bench.liveserver import LiveServer, start_server, stop_server, wait_status
 
 
 def create_run(server: LiveServer, **body: Any) -> int:

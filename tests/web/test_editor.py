@@ -8,9 +8,10 @@ from pathlib import Path
 from typing import Any
 
 from browser import artifact
-from liveserver import LiveServer
 from playwright.sync_api import Page, expect
 from webpage import cell, eventually, open_view
+
+from bench.liveserver import LiveServer
 
 
 def association(server: LiveServer, network: str, stimulus: str, behaviour: str) -> Any:

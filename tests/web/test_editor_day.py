@@ -13,9 +13,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from liveserver import LiveServer, live_server
 from playwright.sync_api import Page, Route, expect
 from webpage import cell, eventually, open_view
+
+from bench.liveserver import LiveServer, live_server
 
 
 def association(server: LiveServer, network: str, stimulus: str, behaviour: str) -> Any:

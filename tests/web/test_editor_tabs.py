@@ -13,9 +13,10 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from liveserver import LiveServer
 from playwright.sync_api import Browser, Dialog, Page, expect
 from webpage import cell, eventually, open_view
+
+from bench.liveserver import LiveServer
 
 
 def association(server: LiveServer, stimulus: str, behaviour: str) -> Any:

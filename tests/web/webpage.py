@@ -6,8 +6,9 @@ import time
 from collections.abc import Callable
 from typing import TypeVar
 
-from liveserver import LiveServer
 from playwright.sync_api import Page
+
+from bench.liveserver import LiveServer
 
 T = TypeVar("T")
 

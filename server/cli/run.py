@@ -1,4 +1,4 @@
-"""`srlab db`, `srlab run` and `srlab runs`: the engine and its storage from the shell."""
+"""`srlab run` and `srlab runs`: a condition on the engine, stored, and the stored runs."""
 
 from __future__ import annotations
 
@@ -9,66 +9,90 @@ import signal
 import time
 from collections.abc import Sequence
 from contextlib import nullcontext
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from rich import box
 from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from core.engine import RunEngine
+from core.brain.catalog import sensor_definitions
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
 from core.ports import Mode, RunStatus, StoredRun
-from server.persistence import SqlAlchemyRunStore, database_url, make_engine, make_sessionmaker
-from server.persistence.migrate import downgrade, upgrade
-from server.persistence.seed import SeedReport
+from core.setup import default_sensors
+from core.worlds import default_world, world_names
+from server.cli.common import (
+    CONDITION_METAVAR,
+    OTHER_CONDITIONS,
+    UsageError,
+    engine_condition,
+    non_negative_int,
+    positive_int,
+    print_table,
+    rate,
+    unit,
+)
+from server.cli.db import open_store, safe_url
 from server.runspec import run_spec
-from server.tables import print_table
+from server.tuning import configure_process
+
+if TYPE_CHECKING:
+    from core.engine import RunEngine
 
 
-def db(args: argparse.Namespace, stdout: IO[str]) -> int:
-    """`srlab db upgrade|downgrade`."""
-    url = args.url or database_url()
-    console = Console(file=stdout)
-    if args.db_command == "upgrade":
-        report = upgrade(url)
-        console.print(f"database {_safe(url)} is at the newest schema")
-        if report is not None:
-            console.print(_seeded(report))
-        return 0
-    downgrade(url, args.revision)
-    console.print(f"database {_safe(url)} is at revision {args.revision}")
-    return 0
-
-
-def _seeded(report: SeedReport) -> str:
-    """What seeding did, as a sentence (not the report's repr)."""
-    if not report.changed:
-        return "the catalogue and the shipped networks were already seeded: nothing changed"
-    return (
-        f"seeded the catalogue and the shipped networks: {report.added} rows added, "
-        f"{report.updated} updated"
+def add_run_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The `run` command and its arguments."""
+    runp = sub.add_parser(
+        "run",
+        help="run a condition on the engine, stored in the database",
+        description="Run a condition on the asyncio engine (a tick task and a reward "
+        "task), storing its LTM, RLTM, network, episodes and rewards. Ctrl-C or SIGTERM "
+        "stops it cleanly (status interrupted); --resume continues it.",
     )
+    runp.add_argument(
+        "--condition",
+        type=engine_condition,
+        metavar=CONDITION_METAVAR,
+        help="which condition (the engine runs the paper's architecture; the baselines, "
+        f"{', '.join(OTHER_CONDITIONS)}, run in srlab experiment)",
+    )
+    runp.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
+    runp.add_argument(
+        "--episodes", type=positive_int, help="episodes to run (default: until stopped)"
+    )
+    runp.add_argument("--mode", choices=["fast", "realtime"], default="fast")
+    runp.add_argument("--hz", type=rate, default=10.0, help="realtime tick rate (default 10)")
+    runp.add_argument("--network", help="start from this knowledge set instead")
+    runp.add_argument(
+        "--world", choices=world_names(), help=f"world preset (default {default_world()})"
+    )
+    runp.add_argument(
+        "--sensors",
+        choices=list(sensor_definitions()),
+        help=f"sensor definition (default {default_sensors()})",
+    )
+    runp.add_argument("--eta", type=unit, help="Eq. (1)'s learning rate")
+    runp.add_argument("--epsilon", type=unit, help="exploration rate")
+    runp.add_argument("--resume", type=positive_int, metavar="RUN", help="resume a stored run")
+    runp.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
+    runp.add_argument("--quiet", action="store_true", help="no progress display")
+    runp.set_defaults(handler=run_command)
 
 
-def _safe(url: str) -> str:
-    """A URL with its password hidden."""
-    from sqlalchemy.engine import make_url
-
-    return make_url(url).render_as_string(hide_password=True)
-
-
-def _store(url: str | None) -> tuple[SqlAlchemyRunStore, Any]:
-    url = url or database_url()
-    upgrade(url)  # cheap when already at head; a fresh machine needs no separate step
-    engine = make_engine(url)
-    return SqlAlchemyRunStore(make_sessionmaker(engine)), engine
+def run_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """`srlab run` from the command line: the process tuned for an engine, then `run`."""
+    configure_process()
+    if args.resume is None and args.condition is None:
+        raise UsageError("run needs --condition (or --resume RUN)")
+    return run(args, stdout, stderr)
 
 
 def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """`srlab run`: a stored engine run, fast or realtime, until done or Ctrl-C."""
-    store, db_engine = _store(args.url)
+    from core.engine import RunEngine
+
+    store, db_engine = open_store(args.url)
     try:
         if args.resume is not None:
             engine = RunEngine.restore(args.resume, store)
@@ -191,9 +215,19 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
     return 0
 
 
-def runs(args: argparse.Namespace, stdout: IO[str]) -> int:
+def add_runs_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The `runs` command and its arguments."""
+    runs_parser = sub.add_parser("runs", help="list the stored runs")
+    runs_parser.add_argument("--json", action="store_true", help="print one JSON object")
+    runs_parser.add_argument("--url", help="SQLAlchemy URL (default: SRLAB_DATABASE_URL)")
+    runs_parser.set_defaults(handler=runs)
+
+
+def runs(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """`srlab runs`: the stored runs with their status and success counts."""
-    store, db_engine = _store(args.url)
+    from server.persistence import database_url
+
+    store, db_engine = open_store(args.url)
     try:
         stored = store.list_runs()
     finally:
@@ -201,7 +235,7 @@ def runs(args: argparse.Namespace, stdout: IO[str]) -> int:
     if args.json:
         stdout.write(json.dumps({"runs": [_run_dict(r) for r in stored]}) + "\n")
         return 0
-    print_table(stdout, runs_table(stored, _safe(args.url or database_url())))
+    print_table(stdout, runs_table(stored, safe_url(args.url or database_url())))
     return 0
 
 

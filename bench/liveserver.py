@@ -1,4 +1,4 @@
-"""A real `srlab serve` on loopback for end-to-end and browser tests."""
+"""A real `srlab serve` on loopback, for the end-to-end and browser tests and the scripts."""
 
 from __future__ import annotations
 

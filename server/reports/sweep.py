@@ -2,39 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 from core.experiment import TaskResult
 from core.params import Params, ParamValue
 from core.sweep import Sweep, format_value, point_label
-from server.report import ROLLING, _diff, _fmt, clean_json
-
-
-def write_sweep_runs(path: Path, results: Sequence[TaskResult]) -> None:
-    """Every episode of every task run, with the parameters the task set, one JSON a line."""
-    with path.open("w", encoding="utf-8") as f:
-        for r in results:
-            for e in r.episodes:
-                row = {
-                    "condition": r.task.condition,
-                    "params": dict(r.task.params),
-                    "seed": r.task.seed,
-                    "episode": e.episode,
-                    "outcome": e.outcome.value,
-                    "cause": e.cause.value if e.cause else None,
-                    "ticks": e.ticks,
-                    "rewards": e.rewards,
-                }
-                f.write(json.dumps(row) + "\n")
+from server.reports.base import diff, failed_lines, fmt, head, row, write_summary
+from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 
 
 def distinct_settings(sweep: Sweep, condition: str) -> list[tuple[int, dict[str, ParamValue]]]:
@@ -52,7 +30,8 @@ def distinct_settings(sweep: Sweep, condition: str) -> list[tuple[int, dict[str,
 
 def plot_parameter(path: Path, name: str, entry: dict[str, Any]) -> None:
     """Success (all episodes, and the last 10) against one parameter's values, per condition."""
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=110)
+    fig, axes = subplots(1, figsize=(7, 4.5))
+    ax = axes[0][0]
     labels: list[str] = []
     for cond, rows in entry["conditions"].items():
         values = [r["value"] for r in rows]
@@ -81,10 +60,8 @@ def plot_parameter(path: Path, name: str, entry: dict[str, Any]) -> None:
             color = bars.lines[0].get_color()
         if not numeric:
             ax.set_xticks(x, labels)
-    ax.set_xlabel(name)
+    success_axes(ax, xlabel=name, criterion=False)
     ax.set_ylabel("success rate (mean over seeds)")
-    ax.set_ylim(-0.02, 1.02)
-    ax.grid(alpha=0.3)
     ax.set_title(f"{name}: {entry['description']}", fontsize=9)
     ax.legend(fontsize=8, loc="best")
     fig.text(
@@ -94,48 +71,38 @@ def plot_parameter(path: Path, name: str, entry: dict[str, Any]) -> None:
         fontsize=7,
         color="grey",
     )
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save(fig, path)
 
 
 def plot_sweep_curves(path: Path, sweep: Sweep, summary: dict[str, Any]) -> None:
     """Learning curves, one panel per condition, one line per distinct setting."""
     cols = len(sweep.conditions)
-    fig, axes = plt.subplots(1, cols, figsize=(6 * cols, 4.8), dpi=110, squeeze=False, sharey=True)
+    fig, axes = subplots(cols, figsize=(6 * cols, 4.8), sharey=True)
     for ax, cond in zip(axes[0], sweep.conditions, strict=True):
         for i, setting in distinct_settings(sweep, cond):
             s = summary["points"][i]["conditions"][cond]
             if not s.get("seeds"):
                 continue
-            runs = np.asarray(s["success_by_seed"], dtype=float)
-            kernel = np.ones(ROLLING)
-            counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
-            rolled = np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
+            rolled = rolling_success(s["success_by_seed"])
             label = point_label(setting) or "defaults"
             ax.plot(np.arange(1, rolled.shape[1] + 1), rolled.mean(axis=0), label=label)
         ax.set_title(cond)
-        ax.set_xlabel("episode")
-        ax.axhline(0.8, color="grey", linestyle=":", linewidth=1)
-        ax.grid(alpha=0.3)
+        success_axes(ax)
         ax.legend(fontsize=7, loc="best")
     axes[0][0].set_ylabel(f"success rate (rolling {ROLLING}, mean over seeds)")
-    axes[0][0].set_ylim(-0.02, 1.02)
     fig.suptitle("Learning curves per setting")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save(fig, path)
 
 
 def _row_cells(s: dict[str, Any]) -> list[str]:
     crit = s["episodes_to_criterion"]
     median = "-" if crit["median"] is None else f"{crit['median']:.0f}"
     return [
-        _fmt(s["success_rate"], pct=True),
-        _fmt(s["success_last10"], pct=True),
+        fmt(s["success_rate"], pct=True),
+        fmt(s["success_last10"], pct=True),
         f"{median} ({crit['reached']}/{crit['never']})",
-        _fmt(s["collisions_per_episode"]),
-        _fmt(s["violations_per_episode"]),
+        fmt(s["collisions_per_episode"]),
+        fmt(s["violations_per_episode"]),
     ]
 
 
@@ -158,8 +125,7 @@ def sweep_markdown(
         f"not use); {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
         f"{params['where']}.",
         "",
-        "| parameter | values | used by | ignored by |",
-        "|---|---|---|---|",
+        *head(["parameter", "values", "used by", "ignored by"]),
     ]
     for name, values in sweep.axes:
         entry = summary["by_parameter"][name]
@@ -192,9 +158,9 @@ def sweep_markdown(
             for r in rows:
                 lines.append(
                     f"| {format_value(r['value'])} | {cond} | "
-                    f"{_fmt(r['success_rate'], pct=True)} | {_diff(r.get('success_vs_first'))} | "
-                    f"{_fmt(r['success_last10'], pct=True)} | "
-                    f"{_fmt(r['collisions_per_episode'])} | {_fmt(r['violations_per_episode'])} |"
+                    f"{fmt(r['success_rate'], pct=True)} | {diff(r.get('success_vs_first'))} | "
+                    f"{fmt(r['success_last10'], pct=True)} | "
+                    f"{fmt(r['collisions_per_episode'])} | {fmt(r['violations_per_episode'])} |"
                 )
         lines += ["", f"![{name}](param_{name}.png)"]
     names = [n for n, _ in sweep.axes]
@@ -206,12 +172,9 @@ def sweep_markdown(
         "not use. Episodes to criterion: the first episode after which the success over the "
         "last 10 episodes is at least 80% (median; seeds reached/never).",
         "",
-        "| condition | "
-        + " | ".join(names)
-        + " | success, all episodes | success, last 10 | episodes to criterion | "
-        "collisions / episode | violations / episode |",
-        "|---|" + "---|" * len(names) + "---|---|---|---|---|",
-    ]
+        *head(["condition", *names, "success, all episodes", "success, last 10",
+                "episodes to criterion", "collisions / episode", "violations / episode"]),
+    ]  # fmt: skip
     best: dict[str, tuple[float, str, dict[str, Any]]] = {}
     for cond in sweep.conditions:
         for i, setting in distinct_settings(sweep, cond):
@@ -220,7 +183,7 @@ def sweep_markdown(
             if not s.get("seeds"):
                 lines.append(f"| {cond} | " + " | ".join(cells) + " | failed | | | | |")
                 continue
-            lines.append(f"| {cond} | " + " | ".join([*cells, *_row_cells(s)]) + " |")
+            lines.append(row([cond, *cells, *_row_cells(s)]))
             rate = s["success_rate"]["mean"]
             if cond not in best or rate > best[cond][0]:
                 best[cond] = (rate, point_label(setting) or "defaults", s)
@@ -233,8 +196,8 @@ def sweep_markdown(
     ]
     for cond, (_, label, s) in best.items():
         lines.append(
-            f"| {cond} | {label} | {_fmt(s['success_rate'], pct=True)} | "
-            f"{_fmt(s['success_last10'], pct=True)} |"
+            f"| {cond} | {label} | {fmt(s['success_rate'], pct=True)} | "
+            f"{fmt(s['success_last10'], pct=True)} |"
         )
     lines += [
         "",
@@ -244,13 +207,7 @@ def sweep_markdown(
         "![learning curves](learning_curves.png)",
     ]
     if failed:
-        lines += ["", "## Failed tasks", ""]
-        for r in failed:
-            first = (r.error or "").splitlines()[0]
-            where = point_label(dict(r.task.params))
-            lines.append(
-                f"- {r.task.condition} seed {r.task.seed}{' ' + where if where else ''}: {first}"
-            )
+        lines += ["", *failed_lines(failed, params=True)]
     return "\n".join(lines) + "\n"
 
 
@@ -262,9 +219,7 @@ def write_sweep_report(
     params: dict[str, Any],
 ) -> list[Path]:
     """Write every output file into `out`; returns their paths."""
-    out.mkdir(parents=True, exist_ok=True)
     failed = [r for r in results if not r.ok]
-    paths = [out / n for n in ("summary.json", "summary.md", "runs.jsonl")]
     doc = {
         "params": params,
         "grid": {n: list(v) for n, v in sweep.axes},
@@ -293,9 +248,8 @@ def write_sweep_report(
             for r in failed
         ],
     }
-    paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
-    paths[1].write_text(sweep_markdown(sweep, summary, params, failed))
-    write_sweep_runs(paths[2], results)
+    markdown = sweep_markdown(sweep, summary, params, failed)
+    paths = write_summary(out, doc, markdown, results, params=True)
     curves = out / "learning_curves.png"
     plot_sweep_curves(curves, sweep, summary)
     plots = [curves]

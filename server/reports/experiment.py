@@ -2,24 +2,20 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.patches
-import matplotlib.pyplot as plt
 import numpy as np
 
 from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
 from core.brain.catalog import Catalog
 from core.experiment import CAMERA_SENSOR, TaskResult
-from core.stats import Estimate, bootstrap_mean
-from core.stats import pct as stats_pct
+from core.stats import bootstrap_mean
+from server.reports.base import diff, failed_lines, head, row, write_summary
+from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 
 # The paper's Table II and the non-zero cells of its Table III (reliability of LTM after
 # 50 episodic trials), keyed by our stimulus and behaviour names.
@@ -48,48 +44,6 @@ PAPER_TABLE_III: dict[str, dict[str, dict[str, float]]] = {
 }
 
 
-def _fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
-    """A figure over seeds with its interval: a rate as ``5% [0, 15]``, else ``0.12 ± 0.03``.
-
-    A rate's interval is the percentile bootstrap's (`core.stats`, within [0, 1]; clipped
-    there all the same) when the summary has one: a mean ± Student's t half-width ran past
-    0% and 100% with few seeds ("5% ± 64%").
-    """
-    mean, ci = stat.get("mean", math.nan), stat.get("ci95", math.nan)
-    if mean is None or math.isnan(mean):
-        return "-"
-    if pct:
-        low, high = stat.get("low", math.nan), stat.get("high", math.nan)
-        if math.isnan(low) or math.isnan(high):
-            return f"{mean:.0%}"
-        return stats_pct(Estimate(mean, max(0.0, low), min(1.0, high), int(stat.get("n", 0))))
-    return f"{mean:.{digits}f} ± {ci:.{digits}f}" if not math.isnan(ci) else f"{mean:.{digits}f}"
-
-
-def write_runs(path: Path, results: Sequence[TaskResult]) -> None:
-    """Every episode of every task, one JSON object a line."""
-    with path.open("w", encoding="utf-8") as f:
-        for r in results:
-            for e in r.episodes:
-                f.write(
-                    json.dumps(
-                        {
-                            "condition": r.task.condition,
-                            "seed": r.task.seed,
-                            "episode": e.episode,
-                            "outcome": e.outcome.value,
-                            "cause": e.cause.value if e.cause else None,
-                            "ticks": e.ticks,
-                            "rewards": e.rewards,
-                        }
-                    )
-                    + "\n"
-                )
-
-
-ROLLING = 5
-
-
 CONDITION_COLOURS = {
     "innate": "#7f7f7f", "unaware": "#c7c7c7", "delayed": "#ff7f0e", "dp": "#2ca02c",
     "rp": "#d62728", "kp": "#1f3fb4", "sonar": "#8c564b", "reflexes": "#e377c2",
@@ -103,10 +57,7 @@ OUTSIDE_LEARNERS = ("qlambda", "qlambda-hybrid", "dqn", "ppo")
 
 def _rolling_curve(success_by_seed: list[list[int]]) -> tuple[Any, Any, Any]:
     """Per episode: the mean over seeds of the rolling success, and its bootstrap band."""
-    runs = np.asarray(success_by_seed, dtype=float)
-    kernel = np.ones(ROLLING)
-    counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
-    rolled = np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
+    rolled = rolling_success(success_by_seed)
     band = [bootstrap_mean(rolled[:, i].tolist()) for i in range(rolled.shape[1])]
     low = np.array([b.low if not math.isnan(b.low) else b.mean for b in band])
     high = np.array([b.high if not math.isnan(b.high) else b.mean for b in band])
@@ -124,9 +75,7 @@ def plot_learning_curves(path: Path, summary: dict[str, Any]) -> None:
     panels = [[n for n in ran if n not in OUTSIDE_LEARNERS]]
     if outside:
         panels.append([n for n in ran if n in ("kp", "sonar")] + outside)
-    fig, axes = plt.subplots(
-        1, len(panels), figsize=(9 if len(panels) == 1 else 14, 5), dpi=110, squeeze=False
-    )
+    fig, axes = subplots(len(panels), figsize=(9 if len(panels) == 1 else 14, 5))
     titles = ["the architecture's conditions", "the baselines beside kp"]
     for ax, names, title in zip(axes[0], panels, titles, strict=False):
         for name in names:
@@ -136,18 +85,13 @@ def plot_learning_curves(path: Path, summary: dict[str, Any]) -> None:
             colour = CONDITION_COLOURS.get(name)
             (line,) = ax.plot(x, y, label=f"{name} (n={s['seeds']})", linewidth=1.8, color=colour)
             ax.fill_between(x, low, high, color=line.get_color(), alpha=0.15)
-        ax.set_xlabel("episode")
-        ax.set_ylim(-0.02, 1.02)
-        ax.axhline(0.8, color="grey", linestyle=":", linewidth=1)
-        ax.grid(alpha=0.3)
+        success_axes(ax)
         ax.legend(loc="lower right", fontsize=8)
         if len(panels) > 1:
             ax.set_title(title, fontsize=10)
     axes[0][0].set_ylabel(f"success rate (rolling {ROLLING} episodes)")
     fig.suptitle("Learning curves: mean over seeds, band = 95% bootstrap interval")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save(fig, path)
 
 
 def _camera_names(catalog: Catalog) -> list[str]:
@@ -194,9 +138,7 @@ def plot_reliability(
         panels.append((f"paper {cname.upper()}", paper))
     correct = {s: set(v["correct"]) for s, v in (probe or {}).get("stimuli", {}).items()}
     cols = len(panels)
-    fig, axes = plt.subplots(
-        1, cols, figsize=(2.4 * cols + 2.5, 7.5), dpi=110, squeeze=False, sharey=True
-    )
+    fig, axes = subplots(cols, figsize=(2.4 * cols + 2.5, 7.5), sharey=True)
     im = None
     for ax, (title, grid) in zip(axes[0], panels, strict=True):
         im = ax.imshow(grid, vmin=0, vmax=1, cmap="viridis", aspect="auto")
@@ -221,8 +163,7 @@ def plot_reliability(
     meaning = "where in the view" if catalog.definition == "paper" else "obstacle side"
     outlined = "; outlined: correct by the placement probe" if correct else ""
     fig.suptitle(f"Reliability of camera obstacle S-R pairs (robot lane _ {meaning}){outlined}")
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
+    save(fig, path, layout=False, bbox_inches="tight")
 
 
 def _origin_table(summary: dict[str, Any]) -> list[str]:
@@ -234,14 +175,14 @@ def _origin_table(summary: dict[str, Any]) -> list[str]:
                 origins.append(o)
     if not origins:
         return ["(no condition ran the paper's architecture)"]
-    rows = ["| condition | " + " | ".join(origins) + " |", "|---|" + "---|" * len(origins)]
+    rows = head(["condition", *origins])
     for name, s in summary.items():
         counts = s.get("ticks_by_origin") or {}
         total = sum(counts.values())
         if not total:
             continue
         cells = [f"{counts.get(o, 0) / total:.1%}" if counts.get(o) else "-" for o in origins]
-        rows.append(f"| {name} | " + " | ".join(cells) + " |")
+        rows.append(row([name, *cells]))
     return rows
 
 
@@ -272,15 +213,6 @@ def _points(stat: dict[str, float] | None) -> str:
     return f"{head} [{100 * low:+.1f}, {100 * high:+.1f}]"
 
 
-def _diff(d: dict[str, float] | None) -> str:
-    """A paired difference in points with its interval and p."""
-    if d is None:
-        return "-"
-    p = d["p"]
-    ptxt = "p < 0.001" if p < 0.001 else f"p {p:.3f}"
-    return f"{100 * d['mean']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}], {ptxt}"
-
-
 def _setup_line(params: dict[str, Any]) -> str:
     return (
         f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
@@ -299,9 +231,10 @@ def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]
         lab for lab in labels if any(lab in s.get("success_horizons", {}) for s in summary.values())
     ]
     evaluated = any("evaluation" in s for s in summary.values())
-    head = ["condition", *(f"success, {_horizon(lab)}" for lab in present), "trend / 10 episodes"]
+    columns = ["condition", *(f"success, {_horizon(lab)}" for lab in present)]
+    columns.append("trend / 10 episodes")
     if evaluated:
-        head += ["held-out, frozen", "held-out, camera only"]
+        columns += ["held-out, frozen", "held-out, camera only"]
     lines = [
         "## Success",
         "",
@@ -316,19 +249,18 @@ def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]
             else ""
         ),
         "",
-        "| " + " | ".join(head) + " |",
-        "|---" * len(head) + "|",
+        *head(columns),
     ]
     for name, s in summary.items():
         if not s.get("seeds"):
-            lines.append(f"| {name} | no successful task |" + " |" * (len(head) - 2))
+            lines.append(f"| {name} | no successful task |" + " |" * (len(columns) - 2))
             continue
         cells = [_ci(s["success_horizons"].get(lab)) for lab in present]
         cells.append(_points(s.get("trend_per_10")))
         if evaluated:
             ev = s.get("evaluation", {})
             cells += [_ci(ev.get("frozen")), _ci(ev.get("camera_only"))]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(row([name, *cells]))
     return [*lines, ""]
 
 
@@ -344,14 +276,11 @@ def _failure_lines(summary: dict[str, Any]) -> list[str]:
         "",
         "Failed episodes per episode, by cause: mean over seeds [95% bootstrap interval].",
         "",
-        "| condition | " + " | ".join(c for c, _ in causes) + " |",
-        "|---|" + "---|" * len(causes),
+        *head(["condition", *(c for c, _ in causes)]),
     ]
     for name, s in summary.items():
         if s.get("seeds"):
-            lines.append(
-                f"| {name} | " + " | ".join(_ci(s[k], pct=False) for _, k in causes) + " |"
-            )
+            lines.append(row([name, *(_ci(s[k], pct=False) for _, k in causes)]))
     return [*lines, ""]
 
 
@@ -379,11 +308,10 @@ def _paired_lines(summary: dict[str, Any]) -> list[str]:
         "condition runs on the same held-out seed per training seed. `kp - sonar` is what "
         "propagation adds (`sonar` is kp without it).",
         "",
-        "| pair | " + " | ".join(_horizon(h) for h in horizons) + " |",
-        "|---|" + "---|" * len(horizons),
+        *head(["pair", *(_horizon(h) for h in horizons)]),
     ]
-    for pair, row in table.items():
-        lines.append(f"| {pair} | " + " | ".join(_diff(row.get(h)) for h in horizons) + " |")
+    for pair, diffs in table.items():
+        lines.append(row([pair, *(diff(diffs.get(h)) for h in horizons)]))
     return [*lines, ""]
 
 
@@ -414,26 +342,24 @@ def _correctness_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[
             f"After episode {checkpoint}: the share of seeds whose learner answers each "
             "stimulus (seen alone) correctly / wrongly / not at all.",
             "",
-            "| condition | " + " | ".join(s.removeprefix("Obstacle_") for s in stimuli) + " |",
-            "|---|" + "---|" * len(stimuli),
+            *head(["condition", *(s.removeprefix("Obstacle_") for s in stimuli)]),
         ]
         for name, c in judged.items():
-            row = c["checkpoints"].get(checkpoint)
-            if row is None:
+            shares = c["checkpoints"].get(checkpoint)
+            if shares is None:
                 continue
             cells = [
-                f"{row[s]['correct']:.0%} / {row[s]['wrong']:.0%} / {row[s]['none']:.0%}"
+                f"{shares[s]['correct']:.0%} / {shares[s]['wrong']:.0%} / {shares[s]['none']:.0%}"
                 for s in stimuli
             ]
-            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+            lines.append(row([name, *cells]))
     lines += [
         "",
         "The knowledge criterion: the first episode after which a seed's answer to the "
         "stimulus is correct and stays correct to the end; median over the seeds that get "
         "there, and how many do (of all seeds).",
         "",
-        "| condition | " + " | ".join(s.removeprefix("Obstacle_") for s in stimuli) + " |",
-        "|---|" + "---|" * len(stimuli),
+        *head(["condition", *(s.removeprefix("Obstacle_") for s in stimuli)]),
     ]
     for name, c in judged.items():
         cells = []
@@ -445,7 +371,7 @@ def _correctness_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[
                 if got
                 else f"- (0/{len(per_seed)})"
             )
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append(row([name, *cells]))
     return [*lines, ""]
 
 
@@ -495,17 +421,17 @@ def _table3_lines(summary: dict[str, Any], catalog: Catalog, params: dict[str, A
         "| stimulus | paper DP | srlab DP | paper RP | srlab RP | paper KP | srlab KP |",
         "|---|---|---|---|---|---|---|",
     ]
-    for stim, row in PAPER_TABLE_III.items():
+    for stim, paper in PAPER_TABLE_III.items():
         cells = []
         for cname in ("dp", "rp", "kp"):
-            paper_best = max(((v.get(cname, 0.0), b) for b, v in row.items()), default=(0.0, ""))
+            paper_best = max(((v.get(cname, 0.0), b) for b, v in paper.items()), default=(0.0, ""))
             cells.append(f"{paper_best[1]} {paper_best[0]:.2f}" if paper_best[0] > 0 else "-")
             cond = summary.get(cname, {})
             rel = cond.get("camera_reliability", {}) if cond.get("seeds") else {}
             mine = [(v["mean"], k.split("/", 1)[1]) for k, v in rel.items() if k.startswith(stim)]
             top = max(mine, default=(0.0, ""))
             cells.append(f"{top[1]} {top[0]:.2f}{mark(stim, top[1])}" if top[0] >= 0.005 else "-")
-        lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
+        lines.append(row([stim.removeprefix("Obstacle_"), *cells]))
     if params.get("sensors") == "paper":
         note = (
             "These are the paper's own stimuli (Fig. 10: robot lane x the third of the "
@@ -548,17 +474,14 @@ def _reliability_lines(
         key=lambda k: (_camera_names(catalog).index(k.split("/")[0]), k),
     )
     if learned:
-        lines.append("| stimulus | behaviour | " + " | ".join(learned) + " |")
-        lines.append("|---|---|" + "---|" * len(learned))
+        lines += head(["stimulus", "behaviour", *learned])
         for k in keys:
             stim, beh = k.split("/", 1)
             cells = [
                 _ci(summary[n]["camera_reliability"].get(k, {"mean": 0.0}), pct=False)
                 for n in learned
             ]
-            lines.append(
-                f"| {stim.removeprefix('Obstacle_')} | {beh} | " + " | ".join(cells) + " |"
-            )
+            lines.append(row([stim.removeprefix("Obstacle_"), beh, *cells]))
     return [*lines, ""]
 
 
@@ -575,12 +498,11 @@ def _met_lines(summary: dict[str, Any], catalog: Catalog) -> list[str]:
         "from a delayed reward only where the lap succeeds. (`-`: not recorded for the "
         "learners that run through the Gymnasium environment.)",
         "",
-        "| stimulus | " + " | ".join(n for n, _ in met) + " |",
-        "|---|" + "---|" * len(met),
+        *head(["stimulus", *(n for n, _ in met)]),
     ]
     for stim in _camera_names(catalog):
         cells = [_met_cell(m[stim]) if stim in m else "0" for _, m in met]
-        lines.append(f"| {stim.removeprefix('Obstacle_')} | " + " | ".join(cells) + " |")
+        lines.append(row([stim.removeprefix("Obstacle_"), *cells]))
     return [*lines, ""]
 
 
@@ -639,10 +561,7 @@ def summary_markdown(
     lines += _criterion_lines(summary)
     lines += _met_lines(summary, catalog)
     if failed:
-        lines += ["## Failed tasks", ""]
-        for r in failed:
-            first = (r.error or "").splitlines()[0]
-            lines.append(f"- {r.task.condition} seed {r.task.seed}: {first}")
+        lines += failed_lines(failed)
     return "\n".join(lines).rstrip() + "\n"
 
 
@@ -654,9 +573,7 @@ def write_report(
     params: dict[str, Any],
 ) -> list[Path]:
     """Write every output file into `out`; returns their paths."""
-    out.mkdir(parents=True, exist_ok=True)
     failed = [r for r in results if not r.ok]
-    paths = [out / n for n in ("summary.json", "summary.md", "runs.jsonl")]
     doc = {
         "params": params,
         "conditions": {
@@ -672,9 +589,7 @@ def write_report(
         ],
     }
     doc["paired"] = paired_table(summary)
-    paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
-    paths[1].write_text(summary_markdown(summary, catalog, params, failed))
-    write_runs(paths[2], results)
+    paths = write_summary(out, doc, summary_markdown(summary, catalog, params, failed), results)
     curves = out / "learning_curves.png"
     plot_learning_curves(curves, summary)
     reliability = out / "reliability.png"
@@ -698,8 +613,7 @@ def plot_knowledge(path: Path, summary: dict[str, Any], stimuli: int = 3) -> Non
         for stim, m in s.get("camera_stimuli_met", {}).items():
             met[stim] = met.get(stim, 0.0) + m["encounters_per_seed"]
     names = sorted(met, key=lambda k: -met[k])[:stimuli]
-    fig, axes = plt.subplots(1, max(1, len(names)), figsize=(4.2 * max(1, len(names)), 3.8),
-                             dpi=110, squeeze=False, sharey=True)  # fmt: skip
+    fig, axes = subplots(max(1, len(names)), figsize=(4.2 * max(1, len(names)), 3.8), sharey=True)
     for ax, stim in zip(axes[0], names, strict=False):
         for name, s in judged.items():
             survival = s["correctness"]["criterion"].get(stim, {}).get("survival")
@@ -708,61 +622,8 @@ def plot_knowledge(path: Path, summary: dict[str, Any], stimuli: int = 3) -> Non
             x = np.arange(1, len(survival) + 1)
             ax.step(x, 1.0 - np.asarray(survival), where="post", label=name, linewidth=1.6)
         ax.set_title(stim.removeprefix("Obstacle_"), fontsize=10)
-        ax.set_xlabel("episode")
-        ax.set_ylim(-0.02, 1.02)
-        ax.grid(alpha=0.3)
+        success_axes(ax, criterion=False)
     axes[0][0].set_ylabel("share of seeds correct from here on")
     axes[0][-1].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     fig.suptitle("Knowledge criterion: the answer is correct and stays correct (probe)")
-    fig.tight_layout()
-    fig.savefig(path, bbox_inches="tight")
-    plt.close(fig)
-
-
-def clean_json(value: Any) -> Any:
-    """JSON has no NaN: undefined figures (a CI over one seed) become null."""
-    if isinstance(value, float) and math.isnan(value):
-        return None
-    if isinstance(value, dict):
-        return {k: clean_json(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [clean_json(v) for v in value]
-    return value
-
-
-def world_check_markdown(report: dict[str, Any]) -> str:
-    """`srlab world-check --out`'s tables: each property's success with its interval."""
-    lines = [
-        "# srlab world-check",
-        "",
-        f"`{report.get('command', 'srlab world-check')}`",
-        "",
-        f"{report['seeds']} seeds (from {report['seed_base']}) x {report['episodes']} episodes "
-        "per property, no learning anywhere; success is the mean over seeds with its 95% "
-        "bootstrap interval.",
-    ]
-    described: set[str] = set()
-    for check in report["checks"]:
-        lines += [
-            "",
-            f"## World `{check['world']}`, camera stimuli `{check['sensors']}`: "
-            + ("every property holds" if check["holds"] else "not every property holds"),
-            "",
-        ]
-        if check["world"] not in described:
-            described.add(check["world"])
-            lines += [check["reasons"].replace("\n", " "), ""]
-        lines += [
-            "| | property | condition | success [95% CI] | bounds | holds |",
-            "|---|---|---|---|---|---|",
-        ]
-        for p in check["properties"]:
-            s = p["success"]
-            ci = "" if s["low"] != s["low"] else f" [{100 * s['low']:.0f}, {100 * s['high']:.0f}]"
-            lines.append(
-                f"| ({p['key']}) | {p['label']} | {p['condition']}"
-                f"{' + signal' if p['signal'] == 'given' else ''} | {100 * s['mean']:.0f}%{ci} | "
-                f"{100 * p['bounds'][0]:.0f}-{100 * p['bounds'][1]:.0f}% | "
-                f"{'yes' if p['holds'] else '**no**'} |"
-            )
-    return "\n".join(lines) + "\n"
+    save(fig, path, bbox_inches="tight")

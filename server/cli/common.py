@@ -1,0 +1,272 @@
+"""What the commands share: argument types and groups, the backend, progress, tables."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import shlex
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import ExitStack, contextmanager, nullcontext
+from pathlib import Path
+from typing import IO, Any
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+)
+from rich.table import Table
+
+from core.conditions import CONDITIONS
+from core.experiment import Backend, LocalBackend, TaskResult
+from core.setup import Setup
+from core.sweep import point_label
+from server.reports.base import first_line
+
+Handler = Callable[[argparse.Namespace, IO[str], IO[str]], int]
+"""What a command runs: its arguments, stdout and stderr in; the exit code out."""
+
+
+class UsageError(Exception):
+    """Arguments that parse but do not go together: `main` answers as argparse does."""
+
+
+def number(
+    cast: Callable[[str], float], low: float, high: float, closed_low: bool, what: str
+) -> Callable[[str], Any]:
+    """An argparse type: a number of `cast`'s kind within bounds, with a clear message."""
+    kind = "whole number" if cast is int else "number"
+
+    def parse(text: str) -> Any:
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind}") from None
+        if value > high or value < low or (value == low and not closed_low):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {value}")
+        return value
+
+    return parse
+
+
+positive_int = number(int, 1, math.inf, True, "at least 1")
+non_negative_int = number(int, 0, math.inf, True, "0 or more")
+"""Seeds, and counts that may be none."""
+unit = number(float, 0.0, 1.0, True, "in [0, 1]")
+rate = number(float, 0.0, 1000.0, False, "in (0, 1000]")
+
+
+ENGINE_CONDITIONS = sorted(n for n, c in CONDITIONS.items() if c.agent == "brain")
+"""The conditions `srlab run` and `srlab simulate` accept: the paper's architecture."""
+OTHER_CONDITIONS = sorted(set(CONDITIONS) - set(ENGINE_CONDITIONS))
+"""The baselines (Q(lambda), DQN, PPO...): `srlab experiment` runs them."""
+CONDITION_METAVAR = "{" + ",".join(ENGINE_CONDITIONS) + "}"
+
+
+def engine_condition(text: str) -> str:
+    """An argparse type: a condition of the paper's architecture, else where to run it."""
+    if text in ENGINE_CONDITIONS:
+        return text
+    if text in OTHER_CONDITIONS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is a baseline, not run by the engine (the paper's architecture): "
+            "run it with "
+            f"`srlab experiment --conditions {text}`"
+        )
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (choose from {', '.join(ENGINE_CONDITIONS)})"
+    )
+
+
+def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
+    """--world, --sensors and (unless `signal` is False) --signal: where a condition runs."""
+    from core.brain.catalog import sensor_definitions
+    from core.setup import SIGNAL_MODES
+    from core.worlds import default_world, world_names
+
+    parser.add_argument(
+        "--world",
+        choices=world_names(),
+        default="",
+        help=f"world preset (default {default_world()}; see `srlab world-check`)",
+    )
+    definitions = list(sensor_definitions())
+    parser.add_argument(
+        "--sensors",
+        choices=definitions,
+        default="",
+        help=f"camera obstacle stimuli: {', '.join(definitions)} (default {definitions[0]}: "
+        "the paper's Fig. 10)",
+    )
+    if signal:
+        parser.add_argument(
+            "--signal",
+            choices=SIGNAL_MODES,
+            default="learned",
+            help="learned: as the condition has it (default); given: the signal's correct "
+            "responses added, so success measures the obstacle alone",
+        )
+
+
+def setup_of(args: argparse.Namespace) -> Setup:
+    """The setup the --world, --sensors and --signal arguments name, defaults named."""
+    return Setup(args.world, args.sensors, getattr(args, "signal", "learned")).resolved()
+
+
+def add_batch_arguments(
+    parser: argparse.ArgumentParser,
+    *,
+    seeds: int = 20,
+    seed_base: int = 0,
+    kind: str = "",
+    jobs_help: str | None = None,
+) -> None:
+    """A batch of tasks and where it runs: --seeds, --seed-base, --episodes, --jobs, backend.
+
+    `kind` names the seeds in the help ("tuning " for tuning seeds).
+    """
+    parser.add_argument(
+        "--seeds", type=positive_int, default=seeds, help=f"{kind}seeds (default {seeds})"
+    )
+    parser.add_argument(
+        "--seed-base",
+        type=non_negative_int,
+        default=seed_base,
+        help=f"first {kind}seed (default {seed_base})",
+    )
+    parser.add_argument(
+        "--episodes", type=positive_int, default=50, help="episodes per seed (default 50)"
+    )
+    parser.add_argument("--jobs", type=positive_int, default=os.cpu_count() or 1, help=jobs_help)
+    add_backend_arguments(parser)
+
+
+def add_task_arguments(parser: argparse.ArgumentParser, out: Path) -> None:
+    """What `experiment` and `sweep` share: seeds, episodes, jobs, backend, setup, --out."""
+    add_batch_arguments(parser, jobs_help="local processes, or CPUs of a private Ray instance")
+    add_setup_arguments(parser)
+    parser.add_argument("--out", type=Path, default=out, help="output folder")
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def add_backend_arguments(parser: argparse.ArgumentParser) -> None:
+    """--backend, --address and --ship-code."""
+    parser.add_argument(
+        "--backend",
+        choices=["local", "ray"],
+        default="local",
+        help="local: --jobs processes on this machine (default); ray: Ray tasks, on a "
+        "private local Ray instance with --jobs CPUs or on the cluster at --address "
+        "(needs pip install 'srlab[ray]')",
+    )
+    parser.add_argument(
+        "--address",
+        help="the Ray cluster to use: auto (the one started here with `ray start`), "
+        "HOST:PORT, or ray://HOST:10001 (default: RAY_ADDRESS, else a private instance)",
+    )
+    parser.add_argument(
+        "--ship-code",
+        action="store_true",
+        help="upload this checkout's core package with the Ray job, so the workers need "
+        "srlab's dependencies but not srlab itself",
+    )
+
+
+def check_backend_arguments(args: argparse.Namespace) -> None:
+    """--address and --ship-code make sense only with --backend ray."""
+    if args.backend != "ray" and (args.address is not None or args.ship_code):
+        raise ValueError("--address and --ship-code need --backend ray")
+
+
+@contextmanager
+def open_backend(args: argparse.Namespace, err: Console) -> Iterator[tuple[Backend, str]]:
+    """The backend the arguments choose, connected, and where it runs, for people."""
+    check_backend_arguments(args)
+    if args.backend == "local":
+        yield LocalBackend(args.jobs), f"{args.jobs} local process{'es' * (args.jobs > 1)}"
+        return
+    from server.backends import RayBackend
+
+    backend = RayBackend(args.address, args.jobs, args.ship_code)
+    with ExitStack() as stack:
+        with nullcontext() if args.quiet else err.status(f"connecting to {backend.where}"):
+            stack.enter_context(backend)
+        yield backend, backend.where
+
+
+def progress_bar(
+    err: Console, label: str, total: int, *, quiet: bool = False, status: str = "", **fields: Any
+) -> tuple[Progress, TaskID]:
+    """A transient progress bar on stderr, and its task.
+
+    Its columns: `label` (Rich markup), the bar, done of `total`, `status` (a column that
+    shows the task's `fields`, if given) and the time taken.
+    """
+    columns = [TextColumn(label), BarColumn(), MofNCompleteColumn()]
+    if status:
+        columns.append(TextColumn(status))
+    progress = Progress(*columns, TimeElapsedColumn(), console=err, transient=True, disable=quiet)
+    return progress, progress.add_task("tasks", total=total, **fields)
+
+
+def task_label(r: TaskResult) -> str:
+    """A task as people name it: ``kp seed 3``, or ``kp eta=0.1 seed 3`` with parameters."""
+    where = point_label(dict(r.task.params))
+    return f"{r.task.condition}{' ' + where if where else ''} seed {r.task.seed}"
+
+
+def task_progress(
+    err: Console, title: str, total: int, quiet: bool
+) -> tuple[Progress, Callable[[TaskResult], None]]:
+    """The progress bar of a batch of tasks, and a callback that advances it per result.
+
+    The bar names the task just done and whether it failed.
+    """
+    progress, bar = progress_bar(
+        err, f"[bold]{title}[/]", total, quiet=quiet, status="{task.fields[last]}", last=""
+    )
+
+    def on_result(r: TaskResult) -> None:
+        mark = "ok" if r.ok else "[red]FAILED[/]"
+        progress.update(bar, advance=1, last=f"{task_label(r)} {mark}")
+
+    return progress, on_result
+
+
+def report_failures(err: Console, results: Sequence[TaskResult], *, params: bool) -> int:
+    """Say which tasks failed and why (their error's first line); the exit code: 1 if any.
+
+    With `params`, each task is named with the parameters it set (a sweep's point).
+    """
+    failed = [r for r in results if not r.ok]
+    for r in failed:
+        name = task_label(r) if params else f"{r.task.condition} seed {r.task.seed}"
+        err.print(f"[red]task {name} failed:[/] {first_line(r.error)}")
+    return 1 if failed else 0
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The command as typed (the arguments `main` was given), for the report."""
+    argv = getattr(args, "argv", None)
+    argv = sys.argv[1:] if argv is None else argv
+    return "srlab " + shlex.join(argv) if argv else f"srlab {args.command}"
+
+
+def print_table(out: IO[str], table: Table) -> Console:
+    """Print `table` to `out`; returns the console used, for what follows it.
+
+    A pipe or a file has no width of its own, and Rich's 80 columns would cut words in
+    half: there the console is as wide as the table needs.
+    """
+    console = Console(file=out)
+    wide = console.measure(table, options=console.options.update_width(1000)).maximum
+    if not console.is_terminal and wide > console.width:
+        console = Console(file=out, width=wide)
+    console.print(table)
+    return console

@@ -1,0 +1,126 @@
+"""What every report writes alike: figures with their intervals, markdown tables, JSON files.
+
+Nothing here imports matplotlib (`server.reports.plots` does), so a command that only
+formats figures or writes JSON starts without it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from core.experiment import TaskResult
+from core.setup import Setup
+from core.stats import Estimate
+from core.stats import pct as stats_pct
+from core.sweep import point_label
+
+
+def fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
+    """A figure over seeds with its interval: a rate as ``5% [0, 15]``, else ``0.12 ± 0.03``.
+
+    A rate's interval is the percentile bootstrap's (`core.stats`, within [0, 1]; clipped
+    there all the same) when the summary has one: a mean ± Student's t half-width ran past
+    0% and 100% with few seeds ("5% ± 64%").
+    """
+    mean, ci = stat.get("mean", math.nan), stat.get("ci95", math.nan)
+    if mean is None or math.isnan(mean):
+        return "-"
+    if pct:
+        low, high = stat.get("low", math.nan), stat.get("high", math.nan)
+        if math.isnan(low) or math.isnan(high):
+            return f"{mean:.0%}"
+        return stats_pct(Estimate(mean, max(0.0, low), min(1.0, high), int(stat.get("n", 0))))
+    return f"{mean:.{digits}f} ± {ci:.{digits}f}" if not math.isnan(ci) else f"{mean:.{digits}f}"
+
+
+def diff(d: dict[str, float] | None) -> str:
+    """A paired difference in points with its interval and p."""
+    if d is None:
+        return "-"
+    p = d["p"]
+    ptxt = "p < 0.001" if p < 0.001 else f"p {p:.3f}"
+    return f"{100 * d['mean']:+.1f} [{100 * d['low']:+.1f}, {100 * d['high']:+.1f}], {ptxt}"
+
+
+def row(cells: Iterable[str]) -> str:
+    """A markdown table's row."""
+    return "| " + " | ".join(cells) + " |"
+
+
+def head(cells: Sequence[str]) -> list[str]:
+    """A markdown table's header row and the line under it."""
+    return [row(cells), "|---" * len(cells) + "|"]
+
+
+def setup_params(setup: Setup) -> dict[str, str]:
+    """The setup as a report's parameters."""
+    return {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
+
+
+def first_line(error: str | None) -> str:
+    """The first line of a failed task's error (its traceback follows)."""
+    return (error or "").splitlines()[0]
+
+
+def failed_lines(failed: Sequence[TaskResult], *, params: bool = False) -> list[str]:
+    """The summary's section on the tasks that failed, each with its error's first line.
+
+    With `params`, each task's parameters follow its seed (a sweep's tasks differ by them).
+    """
+    lines = ["## Failed tasks", ""]
+    for r in failed:
+        where = point_label(dict(r.task.params)) if params else ""
+        task = f"{r.task.condition} seed {r.task.seed}{' ' + where if where else ''}"
+        lines.append(f"- {task}: {first_line(r.error)}")
+    return lines
+
+
+def clean_json(value: Any) -> Any:
+    """JSON has no NaN: undefined figures (a CI over one seed) become null."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, dict):
+        return {k: clean_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [clean_json(v) for v in value]
+    return value
+
+
+def write_runs(path: Path, results: Sequence[TaskResult], *, params: bool = False) -> None:
+    """Every episode of every task, one JSON object a line; with `params`, the task's too."""
+    with path.open("w", encoding="utf-8") as f:
+        for r in results:
+            for e in r.episodes:
+                line: dict[str, Any] = {"condition": r.task.condition}
+                if params:
+                    line["params"] = dict(r.task.params)
+                line |= {
+                    "seed": r.task.seed,
+                    "episode": e.episode,
+                    "outcome": e.outcome.value,
+                    "cause": e.cause.value if e.cause else None,
+                    "ticks": e.ticks,
+                    "rewards": e.rewards,
+                }
+                f.write(json.dumps(line) + "\n")
+
+
+def write_summary(
+    out: Path,
+    doc: dict[str, Any],
+    markdown: str,
+    results: Sequence[TaskResult],
+    *,
+    params: bool = False,
+) -> list[Path]:
+    """summary.json (`doc`), summary.md and runs.jsonl into `out`; returns their paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / n for n in ("summary.json", "summary.md", "runs.jsonl")]
+    paths[0].write_text(json.dumps(clean_json(doc), indent=2, allow_nan=False) + "\n")
+    paths[1].write_text(markdown)
+    write_runs(paths[2], results, params=params)
+    return paths

@@ -1,0 +1,58 @@
+"""What every report's plots share: matplotlib set up for files, success axes, saving.
+
+Importing this module chooses matplotlib's file-only backend (Agg) before pyplot loads,
+so a report never opens a window or needs a display.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import numpy.typing as npt
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from core.analysis import CRITERION_RATE
+
+ROLLING = 5
+"""Episodes in the rolling mean of a learning curve."""
+
+
+def subplots(cols: int, **kwargs: Any) -> tuple[Figure, Any]:
+    """A figure of one row of `cols` panels (axes always 2-D: ``axes[0][i]``)."""
+    fig, axes = plt.subplots(1, cols, dpi=110, squeeze=False, **kwargs)
+    return fig, axes
+
+
+def save(fig: Figure, path: Path, *, layout: bool = True, bbox_inches: str | None = None) -> None:
+    """Lay the figure out (unless `layout` is False), write it to `path` and free it."""
+    if layout:
+        fig.tight_layout()
+    fig.savefig(path, bbox_inches=bbox_inches)
+    plt.close(fig)
+
+
+def rolling_success(success_by_seed: list[list[int]]) -> npt.NDArray[np.float64]:
+    """Each seed's success per episode as a rolling mean over `ROLLING` episodes.
+
+    The first episodes average over as many as there are so far.
+    """
+    runs = np.asarray(success_by_seed, dtype=float)
+    kernel = np.ones(ROLLING)
+    counts = np.convolve(np.ones(runs.shape[1]), kernel)[: runs.shape[1]]
+    return np.array([np.convolve(r, kernel)[: len(r)] / counts for r in runs])
+
+
+def success_axes(ax: Axes, *, xlabel: str = "episode", criterion: bool = True) -> None:
+    """A success-rate panel: y in [0, 1], a light grid, and the success criterion's line."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylim(-0.02, 1.02)
+    if criterion:
+        ax.axhline(CRITERION_RATE, color="grey", linestyle=":", linewidth=1)
+    ax.grid(alpha=0.3)
