@@ -62,7 +62,7 @@ def probe(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     for col in ("stimulus", "correct responses (share of placements passed)", "best"):
         table.add_column(col)
     for name, p in result.stimuli.items():
-        good = sorted(p.correct, key=lambda b: -p.passed[b])
+        good = sorted(p.correct, key=lambda b: (-p.passed[b], b))  # ties by name: stable
         cells = ", ".join(f"{b} {p.passed[b]:.0%}" for b in good) or "[red]none[/]"
         best, share = p.best
         table.add_row(name, cells, f"{best} {share:.0%}")
