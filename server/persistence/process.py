@@ -36,6 +36,7 @@ from core.errors import StorageError
 from server.persistence.db import DatabaseCheck, make_engine, make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
+from server.tuning import configure_process
 
 # --------------------------------------------------------------------------- in the child
 
@@ -46,6 +47,9 @@ def _open(url: str) -> None:
     """The store process's start: one engine and the objects the service calls."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the service stops us after its last write
     faulthandler.enable()
+    # A thread per calling thread serves the service: with CPython's 5 ms switch interval,
+    # a reward's commit waited behind an episode's or a page's read for up to 5 ms.
+    configure_process()
     engine = make_engine(url)
     sessions = make_sessionmaker(engine)
     _stores["runs"] = SqlAlchemyRunStore(sessions)
