@@ -291,6 +291,7 @@ SLOW_MODULES = frozenset(
         "server/test_ray_backend.py",
         "server/test_schemathesis.py",
         "server/test_slow_clients.py",
+        "server/test_viewer_malformed.py",
         "server/test_viewer_serve.py",
     }
 )
