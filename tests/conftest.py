@@ -292,6 +292,7 @@ SLOW_MODULES = frozenset(
         "server/test_schemathesis.py",
         "server/test_slow_clients.py",
         "server/test_store_process.py",  # kills and restarts store processes
+        "server/test_viewer_malformed.py",
         "server/test_viewer_serve.py",
     }
 )

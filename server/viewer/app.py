@@ -22,6 +22,7 @@ from server.guard import SitePolicy
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
 from server.viewer.gate import Gate, Peer
+from server.viewer.inbound import quiet_malformed
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
@@ -222,6 +223,7 @@ class Viewer:
             return Session(inbox, controller, renderer, task)
 
         server = await asyncio.to_thread(_listen)
+        quiet_malformed(server)
         server.scene.world_axes.visible = False  # for every client
         gate = Gate(host, port, server.get_port(), policy)
         # Wired before the gate opens: a browser reconnecting after a restart may be the

@@ -42,6 +42,7 @@ from server.viewer.state import (
     SelectRun,
     SetMode,
     SetSpeed,
+    ShowNotice,
     TogglePlay,
     ViewerCommand,
     ViewState,
@@ -219,6 +220,8 @@ class Controller:
             self._change_rate(command.hz)
         elif isinstance(command, GiveReward):
             self._spawn(self._reward(command.value, command.client))
+        elif isinstance(command, ShowNotice):
+            self._publish(notice=command.text)
 
     def _spawn(self, coro: object) -> None:
         task: asyncio.Task[None] = asyncio.create_task(coro)  # type: ignore[arg-type]

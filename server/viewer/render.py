@@ -22,6 +22,7 @@ import viser
 
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, WorldConfig, episode_layout
+from server.viewer.inbound import guard_panel
 from server.viewer.replay import SPEEDS, run_world
 from server.viewer.scene import (
     BULBS,
@@ -48,6 +49,7 @@ from server.viewer.state import (
     SelectRun,
     SetMode,
     SetSpeed,
+    ShowNotice,
     TogglePlay,
     ViewerCommand,
     ViewState,
@@ -335,6 +337,9 @@ class Renderer:
 
     def _build_panel(self) -> None:
         gui = self.server.gui
+        post = self.post
+        # Before the inputs exist: a socket may send values as soon as it learns their ids.
+        guard_panel(gui, lambda problem: post(ShowNotice(f"**Refused:** {problem}")))
         gui.configure_theme(show_share_button=False, control_width="medium")
         gui.set_panel_label("srlab 3D view")
         self._header = gui.add_markdown("**srlab**: waiting for a run")
@@ -356,13 +361,13 @@ class Renderer:
             )
         self._decision = gui.add_markdown("")
         self._notice = gui.add_markdown("")
-        post = self.post
 
         def command(make: Callable[[viser.GuiEvent[Any]], ViewerCommand | None]) -> Any:
             """A callback that posts `make(event)`: a value it cannot read is ignored.
 
-            A client can send any value for any control over the socket; a bad one must not
-            leave a failed task ("Task exception was never retrieved") in viser's loop.
+            `guard_panel` refuses what viser's page would not send; whatever else cannot be
+            read must not leave a failed task ("Task exception was never retrieved") in
+            viser's loop either.
             """
 
             async def callback(event: viser.GuiEvent[Any]) -> None:

@@ -132,6 +132,13 @@ class RefreshRuns:
     """Read the run list again."""
 
 
+@dataclass(frozen=True, slots=True)
+class ShowNotice:
+    """Tell the viewer something on its panel (why a value it sent was refused)."""
+
+    text: str
+
+
 ViewerCommand = (
     SelectRun
     | SetMode
@@ -143,6 +150,7 @@ ViewerCommand = (
     | GiveReward
     | ClientsChanged
     | RefreshRuns
+    | ShowNotice
 )
 
 
@@ -194,6 +202,7 @@ __all__ = [
     "SelectRun",
     "SetMode",
     "SetSpeed",
+    "ShowNotice",
     "TogglePlay",
     "ViewState",
     "ViewerCommand",

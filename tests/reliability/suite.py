@@ -46,6 +46,7 @@ TESTS = [
     "tests/reliability",
     "tests/server/test_schemathesis.py",
     "tests/server/test_cross_site.py",
+    "tests/server/test_viewer_malformed.py",
     "tests/web/test_attack_page.py",
     "tests/server/test_slow_clients.py",
     "tests/server/test_network_versions.py",
