@@ -25,13 +25,13 @@ import msgspec
 import pytest
 import viser
 import zstandard
-from liveserver import LiveServer, server_log, start_server, stop_server
 from reliability_report import record
 from viser._messages import ViewerCameraMessage
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 from websockets.typing import Origin, Subprotocol
 
+from bench.liveserver import LiveServer, server_log, start_server, stop_server
 from core.engine import HZ_MAX, HZ_MIN
 from server.viewer.inbound import shown
 from server.viewer.render import REWARD_NOTE
