@@ -176,6 +176,8 @@ def test_the_page_recovers_when_the_server_restarts(
         try:
             expect(page.locator("#offline")).to_be_hidden()
             expect(page.locator("#conn")).to_have_class("conn online")
+            # The page reloads what it shows once the service is back: act after that.
+            expect(page.locator("body")).not_to_have_attribute("aria-busy", "true")
             if view == "editor":
                 expect(page.locator("#new-network-form input[name=name]")).to_have_value(
                     "typed-while-down"

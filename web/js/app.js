@@ -33,15 +33,21 @@ async function heartbeat() {
   setTimeout(heartbeat, online ? HEARTBEAT_MS : RETRY_MS);
 }
 
+/** Reload what the page shows; the page is busy (aria-busy) until it matches the service. */
 async function recover() {
-  toast("The service is back.", "ok");
+  document.body.setAttribute("aria-busy", "true");
   try {
-    health = await get("/health");
-  } catch {
-    return;
+    toast("The service is back.", "ok");
+    try {
+      health = await get("/health");
+    } catch {
+      return;
+    }
+    await editor.reload();
+    await console_.reload(health);
+  } finally {
+    document.body.removeAttribute("aria-busy");
   }
-  await editor.reload();
-  await console_.reload(health);
 }
 
 function parseHash() {
