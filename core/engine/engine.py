@@ -134,7 +134,6 @@ class RunEngine:
             last_external_id=last_external_id,
         )
         self.bus = EventBus()
-        self._view = RunView(self)
         self._last_reward_job: RewardJob | None = None
         self._last_snap: Snapshot | None = None
         self._paused = False
@@ -322,8 +321,12 @@ class RunEngine:
         self.bus.unsubscribe(sub)
 
     def view(self) -> RunView:
-        """What the service reads of this run (`core.engine.view`)."""
-        return self._view
+        """What the service reads of this run (`core.engine.view`).
+
+        A new window each call: an engine holding its own view would be a reference cycle,
+        kept alive until the garbage collector's next full pass.
+        """
+        return RunView(self)
 
     def close_subscriptions(self) -> None:
         """End every subscription: its reader gets the current status, then the end.

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import asyncio
+import gc
 import math
 import threading
+import weakref
 from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import replace
 from typing import Any
@@ -761,3 +763,19 @@ def test_next_status_answers_each_change_and_a_cancelled_wait_is_skipped() -> No
         return seen
 
     assert asyncio.run(main()) == [RunStatus.RUNNING, RunStatus.PAUSED, RunStatus.STOPPED]
+
+
+def test_a_finished_engine_is_freed_without_the_garbage_collector() -> None:
+    """No reference cycle keeps a run's simulation alive: the service makes many runs, and
+    cyclic garbage waits for a full collection while it slows everything else."""
+    gc.collect()
+    gc.disable()
+    try:
+        engine = RunEngine.create(fast("kp", 1, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
+        assert asyncio.run(engine.run()) is RunStatus.FINISHED
+        assert engine.view().tick == engine.totals.ticks
+        freed = weakref.ref(engine), weakref.ref(engine.sim)
+        del engine
+        assert [ref() for ref in freed] == [None, None]
+    finally:
+        gc.enable()
