@@ -110,8 +110,8 @@ class RunEngine:
         self.end_stored = False
         """The run has ended and storage holds its final status."""
         self._replay = None if replay is None else ReplayLog(replay, last_external_id)
-        self._replaying: ReplayLog | None = None
-        """The log being replayed, whose internal rewards the replayed ticks match."""
+        """The log a resumed run replays first (None once replayed): the replayed ticks'
+        own rewards are matched with its entries."""
         t = totals or RunTotals(0, 0, sim.tick_count)
         self._episodes_done = t.episodes
         self._successes = t.successes
@@ -719,8 +719,8 @@ class RunEngine:
     def _enqueue_internal(self, e: RewardDue) -> None:
         reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
         job = RewardJob(e.tick, e.episode, reward, False)
-        if self._replaying is not None:
-            self._replaying.match(job)
+        if self._replay is not None:
+            self._replay.match(job)
         self._boundary.queue(job)
 
     async def _settle(
@@ -779,24 +779,20 @@ class RunEngine:
         Trainers' rewards and edits come from the log; the task's and the program's are
         produced again by the replayed ticks and matched with their entries (`replay`).
         """
-        self._replaying = log
         sim = self.sim
-        try:
-            while sim.tick_count + 1 <= log.last_tick and self._more():
-                if self._need_reset:
-                    if not self._episodes_left():
-                        break
-                    self._start_episode()
-                boundary = sim.tick_count + 1
-                for job in log.rewards_at(boundary):
-                    self._boundary.queue(job)
-                for edit in log.edits_at(boundary):
-                    apply_edit(sim, edit)
-                await self._step()
-                if sim.tick_count % FAST_YIELD_TICKS == 0:
-                    await asyncio.sleep(0)
-        finally:
-            self._replaying = None
+        while sim.tick_count + 1 <= log.last_tick and self._more():
+            if self._need_reset:
+                if not self._episodes_left():
+                    break
+                self._start_episode()
+            boundary = sim.tick_count + 1
+            for job in log.rewards_at(boundary):
+                self._boundary.queue(job)
+            for edit in log.edits_at(boundary):
+                apply_edit(sim, edit)
+            await self._step()
+            if sim.tick_count % FAST_YIELD_TICKS == 0:
+                await asyncio.sleep(0)
 
     # --- the reward task ------------------------------------------------------------
 

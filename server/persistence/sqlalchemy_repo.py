@@ -81,6 +81,7 @@ def _json(value: Mapping[str, Any]) -> dict[str, Any]:
 _RUN_EXISTS = select(RunRow.id).where(RunRow.id == bindparam("b_run"))
 """The hot path's statements are built once: building one costs more than running it."""
 _INSERT_REWARD = insert(RewardRow).returning(RewardRow.id)
+_INSERT_REWARDS_IN_ORDER = insert(RewardRow).returning(RewardRow.id, sort_by_parameter_order=True)
 _MARK_APPLIED = (
     sql_update(RewardRow)
     .where(RewardRow.id == bindparam("b_id"), RewardRow.run_id == bindparam("b_run"))
@@ -412,8 +413,7 @@ class SqlAlchemyRunStore:
             }
             for r, c in zip(records, credited, strict=True)
         ]
-        stmt = insert(RewardRow).returning(RewardRow.id, sort_by_parameter_order=True)
-        return list(s.scalars(stmt, rows))
+        return list(s.scalars(_INSERT_REWARDS_IN_ORDER, rows))
 
     def _mark_all_applied(self, s: Session, run_id: int, logged: Sequence[tuple[int, int]]) -> None:
         """Mark logged rewards applied with their credit (`StorageError` for a missing one)."""

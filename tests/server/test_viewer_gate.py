@@ -16,12 +16,11 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 
 import httpx
-import msgspec
 import pytest
 import viser
 from apphelpers import client_for, settings_for
 from fastapi import FastAPI
-from viser._messages import ViewerCameraMessage
+from viserpage import camera_message
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.typing import Subprotocol
 
@@ -229,18 +228,7 @@ async def _drain(socket: ClientConnection) -> None:
 async def becomes_viewer(viewer: Viewer, socket: ClientConnection) -> Session:
     """Send the page's first camera message, which makes viser call the socket a viewer."""
     before = set(viewer.sessions)
-    camera = ViewerCameraMessage(
-        wxyz=(1.0, 0.0, 0.0, 0.0),
-        position=(0.0, 0.0, 5.0),
-        fov=1.0,
-        near=0.01,
-        far=100.0,
-        image_height=600,
-        image_width=800,
-        look_at=(0.0, 0.0, 0.0),
-        up_direction=(0.0, 0.0, 1.0),
-    )
-    await socket.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+    await socket.send(camera_message())
     await until(lambda: set(viewer.sessions) - before, "the socket's viewer session")
     (client_id,) = set(viewer.sessions) - before
     return viewer.sessions[client_id]

@@ -26,7 +26,7 @@ import pytest
 import viser
 import zstandard
 from reliability_report import record
-from viser._messages import ViewerCameraMessage
+from viserpage import camera_message
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 from websockets.typing import Origin, Subprotocol
@@ -102,22 +102,6 @@ NOT_A_VALUE: tuple[object, ...] = (
 """`updates` of a GuiUpdateMessage that viser's page never sends (it sends only a value)."""
 
 
-def camera() -> bytes:
-    """The page's first message, which makes viser call the socket a viewer."""
-    message = ViewerCameraMessage(
-        wxyz=(1.0, 0.0, 0.0, 0.0),
-        position=(0.0, 0.0, 5.0),
-        fov=1.0,
-        near=0.01,
-        far=100.0,
-        image_height=600,
-        image_width=800,
-        look_at=(0.0, 0.0, 0.0),
-        up_direction=(0.0, 0.0, 1.0),
-    )
-    return msgspec.msgpack.encode(message.as_serializable_dict())
-
-
 def update(element: object, updates: object) -> bytes:
     """A GuiUpdateMessage as viser's page sends it (msgpack, a `type` field)."""
     return msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": element, "updates": updates})
@@ -161,7 +145,7 @@ class Page:
         self.closed = threading.Event()
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
-        self.socket.send(camera())
+        self.socket.send(camera_message())
 
     def _read(self) -> None:
         try:
@@ -337,7 +321,7 @@ UNREADABLE: tuple[bytes | str, ...] = (
     msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": "x"}),  # no updates
     msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": "x", "updates": {}, "y": 1}),
     msgspec.msgpack.encode({"type": "GuiButtonHoldMessage", "uuid": "x", "frequency": "x"}),
-    msgspec.msgpack.encode({**msgspec.msgpack.decode(camera()), "fov": "wide"}),
+    msgspec.msgpack.encode({**msgspec.msgpack.decode(camera_message()), "fov": "wide"}),
     "a text frame",
 )
 """Frames viser cannot read: it closes the socket that sent one."""
