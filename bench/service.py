@@ -58,6 +58,7 @@ import resource
 import shutil
 import signal
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -1266,7 +1267,17 @@ async def day(args: argparse.Namespace, server: Server, episodes_run: int) -> No
     print(f"  p99 old / fresh {ratio:.2f}   (goal: <= 1.5)")
     await recover(control, 30)
 
-    # D3. event streams: many clients, the excess refused, while a 20 Hz run ticks.
+    await event_streams(args, server, control)
+    await recover(control, 30)
+    await control.aclose()
+    await reads.aclose()
+    await many_runs(args, server)
+
+
+async def event_streams(
+    args: argparse.Namespace, server: Server, control: RawClient
+) -> dict[str, float]:
+    """D3: ``--streams`` clients of a realtime run's event stream; its figures."""
     run_id = await start_run(control, args.hz)
     await asyncio.sleep(1.0)
     before = (await call(control, "GET", f"/api/runs/{run_id}"))["live"]
@@ -1275,23 +1286,76 @@ async def day(args: argparse.Namespace, server: Server, episodes_run: int) -> No
     after = (await call(control, "GET", f"/api/runs/{run_id}"))["live"]
     await stop_run(control, run_id)  # the streams end with the run
     got = await asyncio.gather(*readers)
+    overruns = after["overruns"] - before["overruns"]
     print(
         f"D3. {args.streams} clients of one {args.hz:g} Hz run's event stream for "
         f"{args.stream_seconds:g} s (run {run_id}): answers {dict(sorted(statuses.items()))}, "
         f"{sum(got) / 1024:.0f} KiB read by the accepted ones"
     )
     print(
-        f"  while they were open: overruns {after['overruns'] - before['overruns']} "
+        f"  while they were open: overruns {overruns} "
         f"(goal: 0), lateness max over the run {ms(live_ms(after, 'lateness_max_ms'), 1)}, "
         f"p99 {ms(live_ms(after, 'lateness_p99_ms'), 1)}"
     )
-    await recover(control, 30)
-    await control.aclose()
-    await reads.aclose()
+    return {
+        "overruns": float(overruns),
+        "max_ms": (live_ms(after, "lateness_max_ms") or 0.0) * 1000,
+        "p99_ms": (live_ms(after, "lateness_p99_ms") or 0.0) * 1000,
+    }
+
+
+async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
+    """D3 and D4 with the engines on the service's loop and on their own, alternated.
+
+    Each round starts a fresh `srlab serve` per placement (``SRLAB_ENGINE_THREAD``), so
+    both see the same machine within minutes of each other.
+    """
+    rows: dict[str, list[dict[str, float]]] = {"loop": [], "thread": []}
+    for k in range(args.rounds):
+        for placement in ("loop", "thread"):
+            server = Server(folder / f"{placement}-{k}")
+            server.folder.mkdir(parents=True)
+            server.env["SRLAB_MAX_RUNS"] = str(args.runs + 4)
+            server.env["SRLAB_ENGINE_THREAD"] = str(placement == "thread").lower()
+            server.start()
+            try:
+                print(f"\n== round {k + 1}, engines on {placement_name(placement)} ==")
+                control = RawClient(server.port, 2, CONTROL_TIMEOUT_S)
+                await wait_healthy(control, server, args.startup_timeout)
+                d3 = await event_streams(args, server, control)
+                await recover(control, 30)
+                await control.aclose()
+                d4 = await many_runs(args, server)
+                rows[placement].append({**{f"d3_{key}": v for key, v in d3.items()}, **d4})
+            finally:
+                server.stop()
+    print(f"\nD3 and D4 side by side, {args.rounds} round(s), medians over rounds:")
+    print(f"  {'':44}{placement_name('loop'):>22}{placement_name('thread'):>22}")
+    for key, label in (
+        ("d3_overruns", "D3 overruns (goal 0)"),
+        ("d3_max_ms", "D3 lateness max, ms"),
+        ("p99_worst_ms", "D4 lateness p99 worst run, ms (goal 5)"),
+        ("p99_median_ms", "D4 lateness p99 median run, ms"),
+        ("max_ms", "D4 lateness max worst run, ms (goal 25)"),
+        ("overruns", "D4 overruns, all runs (goal 0)"),
+        ("request_p99_ms", "D4 requests p99, ms"),
+        ("errors", "D4 request errors"),
+    ):
+        cells = [statistics.median(r[key] for r in rows[p]) for p in ("loop", "thread")]
+        print(f"  {label:<44}{cells[0]:>22.2f}{cells[1]:>22.2f}")
+
+
+async def one_run_part(args: argparse.Namespace, server: Server) -> None:
+    """``--part runs``: D4 alone."""
     await many_runs(args, server)
 
 
-async def many_runs(args: argparse.Namespace, server: Server) -> None:
+def placement_name(placement: str) -> str:
+    """How the comparison names where the engines tick."""
+    return "the service's loop" if placement == "loop" else "their own thread"
+
+
+async def many_runs(args: argparse.Namespace, server: Server) -> dict[str, float]:
     """D4: ``--runs`` realtime runs under mixed load (``--part runs`` runs it alone)."""
     control = RawClient(server.port, 2, CONTROL_TIMEOUT_S)
     await wait_healthy(control, server, args.startup_timeout)
@@ -1312,7 +1376,7 @@ async def many_runs(args: argparse.Namespace, server: Server) -> None:
     if failed:
         print(f"D4. {len(failed)} of {args.runs} runs FAILED: {failed[0]['error']}")
     if not lives:
-        return
+        raise SystemExit("D4: no run reported live figures")
     p99s = [live_ms(x, "lateness_p99_ms") or 0.0 for x in lives]
     maxes = [live_ms(x, "lateness_max_ms") or 0.0 for x in lives]
     overruns = sum(int(x["overruns"]) for x in lives)
@@ -1334,6 +1398,14 @@ async def many_runs(args: argparse.Namespace, server: Server) -> None:
     if isinstance(client, RawClient):
         await client.aclose()
     await control.aclose()
+    return {
+        "p99_worst_ms": max(p99s) * 1000,
+        "p99_median_ms": percentile(p99s, 50) * 1000,
+        "max_ms": max(maxes) * 1000,
+        "overruns": float(overruns),
+        "request_p99_ms": percentile(load.latencies(), 99) * 1000,
+        "errors": float(load.errors),
+    }
 
 
 def loop_runner(choice: str) -> tuple[Callable[[Coroutine[Any, Any, None]], None], str]:
@@ -1381,10 +1453,12 @@ def main() -> None:
     parser.add_argument("--server-log", type=Path, help="keep the server's log here")
     parser.add_argument(
         "--part",
-        choices=["all", "load", "day", "runs"],
+        choices=["all", "load", "day", "runs", "engines"],
         default="all",
-        help="the load figures (1-2), the long day's (D1-D4), both (default), or D4 alone",
+        help="the load figures (1-2), the long day's (D1-D4), both (default), D4 alone, or "
+        "D3 and D4 with the engines on the service's loop and on their own thread",
     )
+    parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")
     parser.add_argument("--samples", type=int, default=1000, help="GETs per D1/D2 figure")
@@ -1419,10 +1493,12 @@ def main() -> None:
                 episodes_run = store_episodes(server.url, args.episodes)
                 server.start()
                 runner(day(args, server, episodes_run))
+            if args.part == "engines":
+                runner(compare_engines(args, Path(tmp) / "engines"))
             if args.part == "runs":
                 server.env["SRLAB_MAX_RUNS"] = str(args.runs + 4)
                 server.start()
-                runner(many_runs(args, server))
+                runner(one_run_part(args, server))
         finally:
             code = server.stop()
             if server.proc is not None:

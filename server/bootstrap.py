@@ -22,6 +22,7 @@ from core.ports import NetworkRepository, RunQueries
 from core.setup import Setup
 from server.api.deps import AppState
 from server.config import Settings
+from server.engine_loop import EngineLoop
 from server.engines import EngineManager
 from server.guard import SitePolicy
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
@@ -84,57 +85,63 @@ async def service(
     opened = await asyncio.to_thread(storage, settings)
     try:
         catalog = Setup().catalog()  # the default definition's, shared with its runs
-        manager = EngineManager(
-            opened.runs,
-            catalog,
-            settings.max_runs,
-            max_streams=settings.max_streams,
-            max_streams_per_run=settings.max_streams_per_run,
-        )
-        await _warm_up()
-        # Routes run their blocking work in threads, which take the GIL from the event loop
-        # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
-        # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
-        # them short (tests/reliability/test_load.py).
-        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
-        # A run stored as running or paused lost its process: it can be resumed from its
-        # checkpoint and log.
-        await asyncio.to_thread(opened.runs.interrupt_active)
-        limiter = RateLimiter(
-            settings.reward_rate_per_s,
-            settings.reward_burst,
-            run_rate=settings.reward_run_rate_per_s,
-            run_burst=settings.reward_run_burst,
-        )
-        viewer = None
-        if settings.viser:
-            from server.viewer import Viewer
-
-            viewer = await Viewer.start(
-                host=settings.host,
-                port=settings.viser_port,
-                manager=manager,
-                store=opened.runs,
-                catalog=catalog,
-                limiter=limiter,
-                writable=not settings.writes_need_token,
-                policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
-            )
+        engine_loop = EngineLoop(thread=settings.engine_thread)
+        await engine_loop.start()
         try:
-            yield AppState(
-                settings=settings,
-                catalog=catalog,
-                database=opened.database,
-                store=opened.runs,
-                networks=opened.networks,
-                engines=manager,
-                rewards_limiter=limiter,
-                viewer=viewer,
+            manager = EngineManager(
+                opened.runs,
+                catalog,
+                settings.max_runs,
+                loop=engine_loop,
+                max_streams=settings.max_streams,
+                max_streams_per_run=settings.max_streams_per_run,
             )
+            await _warm_up()
+            # Routes run their blocking work in threads, which take the GIL from the event loop
+            # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
+            # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
+            # them short (tests/reliability/test_load.py).
+            anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+            # A run stored as running or paused lost its process: it can be resumed from its
+            # checkpoint and log.
+            await asyncio.to_thread(opened.runs.interrupt_active)
+            limiter = RateLimiter(
+                settings.reward_rate_per_s,
+                settings.reward_burst,
+                run_rate=settings.reward_run_rate_per_s,
+                run_burst=settings.reward_run_burst,
+            )
+            viewer = None
+            if settings.viser:
+                from server.viewer import Viewer
+
+                viewer = await Viewer.start(
+                    host=settings.host,
+                    port=settings.viser_port,
+                    manager=manager,
+                    store=opened.runs,
+                    catalog=catalog,
+                    limiter=limiter,
+                    writable=not settings.writes_need_token,
+                    policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
+                )
+            try:
+                yield AppState(
+                    settings=settings,
+                    catalog=catalog,
+                    database=opened.database,
+                    store=opened.runs,
+                    networks=opened.networks,
+                    engines=manager,
+                    rewards_limiter=limiter,
+                    viewer=viewer,
+                )
+            finally:
+                if viewer is not None:
+                    await viewer.stop()
+                await manager.shutdown()
         finally:
-            if viewer is not None:
-                await viewer.stop()
-            await manager.shutdown()
+            await engine_loop.stop()
     finally:
         await asyncio.to_thread(opened.close)
 

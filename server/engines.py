@@ -13,6 +13,7 @@ from core.engine import RunEngine, Subscription
 from core.errors import RunStateError, StorageError
 from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
 from core.setup import Setup
+from server.engine_loop import EngineLoop, LiveRun
 
 log = logging.getLogger("srlab.engines")
 
@@ -36,6 +37,10 @@ class EngineManager:
     its checkpoint and log, after its slot under `max_runs` is taken; when the run ends, its
     engine is let go once its final status is stored (an engine whose status could not be
     stored is kept until then: it is the truth about how the run ended).
+
+    The engines tick on `loop` (`server.engine_loop`); the manager and its books live on
+    the service's loop, and hand runs out as `LiveRun`s, through which the service calls
+    and reads them.
     """
 
     def __init__(
@@ -44,6 +49,7 @@ class EngineManager:
         catalog: Catalog,
         max_runs: int,
         *,
+        loop: EngineLoop,
         max_streams: int = 64,
         max_streams_per_run: int = 16,
     ) -> None:
@@ -52,8 +58,10 @@ class EngineManager:
         """The shipped catalogue under the default sensor definition (names only: each
         run's engine loads its own definition's, see `core.setup.Setup`)."""
         self.max_runs = max_runs
-        self._engines: dict[int, RunEngine] = {}
-        self._tasks: dict[int, asyncio.Task[RunStatus]] = {}
+        self.loop = loop
+        self._engines: dict[int, LiveRun] = {}
+        self._tasks: dict[int, asyncio.Future[RunStatus]] = {}
+        """Each run's `RunEngine.run` on the engines' loop, as a future of this loop."""
         self._starting: set[int] = set()
         """Runs whose slot is taken while their engine is rebuilt."""
         self._waiting: dict[int, list[Subscription]] = {}
@@ -62,14 +70,16 @@ class EngineManager:
         self.max_streams_per_run = max_streams_per_run
         self._streams: dict[int, set[Subscription]] = {}
         """The subscriptions `subscribe` gave, by run, until `unsubscribe`."""
+        self._ticking: dict[int, asyncio.Task[RunStatus]] = {}
+        """The engines' loop's own: each run's task there, while it runs."""
 
-    def get(self, run_id: int) -> RunEngine | None:
-        """The engine of a run ticking or paused here (or one whose end is not stored)."""
+    def get(self, run_id: int) -> LiveRun | None:
+        """The run ticking or paused here (or one whose end is not stored)."""
         return self._engines.get(run_id)
 
-    def engines(self) -> Iterable[RunEngine]:
-        """Every engine this process has."""
-        return self._engines.values()
+    def engines(self) -> Iterable[LiveRun]:
+        """Every run this process has an engine for (a copy: safe to await over)."""
+        return tuple(self._engines.values())
 
     def running(self) -> int:
         """How many runs are ticking, paused or starting."""
@@ -96,7 +106,7 @@ class EngineManager:
             )
         return RunEngine.create(spec, self.store, network=assoc).run_id
 
-    async def start(self, run_id: int) -> RunEngine:
+    async def start(self, run_id: int) -> LiveRun:
         """Start a stored run from its checkpoint and log (created, stopped, interrupted).
 
         The run slot is taken first: a start refused (`TooManyRunsError`) or one that fails
@@ -104,8 +114,8 @@ class EngineManager:
         """
         task = self._tasks.get(run_id)
         if run_id in self._starting or (task is not None and not task.done()):
-            engine = self._engines.get(run_id)
-            status = engine.status.value if engine is not None else "starting"
+            live = self._engines.get(run_id)
+            status = live.status.value if live is not None else "starting"
             raise RunStateError(f"run {run_id} is {status}")
         if self.running() >= self.max_runs:
             raise TooManyRunsError(
@@ -115,16 +125,18 @@ class EngineManager:
         try:
             stale = self._engines.get(run_id)
             if stale is not None:  # it ended here without its status stored
-                await asyncio.to_thread(self._settle_status, stale)
+                await asyncio.to_thread(self._settle_status, stale.engine)
             # In its stored world and definition.
             engine = await asyncio.to_thread(RunEngine.restore, run_id, self.store)
         finally:
             self._starting.discard(run_id)
-        self._engines[run_id] = engine
-        for sub in self._waiting.pop(run_id, ()):
-            engine.attach(sub)
-        self._tasks[run_id] = asyncio.create_task(self._run(engine), name=f"run {run_id}")
-        return engine
+        live = LiveRun(engine, self.loop)
+        self._engines[run_id] = live
+        waiting = self._waiting.pop(run_id, [])
+        task = asyncio.wrap_future(self.loop.submit(self._run(engine, waiting)))
+        task.add_done_callback(lambda _: self._forget(live))
+        self._tasks[run_id] = task
+        return live
 
     def streams(self, run_id: int | None = None) -> int:
         """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
@@ -147,10 +159,11 @@ class EngineManager:
                 f"run {run_id} has {self.max_streams_per_run} event streams open already "
                 "(SRLAB_MAX_STREAMS_PER_RUN)"
             )
-        engine = self._engines.get(run_id)
+        live = self._engines.get(run_id)
         task = self._tasks.get(run_id)
-        if engine is not None and task is not None and not task.done():
-            sub = engine.subscribe(maxsize, tick_hz)
+        if live is not None and task is not None and not task.done():
+            # Closed at once if the run has ended meanwhile on the engines' loop.
+            sub = live.subscribe(maxsize, tick_hz)
         else:
             sub = Subscription(maxsize, tick_hz)
             self._waiting.setdefault(run_id, []).append(sub)
@@ -159,9 +172,9 @@ class EngineManager:
 
     def unsubscribe(self, run_id: int, sub: Subscription) -> None:
         """Stop feeding a subscription `subscribe` gave."""
-        engine = self._engines.get(run_id)
-        if engine is not None:
-            engine.unsubscribe(sub)
+        live = self._engines.get(run_id)
+        if live is not None:
+            live.unsubscribe(sub)
         waiting = self._waiting.get(run_id)
         if waiting is not None and sub in waiting:
             waiting.remove(sub)
@@ -186,19 +199,22 @@ class EngineManager:
 
     async def started(self, run_id: int, timeout_s: float = 5.0) -> None:
         """Wait until a started run ticks (or has already ended)."""
-        engine = self._engines.get(run_id)
+        live = self._engines.get(run_id)
         task = self._tasks.get(run_id)
-        if engine is None or task is None:
+        if live is None or task is None:
             return
-        async with asyncio.timeout(timeout_s):
+        engine = live.engine
+
+        async def ticking() -> None:  # on the engines' loop
             while engine.status in (RunStatus.CREATED, RunStatus.INTERRUPTED, RunStatus.STOPPED):
-                if task.done():
-                    return
-                change = engine.next_status()
-                try:
-                    await asyncio.wait((task, change), return_when=asyncio.FIRST_COMPLETED)
-                finally:
-                    change.cancel()
+                await engine.next_status()
+
+        waiting = asyncio.wrap_future(self.loop.submit(ticking()))
+        try:
+            async with asyncio.timeout(timeout_s):
+                await asyncio.wait((task, waiting), return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            waiting.cancel()
 
     async def ended(self, run_id: int, timeout_s: float) -> bool:
         """Wait up to `timeout_s` for a run's task to end; whether it has."""
@@ -208,7 +224,13 @@ class EngineManager:
         done, _ = await asyncio.wait({task}, timeout=timeout_s)
         return bool(done)
 
-    async def _run(self, engine: RunEngine) -> RunStatus:
+    async def _run(self, engine: RunEngine, waiting: list[Subscription]) -> RunStatus:
+        """The run on the engines' loop, fed to the subscriptions made before it started."""
+        for sub in waiting:
+            engine.attach(sub)
+        task = asyncio.current_task()
+        assert task is not None
+        self._ticking[engine.run_id] = task
         try:
             return await engine.run()
         except StorageError as e:
@@ -219,12 +241,12 @@ class EngineManager:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
         finally:
-            self._forget(engine)
+            del self._ticking[engine.run_id]
 
-    def _forget(self, engine: RunEngine) -> None:
+    def _forget(self, live: LiveRun) -> None:
         """Let an ended run's engine go, unless its final status is not in storage."""
-        run_id = engine.run_id
-        if self._engines.get(run_id) is engine and engine.end_stored:
+        run_id = live.run_id
+        if self._engines.get(run_id) is live and live.engine.end_stored:
             del self._engines[run_id]
             self._tasks.pop(run_id, None)
 
@@ -234,11 +256,10 @@ class EngineManager:
         Its event streams end with it, with a last status event; those of a run that is not
         ticking end at once.
         """
-        for run_id, engine in self._engines.items():
-            engine.interrupt()
+        for run_id, live in self._engines.items():
             task = self._tasks.get(run_id)
-            if task is None or task.done():
-                engine.close_subscriptions()
+            ticking = task is not None and not task.done()
+            self.loop.post(_interrupt, live.engine, ticking)
         for subs in self._waiting.values():
             for sub in subs:
                 sub.close()
@@ -252,7 +273,21 @@ class EngineManager:
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(grace_s):
                     await asyncio.gather(*tasks, return_exceptions=True)
-            for t in tasks:
-                if not t.done():
-                    t.cancel()
+            if any(not t.done() for t in tasks):
+                # Cancelled on the engines' loop, where each ends interrupted and stores so.
+                await self.loop.run(self._cancel_ticking())
             await asyncio.gather(*tasks, return_exceptions=True)
+
+    async def _cancel_ticking(self) -> None:
+        """On the engines' loop: cancel every run still going and wait for each to end."""
+        tasks = list(self._ticking.values())
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def _interrupt(engine: RunEngine, ticking: bool) -> None:
+    """On the engines' loop: end a run at its next boundary, or its streams now."""
+    engine.interrupt()
+    if not ticking:
+        engine.close_subscriptions()

@@ -19,6 +19,8 @@ A reader can hold its parts one at a time:
 """
 
 from core.engine.bus import (
+    COMPETITORS,
+    Competition,
     EventBus,
     StatusChanged,
     Subscription,
@@ -33,6 +35,7 @@ from core.engine.view import RunView
 from core.engine.writer import EPISODE_BATCH_MAX, EPISODE_BATCH_S, WRITE_BATCH_MAX, WRITE_BATCH_S
 
 __all__ = [
+    "COMPETITORS",
     "EPISODE_BATCH_MAX",
     "EPISODE_BATCH_S",
     "FAST_YIELD_TICKS",
@@ -40,6 +43,7 @@ __all__ = [
     "HZ_MIN",
     "WRITE_BATCH_MAX",
     "WRITE_BATCH_S",
+    "Competition",
     "EngineStats",
     "EventBus",
     "MonotonicPacer",

@@ -3,19 +3,53 @@
 Nothing a subscriber does can hold up the tick task: `EventBus.publish` offers each event
 to every subscription without waiting, and a full subscription drops its oldest event.
 Tick snapshots go only to subscriptions that asked for them, at most at their rate.
+
+A subscription may be read on another event loop, in another thread, than the engine's
+(the service reads its runs' events on its own loop while the engines tick on theirs): the
+engine's side only appends to it and wakes its reader through the reader's loop.
+`EventBus` itself is the engine's: attach and unsubscribe on the engine's loop.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import threading
 import time
 from collections import deque
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 
-from core.ports import RunStatus
+from core.brain.selection import Selector
+from core.ports import RunStatus, RunTotals
 from core.simulation import Snapshot
+
+COMPETITORS = 8
+"""How many of a tick's competing behaviours its event carries, strongest first."""
+
+
+@dataclass(frozen=True, slots=True)
+class Competition:
+    """What competed for a tick's stimuli: each released behaviour's value, the threshold.
+
+    `values` holds (behaviour, value, the stimulus releasing it most), strongest first, at
+    most `COMPETITORS` of them, from the network as it stood when the tick was published.
+    """
+
+    threshold: float
+    strategy: str
+    values: tuple[tuple[int, float, int], ...]
+
+    @classmethod
+    def of(cls, selector: Selector, stimuli: tuple[int, ...]) -> Competition:
+        """The competition `selector` holds for `stimuli` now."""
+        values = selector.values(list(stimuli))
+        ranked = sorted(values.items(), key=lambda kv: -kv[1][0])[:COMPETITORS]
+        return cls(
+            selector.config.threshold,
+            selector.config.strategy.value,
+            tuple((b, v, s) for b, (v, s) in ranked),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -32,14 +66,18 @@ class TickPublished:
     """A tick's snapshot, as subscribers see it (throttled to their rate).
 
     With what a top-down view draws besides the pose: the sonars' readings of that tick
-    (in the robot's sonar order, noisy as the robot read them) and the obstacle's centre
-    (None: the episode has none). Read only when a tick is published, never per tick.
+    (in the robot's sonar order, noisy as the robot read them), the obstacle's centre
+    (None: the episode has none), the competition among the behaviours its stimuli
+    released and the run's totals at that tick (None: not taken). Read only when a tick is
+    published, never per tick.
     """
 
     run_id: int
     snapshot: Snapshot
     sonar_m: tuple[float, ...] = ()
     obstacle: tuple[float, float] | None = None
+    competition: Competition | None = None
+    totals: RunTotals | None = None
 
 
 class SubscriptionClosed(Exception):
@@ -51,6 +89,8 @@ class Subscription:
 
     A reader waiting in `get` is woken when the subscription closes, so a stream never outlives
     its run: once closed and drained, `get` raises `SubscriptionClosed` and iteration stops.
+    `offer` and `close` may be called from another thread than the reader's (the engine's):
+    the reader is woken through its own event loop, once for however many events arrived.
 
     Args:
         maxsize: how many events it holds.
@@ -62,6 +102,10 @@ class Subscription:
             raise ValueError(f"a subscription holds at least one event, not {maxsize}")
         self._events: deque[object] = deque(maxlen=maxsize)
         self._ready = asyncio.Event()
+        self._reader: asyncio.AbstractEventLoop | None = None
+        """The loop of the reader waiting in `get` (None: nobody has waited yet)."""
+        self._reader_thread = 0
+        self._wake_pending = False
         self.tick_period = 1.0 / tick_hz if tick_hz > 0 else math.inf
         self.next_tick_at = 0.0
         self.tick_sent = -1
@@ -89,22 +133,48 @@ class Subscription:
         dropped = len(self._events) == self._events.maxlen
         self.dropped += dropped
         self._events.append(event)
-        self._ready.set()
+        self._notify()
         return not dropped
 
     def close(self) -> None:
         """No more events; a waiting reader gets what is left, then `SubscriptionClosed`."""
         self.closed = True
+        self._notify()
+
+    def _notify(self) -> None:
+        """Wake the reader, on its own loop (from the engine's thread, through it)."""
+        reader = self._reader
+        if reader is None:
+            return  # no reader has waited: it looks at the events before it waits
+        if threading.get_ident() == self._reader_thread:
+            self._ready.set()
+            return
+        if self._wake_pending:
+            return  # a wake-up is on its way: it finds every event offered by then
+        self._wake_pending = True
+        try:
+            reader.call_soon_threadsafe(self._wake)
+        except RuntimeError:  # the reader's loop has closed: nobody is left to wake
+            self._wake_pending = False
+
+    def _wake(self) -> None:
+        self._wake_pending = False
         self._ready.set()
 
     def drain(self) -> list[object]:
         """Every waiting event, without blocking."""
-        out = list(self._events)
-        self._events.clear()
+        out = []
+        events = self._events
+        while events:
+            out.append(events.popleft())
         return out
 
     async def get(self) -> object:
         """The next event; raises `SubscriptionClosed` once closed and drained."""
+        if self._reader is None:
+            # Before looking at the events: an event offered from now on wakes this loop.
+            self._reader_thread = threading.get_ident()
+            self._reader = asyncio.get_running_loop()
         while not self._events:
             if self.closed:
                 raise SubscriptionClosed
@@ -127,9 +197,14 @@ class EventBus:
         self._subscribers: list[Subscription] = []
         self.tick_subscribers = 0
         """How many subscriptions want tick snapshots (0: a tick publishes nothing)."""
+        self.closed = False
+        """The run has ended: a subscription attached now is closed at once."""
 
     def attach(self, sub: Subscription) -> Subscription:
-        """Feed a subscription from now on."""
+        """Feed a subscription from now on (close it, if the run has ended)."""
+        if self.closed:
+            sub.close()
+            return sub
         self._subscribers.append(sub)
         self.tick_subscribers += sub.wants_ticks
         return sub
@@ -143,12 +218,14 @@ class EventBus:
 
     def end(self, last: object) -> None:
         """Offer `last` to every subscription, then close and drop them all."""
+        self.closed = True
         for sub in list(self._subscribers):
             sub.offer(last)
             self.unsubscribe(sub)
 
     def close(self) -> None:
         """Close every subscription (the run ended); they stay attached."""
+        self.closed = True
         for sub in self._subscribers:
             sub.close()
 

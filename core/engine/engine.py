@@ -33,7 +33,7 @@ from core.checkpoint import decode, encode, export_state, restore_simulation
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.conditions import Condition, get_condition
 from core.engine.boundary import Boundary
-from core.engine.bus import EventBus, StatusChanged, Subscription, TickPublished
+from core.engine.bus import Competition, EventBus, StatusChanged, Subscription, TickPublished
 from core.engine.jobs import (
     CLOSE,
     CommandJob,
@@ -714,7 +714,14 @@ class RunEngine:
 
     def _tick_event(self, snap: Snapshot) -> TickPublished:
         sim = self.sim
-        return TickPublished(self.run_id, snap, sim.sonar_m(), sim.world.layout.obstacle_center)
+        return TickPublished(
+            self.run_id,
+            snap,
+            sim.sonar_m(),
+            sim.world.layout.obstacle_center,
+            Competition.of(sim.brain.selector, snap.stimuli),
+            self.totals,
+        )
 
     def _enqueue_internal(self, e: RewardDue) -> None:
         reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))

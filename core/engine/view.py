@@ -4,7 +4,8 @@ Routes, the event stream and the 3D view read a run through its view and control
 through the engine's methods (`reward`, `edit`, `pause`, `stop`, `subscribe`, ...); none
 reaches into the simulation. A view reads the live state, not a copy: read it on the
 engine's event loop, where the tick and reward tasks change that state only between awaits,
-so what is read between two awaits is one consistent state.
+so what is read between two awaits is one consistent state (the service, whose loop is
+another, reads through `server.engine_loop.LiveRun.read`, which runs its reader there).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from core.brain.propagation import KnowledgePropagation
 from core.brain.selection import Selector
 from core.engine.stats import EngineStats
 from core.ports import RunSpec, RunStatus, RunTotals
+from core.sim.world import WorldConfig
 from core.simulation import Snapshot
 
 if TYPE_CHECKING:
@@ -86,6 +88,11 @@ class RunView:
     def snapshot(self) -> Snapshot:
         """The latest tick's snapshot (`SimulationStateError` before the first episode)."""
         return self._engine.sim.snapshot
+
+    @property
+    def world_config(self) -> WorldConfig:
+        """The world the run ticks in."""
+        return self._engine.sim.world.config
 
     @property
     def catalog(self) -> Catalog:

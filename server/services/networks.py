@@ -18,10 +18,10 @@ from typing import Any, Protocol, TypeVar
 from starlette.concurrency import run_in_threadpool
 
 from core.commands import EditAssociation
-from core.engine import RunEngine
 from core.errors import RunStateError, StorageError
 from core.networks import AssociationChange, NetworkEdit, Precondition, StoredNetwork
 from core.ports import NetworkPair, NetworkRepository, RunStatus
+from server.engine_loop import LiveRun
 
 log = logging.getLogger("srlab.networks")
 _T = TypeVar("_T")
@@ -30,7 +30,7 @@ _T = TypeVar("_T")
 class Engines(Protocol):
     """The engines running in this process (`server.engines.EngineManager`)."""
 
-    def engines(self) -> Iterable[RunEngine]:
+    def engines(self) -> Iterable[LiveRun]:
         """Every engine this process has."""
         ...
 
@@ -53,9 +53,9 @@ def edit_command(change: AssociationChange) -> EditAssociation:
     )
 
 
-async def _push(engine: RunEngine, edits: Sequence[EditAssociation]) -> bool:
+async def _push(engine: LiveRun, edits: Sequence[EditAssociation]) -> bool:
     # Queued together, the edits land at the same tick boundary, in order.
-    results = await asyncio.gather(*(engine.edit(e) for e in edits), return_exceptions=True)
+    results = await engine.edit_all(edits)
     failed = [r for r in results if isinstance(r, BaseException)]
     for r in failed:
         if not isinstance(r, RunStateError | StorageError):
@@ -86,7 +86,7 @@ class NetworkService:
         """A repository call off the event loop, so ticking runs never wait on the database."""
         return await run_in_threadpool(fn, *args, **kwargs)
 
-    def started_from(self, engine: RunEngine, network: StoredNetwork) -> bool:
+    def started_from(self, engine: LiveRun, network: StoredNetwork) -> bool:
         """Whether a run was started from this very network (not an earlier one of its name).
 
         A run keeps its network's id (`RunSpec.network_id`, stored with the run); deleting

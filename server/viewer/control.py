@@ -1,4 +1,4 @@
-"""The 3D view's controller: it runs on the service's event loop, beside the engines.
+"""The 3D view's controller: it runs on the service's event loop, the engines on theirs.
 
 It carries out the panel's commands (select a run, reward it, change its rate, replay a
 stored episode) with the same engine calls and store reads the HTTP API uses, and feeds
@@ -18,12 +18,13 @@ from dataclasses import replace
 
 from core.brain.catalog import Catalog
 from core.commands import RewardSource
-from core.engine import RunEngine, StatusChanged, SubscriptionClosed, TickPublished
+from core.engine import RunView, StatusChanged, SubscriptionClosed, TickPublished, check_hz
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
-from core.ports import Mode, RunQueries, RunStatus
+from core.ports import Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
+from server.engine_loop import LiveRun
 from server.engines import EngineManager
 from server.ratelimit import RateLimiter
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
@@ -57,23 +58,27 @@ LIMITER_KEY = "3d-view"
 """The rate limiter's client name for rewards given from the panel, with the viewer's id."""
 
 
-def tick_view(engine: RunEngine, snap: Snapshot) -> TickView:
-    """A live snapshot as the view shows it (call on the engine's event loop)."""
-    view = engine.view()
+def tick_view(live: LiveRun, snap: Snapshot, totals: RunTotals) -> TickView:
+    """A live snapshot as the view shows it, with the run's totals at that tick.
+
+    Read on the service's loop: the catalogue is immutable (KP's growth replaces it) and
+    the network is read by one lookup per stimulus.
+    """
+    view = live.engine.view()
     cat = view.catalog
     stimuli = tuple(cat.stimuli[i].name for i in snap.stimuli)
     b = snap.behaviour
     behaviour = cat.behaviours[b].name if 0 <= b < len(cat.behaviours) else None
     kp = False
     if snap.how.value == "released" and behaviour is not None:
+        network = view.network
         for s in snap.stimuli:
-            a = view.network.get(s, b)
+            a = network.get(s, b)
             if a is not None and a.source == "kp":
                 kp = True
                 break
-    totals = engine.totals
     return TickView(
-        run_id=engine.run_id,
+        run_id=live.run_id,
         episode=snap.episode,
         tick=snap.tick,
         episode_tick=snap.episode_tick,
@@ -217,7 +222,7 @@ class Controller:
             if st.clock is not None:
                 self._publish(clock=st.clock.with_speed(command.speed, now))
         elif isinstance(command, ChangeRate):
-            self._change_rate(command.hz)
+            await self._change_rate(command.hz)
         elif isinstance(command, GiveReward):
             self._spawn(self._reward(command.value, command.client))
         elif isinstance(command, ShowNotice):
@@ -386,45 +391,58 @@ class Controller:
 
     async def _follow_run(self, run_id: int) -> None:
         """Push the run's tick snapshots to the renderer; wait out its pauses and restarts."""
-        shown: RunEngine | None = None
+        shown: LiveRun | None = None
         while True:
-            engine = self.manager.get(run_id)
-            if engine is None or engine.status not in ACTIVE:
-                if engine is not None and engine is not shown:
+            live = self.manager.get(run_id)
+            if live is None or live.status not in ACTIVE:
+                if live is not None and live is not shown:
                     # A run that ended here: show where it stopped.
-                    shown = engine
-                    with contextlib.suppress(SimulationStateError):
-                        self.inbox.push(tick_view(engine, engine.view().snapshot))
+                    shown = live
+                    await self._show_now(live)
                 await asyncio.sleep(0.5)
                 continue
-            sub = engine.subscribe(maxsize=64, tick_hz=MAX_HZ)
+            sub = live.subscribe(maxsize=64, tick_hz=MAX_HZ)
             try:
                 self._publish(live=self._live_info(run_id))
-                with contextlib.suppress(SimulationStateError):  # not reset yet
-                    self.inbox.push(tick_view(engine, engine.view().snapshot))
+                await self._show_now(live)
                 while True:
                     try:
                         event = await sub.get()
                     except SubscriptionClosed:
                         break
                     if isinstance(event, TickPublished):
-                        self.inbox.push(tick_view(engine, event.snapshot))
+                        if event.totals is not None:
+                            self.inbox.push(tick_view(live, event.snapshot, event.totals))
                     elif isinstance(event, StatusChanged | EpisodeEnded):
                         self._publish(live=self._live_info(run_id))
             finally:
-                engine.unsubscribe(sub)
+                live.unsubscribe(sub)
             self._publish(live=self._live_info(run_id))
 
-    def _change_rate(self, hz: float) -> None:
+    async def _show_now(self, live: LiveRun) -> None:
+        """Push the run's latest tick (none before its first episode)."""
+
+        def latest(view: RunView) -> tuple[Snapshot, RunTotals] | None:
+            try:
+                return view.snapshot, view.totals
+            except SimulationStateError:  # not reset yet
+                return None
+
+        now = await live.read(latest)
+        if now is not None:
+            self.inbox.push(tick_view(live, *now))
+
+    async def _change_rate(self, hz: float) -> None:
         st = self.state
         if not st.writable:
             raise ValueError("the panel changes rates on loopback only: use the API's token")
-        engine = self.manager.get(st.run_id) if st.run_id is not None else None
-        if engine is None or engine.status not in ACTIVE:
+        live = self.manager.get(st.run_id) if st.run_id is not None else None
+        if live is None or live.status not in ACTIVE:
             raise ValueError("the selected run is not running here")
-        if engine.spec.mode is not Mode.REALTIME:
+        if live.spec.mode is not Mode.REALTIME:
             raise ValueError("a fast run has no tick rate to change")
-        engine.set_rate(hz)  # ValueError (shown) out of HZ_MIN..HZ_MAX
+        check_hz(hz)  # ValueError (shown) out of HZ_MIN..HZ_MAX
+        await live.control(lambda engine: engine.set_rate(hz))
         self._publish(live=self._live_info(st.run_id), notice=f"Tick rate set to {hz:g} Hz")
 
     async def _reward(self, value: float, client: int | None = None) -> None:

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 from core.brain.catalog import Catalog
 from core.conditions import get_condition
-from core.engine import TickPublished
+from core.engine import COMPETITORS, Competition, TickPublished
 from core.simulation import Simulation
-from server.api.routes.events import COMPETITORS, competition, encode
+from server.api.routes.events import competition, encode
 
 
 def test_red_releases_stop_above_the_threshold_in_the_expert_network(catalog: Catalog) -> None:
     sim = Simulation(get_condition("expert"), seed=1, catalog=catalog)
     red = catalog.stimulus("Red").id
     middle = catalog.stimulus("Middle").id
-    result = competition(sim.brain.selector, (middle, red), catalog)
+    result = competition(Competition.of(sim.brain.selector, (middle, red)), catalog)
     assert result["threshold"] == sim.brain.selector.config.threshold
     values = result["values"]
     assert values[0]["behaviour"] == "stop" and values[0]["stimulus"] == "Red"
@@ -24,16 +24,19 @@ def test_red_releases_stop_above_the_threshold_in_the_expert_network(catalog: Ca
 
 def test_no_stimuli_means_no_competitors(catalog: Catalog) -> None:
     sim = Simulation(get_condition("innate"), seed=1, catalog=catalog)
-    assert competition(sim.brain.selector, (), catalog)["values"] == []
+    assert competition(Competition.of(sim.brain.selector, ()), catalog)["values"] == []
 
 
-def test_a_tick_event_carries_the_competition_only_with_a_selector(catalog: Catalog) -> None:
+def test_a_tick_event_carries_the_competition_when_the_engine_took_it(
+    catalog: Catalog,
+) -> None:
     sim = Simulation(get_condition("expert"), seed=3, catalog=catalog)
     sim.reset()
     snapshot = sim.tick().snapshot
     event = TickPublished(1, snapshot)
     plain = encode(event, catalog)
-    rich = encode(event, catalog, sim.brain.selector)
+    taken = Competition.of(sim.brain.selector, snapshot.stimuli)
+    rich = encode(TickPublished(1, snapshot, competition=taken), catalog)
     assert plain is not None and rich is not None
     assert "competition" not in plain[1]
     assert rich[0] == "tick" and len(rich[1]["competition"]["values"]) <= COMPETITORS

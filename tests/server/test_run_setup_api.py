@@ -30,9 +30,10 @@ async def test_create_run_with_a_world_and_sensors_keeps_their_names(tmp_path: P
         assert (run["world"], run["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
         assert app.state.srlab.engines.get(run["id"]) is None  # created: in storage only
         assert (await client.post(f"/api/runs/{run['id']}/start")).status_code == 200
-        engine = app.state.srlab.engines.get(run["id"])
-        assert engine.sim.brain.catalog.definition == OTHER_SENSORS
-        assert engine.sim.world.config == load_world(OTHER_WORLD).config
+        live = app.state.srlab.engines.get(run["id"])
+        definition, config = await live.read(lambda v: (v.catalog.definition, v.world_config))
+        assert definition == OTHER_SENSORS
+        assert config == load_world(OTHER_WORLD).config
         await client.post(f"/api/runs/{run['id']}/stop")
         listed = (await client.get("/api/runs")).json()["data"]
         assert (listed[0]["world"], listed[0]["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
@@ -88,11 +89,12 @@ async def test_a_run_resumed_by_another_service_keeps_its_world_and_sensors(
         r = await client.post(f"/api/runs/{run['id']}/start")
         assert r.status_code == 200, r.text
         assert (r.json()["world"], r.json()["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
-        engine = app.state.srlab.engines.get(run["id"])
+        live = app.state.srlab.engines.get(run["id"])
         preset = load_world(OTHER_WORLD).config
-        assert engine.sim.brain.catalog.definition == OTHER_SENSORS
-        assert engine.sim.world.config == preset
-        assert engine.sim.world.config.track.obstacle == preset.track.obstacle
+        definition, config = await live.read(lambda v: (v.catalog.definition, v.world_config))
+        assert definition == OTHER_SENSORS
+        assert config == preset
+        assert config.track.obstacle == preset.track.obstacle
         await client.post(f"/api/runs/{run['id']}/stop")
         await until(client, run["id"], "stopped")
 

@@ -12,6 +12,7 @@ from apphelpers import client_for, create, settings_for, until
 
 from core.errors import RunStateError
 from server.api.routes.events import encode
+from server.engines import EngineManager
 from server.schemas import TickEvent
 
 pytestmark = pytest.mark.anyio
@@ -71,11 +72,18 @@ async def test_steps_asked_together_each_run_one_tick(tmp_path: Path) -> None:
 async def test_a_pending_step_is_answered_when_the_run_stops(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, app):
         run_id = await _paused_realtime_run(client)
-        engine = app.state.srlab.engines.get(run_id)
-        assert engine is not None
-        step = asyncio.create_task(engine.step())
-        await asyncio.sleep(0)  # the step is asked; the tick task has not woken yet
-        engine.stop()
+        manager: EngineManager = app.state.srlab.engines
+        live = manager.get(run_id)
+        assert live is not None
+        engine = live.engine
+
+        async def step_then_stop() -> int:  # on the engines' loop, where the run ticks
+            step = asyncio.ensure_future(engine.step())
+            await asyncio.sleep(0)  # the step is asked; the tick task has not woken yet
+            engine.stop()
+            return await step
+
+        step = asyncio.create_task(manager.loop.run(step_then_stop()))
         with pytest.raises(RunStateError, match="ended before the step"):
             await step
         await until(client, run_id, "stopped")
@@ -112,16 +120,16 @@ async def test_tick_events_carry_sonar_readings_and_the_obstacle(tmp_path: Path)
         run = await create(client, condition="kp", mode="realtime", hz=50)
         await client.post(f"/api/runs/{run['id']}/start")
         await until(client, run["id"], "running")
-        engine = app.state.srlab.engines.get(run["id"])
-        assert engine is not None
-        sub = engine.subscribe(tick_hz=50)
+        live = app.state.srlab.engines.get(run["id"])
+        assert live is not None
+        sub = live.subscribe(256, tick_hz=50)
         ticks: list[dict[str, Any]] = []
         async with asyncio.timeout(30):
             while len(ticks) < 3:
-                encoded = encode(await sub.get(), engine.sim.brain.catalog)
+                encoded = encode(await sub.get(), live.catalog)
                 if encoded is not None and encoded[0] == "tick":
                     ticks.append(json.loads(json.dumps(encoded[1])))
-        engine.unsubscribe(sub)
+        live.unsubscribe(sub)
         await client.post(f"/api/runs/{run['id']}/stop")
         world = (await client.get(f"/api/runs/{run['id']}/world")).json()
     for t in ticks:

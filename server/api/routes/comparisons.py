@@ -86,9 +86,9 @@ async def compare_runs(
     done: list[int] = []
     ended: list[bool] = []
     for r in runs:
-        engine = engines.get(r.id)
-        done.append(engine.totals.episodes if engine is not None else r.totals.episodes)
-        ended.append((engine.status if engine is not None else r.status) in _ENDED)
+        live = engines.get(r.id)
+        done.append((await live.totals()).episodes if live is not None else r.totals.episodes)
+        ended.append((live.status if live is not None else r.status) in _ENDED)
     horizon = min(done)
     complete = all(ended)
 

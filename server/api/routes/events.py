@@ -12,8 +12,7 @@ from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
 from core.brain.catalog import Catalog
-from core.brain.selection import Selector
-from core.engine import StatusChanged, SubscriptionClosed, TickPublished
+from core.engine import Competition, StatusChanged, SubscriptionClosed, TickPublished
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
 from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
@@ -24,27 +23,24 @@ router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
 HEARTBEAT_S = 15.0
 STREAM_RETRY_AFTER_S = 5
 """What a client refused a stream (503) is told to wait."""
-COMPETITORS = 8
 
 
-def competition(selector: Selector, stimuli: tuple[int, ...], catalog: Catalog) -> dict[str, Any]:
-    """What competes for these stimuli: each released behaviour's value and the threshold.
+def competition(held: Competition, catalog: Catalog) -> dict[str, Any]:
+    """What competed for a tick's stimuli: each released behaviour's value and the threshold.
 
-    Values come from the network as it stands now (a live edit or a promotion since the
-    tick shows), strongest first, at most `COMPETITORS` of them.
+    Values come from the network as it stood when the tick was published (a live edit or a
+    promotion since the tick before shows), strongest first, at most `COMPETITORS`.
     """
-    values = selector.values(list(stimuli))
-    ranked = sorted(values.items(), key=lambda kv: -kv[1][0])[:COMPETITORS]
     return {
-        "threshold": selector.config.threshold,
-        "strategy": selector.config.strategy.value,
+        "threshold": held.threshold,
+        "strategy": held.strategy,
         "values": [
             {
                 "behaviour": _name(catalog, b),
                 "stimulus": catalog.stimuli[st].name,
                 "value": round(v, 4),
             }
-            for b, (v, st) in ranked
+            for b, v, st in held.values
         ],
     }
 
@@ -53,12 +49,11 @@ def _name(catalog: Catalog, behaviour: int) -> str | None:
     return catalog.behaviours[behaviour].name if 0 <= behaviour < len(catalog.behaviours) else None
 
 
-def encode(
-    event: object, catalog: Catalog, selector: Selector | None = None
-) -> tuple[str, dict[str, Any]] | None:
+def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None:
     """An engine event as an SSE event name and JSON payload (None: not streamed).
 
-    With `selector`, tick events carry the competition among released behaviours. A tick
+    A tick event carries the competition among released behaviours when the engine took
+    it (`TickPublished.competition`). A tick
     carries what a top-down view draws: pose, lamp, the sonars' readings and the obstacle
     (the track's fixed parts are GET /api/runs/{id}/world). A tick
     says what made its behaviour run (`origin`: the releasing association's source,
@@ -71,11 +66,8 @@ def encode(
 
     if isinstance(event, TickPublished):
         snap = event.snapshot
-        extra = (
-            {}
-            if selector is None
-            else {"competition": competition(selector, snap.stimuli, catalog)}
-        )
+        held = event.competition
+        extra = {} if held is None else {"competition": competition(held, catalog)}
         return "tick", {**extra,
             "episode": snap.episode, "tick": snap.tick, "episode_tick": snap.episode_tick,
             "x": snap.x, "y": snap.y, "heading_rad": snap.heading_rad,
@@ -153,11 +145,11 @@ async def stream_events(
     except BaseException:
         engines.unsubscribe(run_id, sub)
         raise
-    live = engines.get(run_id)
-    now = live.status if live is not None else stored.status
+    running = engines.get(run_id)
+    now = running.status if running is not None else stored.status
 
     async def events() -> AsyncIterator[bytes]:
-        engine = live
+        live = running
         try:
             first = {"status": now.value, "run": run_id}
             yield f"event: status\ndata: {json.dumps(first)}\n\n".encode()
@@ -172,12 +164,12 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
-                engine = engine or engines.get(run_id)  # fed from the run's start on
-                if engine is None:
+                live = live or engines.get(run_id)  # fed from the run's start on
+                if live is None:
                     continue
-                view = engine.view()
-                # The brain's catalogue of now: it grows when KP synthesises a behaviour.
-                encoded = encode(event, view.catalog, view.selector)
+                # The brain's catalogue of now: it grows when KP synthesises a behaviour
+                # (a new catalogue each time, so reading it here is reading one whole).
+                encoded = encode(event, live.catalog)
                 if encoded is not None:
                     name, data = encoded
                     yield f"event: {name}\ndata: {json.dumps(data)}\n\n".encode()

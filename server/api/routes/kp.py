@@ -10,7 +10,7 @@ from starlette.concurrency import run_in_threadpool as io
 from core.brain.catalog import Catalog
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
-from core.engine import RunEngine
+from core.engine import RunView
 from core.ports import RunQueries
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
@@ -32,11 +32,18 @@ TRACE_EPISODES = 20
 """A stored run's latest episodes whose traces say where its KP associations ran."""
 
 
-def _not_kp_reason(condition: str) -> str:
+def _not_kp(run_id: int, condition: str, live: bool) -> KpPublic:
+    """The answer for a run whose condition does not propagate."""
     kp = ", ".join(n for n, c in CONDITIONS.items() if c.kp)
-    return (
-        f"condition {condition!r} does not run knowledge propagation: no RSTM, no RLTM "
-        f"(conditions that do: {kp})"
+    return KpPublic(
+        run=run_id,
+        condition=condition,
+        kp=False,
+        live=live,
+        reason=(
+            f"condition {condition!r} does not run knowledge propagation: no RSTM, no RLTM "
+            f"(conditions that do: {kp})"
+        ),
     )
 
 
@@ -65,13 +72,21 @@ def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpPro
     )
 
 
-def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
-    """Read on the event loop, between ticks: the engine mutates it only there."""
+def _of_view(run_id: int, view: RunView) -> KpPublic:
+    """A live run's answer, read on the engines' loop (`LiveRun.read`)."""
+    kp = view.kp
+    if kp is None:
+        return _not_kp(run_id, view.spec.condition, live=True)
+    return _live(run_id, view, kp)
+
+
+def _live(run_id: int, view: RunView, kp: KnowledgePropagation) -> KpPublic:
+    """Read on the engines' loop, between ticks (`LiveRun.read`): it changes only there."""
     dt_s = kp.dt_s
     cat = kp.catalog
     s = [x.name for x in cat.stimuli]
     b = [x.name for x in cat.behaviours]
-    tick = engine.view().tick
+    tick = view.tick
     window = kp.config.window_ticks
     rstm = [
         RstmPublic(
@@ -129,7 +144,7 @@ def _live(run_id: int, engine: RunEngine, kp: KnowledgePropagation) -> KpPublic:
         )
     return KpPublic(
         run=run_id,
-        condition=engine.spec.condition,
+        condition=view.spec.condition,
         kp=True,
         live=True,
         reason=reason,
@@ -183,28 +198,13 @@ async def get_run_kp(
     in the running engine only); a run whose condition does not propagate answers
     `kp: false` with a `reason`. 404 for an unknown run.
     """
-    engine = engines.get(run_id)
-    if engine is not None:
-        kp = engine.view().kp
-        if kp is None:
-            return KpPublic(
-                run=run_id,
-                condition=engine.spec.condition,
-                kp=False,
-                live=True,
-                reason=_not_kp_reason(engine.spec.condition),
-            )
-        return _live(run_id, engine, kp)
+    live = engines.get(run_id)
+    if live is not None:
+        return await live.read(lambda view: _of_view(run_id, view))
     run = await io(store.run_summary, run_id)
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:
-        return KpPublic(
-            run=run_id,
-            condition=run.spec.condition,
-            kp=False,
-            live=False,
-            reason=_not_kp_reason(run.spec.condition),
-        )
+        return _not_kp(run_id, run.spec.condition, live=False)
     rltm = await io(store.rltm, run_id)
     network = {
         (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"

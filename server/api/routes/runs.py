@@ -10,7 +10,7 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, st
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import RunEngine
+from core.engine import RunEngine, RunView
 from core.errors import UnknownNameError
 from core.ports import Mode, RunSpec, RunTotals, StoredRun
 from core.sim.track import TrackGeometry
@@ -18,6 +18,7 @@ from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
+from server.engine_loop import LiveRun
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
@@ -49,8 +50,7 @@ def _ms(x: float) -> float | None:
     return None if math.isnan(x) else x * 1000
 
 
-def _live_state(engine: RunEngine) -> LiveState:
-    view = engine.view()
+def _live_state(view: RunView) -> LiveState:
     stats = view.stats
     return LiveState(
         tick=view.tick,
@@ -94,15 +94,13 @@ def _public(
     )
 
 
-def _of_engine(engine: RunEngine) -> RunPublic:
-    """A run's state from its engine, without touching the database."""
+def _of_view(view: RunView) -> RunPublic:
+    """A run's state from its engine, without touching the database.
+
+    Read on the engines' loop (`LiveRun.read`): one consistent state of the run.
+    """
     return _public(
-        engine.run_id,
-        engine.spec,
-        engine.status.value,
-        engine.error,
-        engine.totals,
-        _live_state(engine),
+        view.run_id, view.spec, view.status.value, view.error, view.totals, _live_state(view)
     )
 
 
@@ -111,9 +109,9 @@ def _of_stored(run: StoredRun) -> RunPublic:
 
 
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
-    engine = engines.get(run_id)
-    if engine is not None:
-        return _of_engine(engine)
+    live = engines.get(run_id)
+    if live is not None:
+        return await live.read(_of_view)
     # Database work runs in a thread: the event loop also paces realtime ticks.
     return _of_stored(await io(store.run_summary, run_id))
 
@@ -166,8 +164,8 @@ async def list_runs(
     page, total = await io(store.run_summaries, offset, limit)
     data = []
     for r in page:
-        engine = engines.get(r.id)
-        data.append(_of_engine(engine) if engine is not None else _of_stored(r))
+        live = engines.get(r.id)
+        data.append(await live.read(_of_view) if live is not None else _of_stored(r))
     return RunsPublic(data=data, count=total)
 
 
@@ -189,11 +187,11 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     return await _run(store, engines, run_id)
 
 
-def _live(engines: EnginesDep, run_id: int) -> RunEngine:
-    engine = engines.get(run_id)
-    if engine is None:
+def _live(engines: EnginesDep, run_id: int) -> LiveRun:
+    live = engines.get(run_id)
+    if live is None:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
-    return engine
+    return live
 
 
 async def _control(
@@ -201,14 +199,24 @@ async def _control(
     store: StoreDep,
     engines: EnginesDep,
     allowed: tuple[str, ...],
-    action: Callable[[RunEngine], None],
+    action: Callable[[RunEngine], str | None],
 ) -> RunPublic:
-    """Apply `action` to a live run whose status is one of `allowed` (409 otherwise)."""
+    """Apply `action` to a live run whose status is one of `allowed` (409 otherwise).
+
+    The status is checked and the action taken in one call on the engines' loop, so the
+    run cannot change status in between. An action refusing answers why (a 409's message).
+    """
     await io(store.run_summary, run_id)
-    engine = _live(engines, run_id)
-    if engine.status.value not in allowed:
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
-    action(engine)
+    live = _live(engines, run_id)
+
+    def act(engine: RunEngine) -> str | None:
+        if engine.status.value not in allowed:
+            return f"run {run_id} is {engine.status.value}"
+        return action(engine)
+
+    refused = await live.control(act)
+    if refused is not None:
+        raise HTTPException(status.HTTP_409_CONFLICT, refused)
     return await _run(store, engines, run_id)
 
 
@@ -236,8 +244,7 @@ async def step_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPu
     rewards and edits due there are applied first. Answered once it has run.
     """
     await io(store.run_summary, run_id)
-    engine = _live(engines, run_id)
-    await engine.step()  # RunStateError (409) unless paused and realtime
+    await _live(engines, run_id).step()  # RunStateError (409) unless paused and realtime
     return await _run(store, engines, run_id)
 
 
@@ -250,14 +257,15 @@ async def set_run_rate(
     run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
 ) -> RunPublic:
     """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
-    await io(store.run_summary, run_id)
-    engine = _live(engines, run_id)
-    if engine.status.value not in ("running", "paused"):
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is {engine.status.value}")
-    if engine.spec.mode is not Mode.REALTIME:
-        raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is fast: it has no rate")
-    engine.set_rate(body.hz)
-    return await _run(store, engines, run_id)
+    hz = body.hz
+
+    def rate(engine: RunEngine) -> str | None:
+        if engine.spec.mode is not Mode.REALTIME:
+            return f"run {run_id} is fast: it has no rate"
+        engine.set_rate(hz)
+        return None
+
+    return await _control(run_id, store, engines, ("running", "paused"), rate)
 
 
 def world_public(name: str) -> RunWorldPublic:
