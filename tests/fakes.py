@@ -14,6 +14,7 @@ import numpy as np
 
 from core import networks as rules
 from core.brain.catalog import Catalog
+from core.engine.pacing import Wake
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
 from core.networks import (
     AssociationChange,
@@ -506,7 +507,7 @@ class ManualPacer:
         """How many sleeps are going on."""
         return len(self._sleepers)
 
-    async def sleep(self, seconds: float, wake: asyncio.Event) -> None:
+    async def sleep(self, seconds: float, wake: Wake) -> None:
         if wake.is_set() or seconds <= 0:
             return
         entry = (self.time + seconds, asyncio.Event())

@@ -29,7 +29,15 @@ from core.engine.bus import (
 )
 from core.engine.engine import FAST_YIELD_TICKS, RunEngine
 from core.engine.jobs import RewardAck
-from core.engine.pacing import HZ_MAX, HZ_MIN, MonotonicPacer, Pacer, check_hz, sleep_until
+from core.engine.pacing import (
+    HZ_MAX,
+    HZ_MIN,
+    MonotonicPacer,
+    Pacer,
+    Wake,
+    check_hz,
+    sleep_until,
+)
 from core.engine.stats import EngineStats
 from core.engine.view import RunView
 from core.engine.writer import EPISODE_BATCH_MAX, EPISODE_BATCH_S, WRITE_BATCH_MAX, WRITE_BATCH_S
@@ -55,6 +63,7 @@ __all__ = [
     "Subscription",
     "SubscriptionClosed",
     "TickPublished",
+    "Wake",
     "check_hz",
     "sleep_until",
 ]

@@ -49,6 +49,7 @@ from core.engine.pacing import (
     HZ_MIN,
     MonotonicPacer,
     Pacer,
+    Wake,
     check_hz,
     sleep_until,
 )
@@ -119,7 +120,7 @@ class RunEngine:
         # A run stored before rates were bounded ticks at the nearest bounded rate.
         self._hz = min(max(float(spec.hz), HZ_MIN), HZ_MAX)
         self._pacer: Pacer = pacer or MonotonicPacer()
-        self._wake = asyncio.Event()
+        self._wake = Wake()
         """Set by stop, pause, interrupt and rate changes: a sleeping tick task wakes now."""
         self._rate_changed = False
         self._trace = TraceRecorder() if trace else None
