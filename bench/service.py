@@ -67,7 +67,7 @@ from collections import Counter
 from collections.abc import Callable, Coroutine, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 from urllib.parse import quote
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -524,6 +524,8 @@ class Server:
     proc: subprocess.Popen[bytes] | None = None
     env: dict[str, str] = field(default_factory=lambda: {"SRLAB_VISER_PORT": str(free_port())})
     """More SRLAB_* settings (by default the 3D view on a free port, not on 8080)."""
+    placement: ClassVar[str] = "thread"
+    """Where servers tick their runs unless `env` says (``--engines``)."""
 
     @property
     def log(self) -> Path:
@@ -539,6 +541,7 @@ class Server:
         """Start it; it migrates the database first."""
         env = {k: v for k, v in os.environ.items() if not k.startswith("SRLAB_")}
         env.update(
+            SRLAB_ENGINE_THREAD=str(self.placement == "thread").lower(),
             SRLAB_DATABASE_URL=self.url,
             SRLAB_HOST=HOST,
             SRLAB_PORT=str(self.port),
@@ -1459,6 +1462,13 @@ def main() -> None:
         "D3 and D4 with the engines on the service's loop and on their own thread",
     )
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
+    parser.add_argument(
+        "--engines",
+        choices=["thread", "loop"],
+        default="thread",
+        help="where the servers tick their runs (SRLAB_ENGINE_THREAD): their own thread "
+        "(default, as srlab serve) or the service's loop; --part engines runs both",
+    )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")
     parser.add_argument("--samples", type=int, default=1000, help="GETs per D1/D2 figure")
@@ -1476,6 +1486,7 @@ def main() -> None:
     # SIGTERM ends the bench as Ctrl-C does: through the finally that stops the server.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     with tempfile.TemporaryDirectory(prefix="srlab-bench-") as tmp:
+        Server.placement = args.engines
         server = Server(Path(tmp))
         started = time.perf_counter()
         try:

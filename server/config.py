@@ -50,9 +50,11 @@ class Settings(BaseSettings):
             ``SRLAB_STORE_PROCESS`` says otherwise; `create_app` alone keeps storage in the
             service's process (quick to start, as tests want).
         engine_thread: tick the runs on an event loop of their own, in a thread of its
-            own (`server.engine_loop`), so a burst of requests on the service's loop does
-            not delay a realtime tick by more than the interpreter's switch interval;
-            false ticks them on the service's loop (the bench compares the two).
+            own (`server.engine_loop`): a burst of connections (hundreds of event streams
+            refused at once) then delays a tick by little more than the interpreter's
+            switch interval, but under steady load the engines' thread waits for the GIL
+            at every wake-up and ticks run later than on the service's loop (the default;
+            `bench/service.py --part engines` measures both).
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -76,7 +78,7 @@ class Settings(BaseSettings):
     viser_port: int = Field(8080, ge=1, le=65535)
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
     store_process: bool = False
-    engine_thread: bool = True
+    engine_thread: bool = False
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
     @classmethod

@@ -1,11 +1,15 @@
-"""Where the service's runs tick: an event loop of their own, in a thread of its own.
+"""Where the service's runs tick: the service's own event loop, or one in a thread of its own.
 
-The service's event loop answers HTTP; the engines' loop runs every run's tick task,
-reward task and writer tasks. A burst of requests (a page of answers to encode, 500
-connections to refuse) used to be one pass of the loop that also paced the ticks, and a
-tick due meanwhile waited for the whole pass. On a loop of their own, a tick that falls
-due takes the GIL from whatever the service is doing within the interpreter's switch
-interval (`server.tuning`).
+The engines' loop runs every run's tick task, reward task and writer tasks. By default it
+is the service's loop, which also answers HTTP; with ``SRLAB_ENGINE_THREAD=true`` it is a
+loop of its own in a thread of its own. What each costs (`bench/service.py --part
+engines`, docs/benchmarks.md): on the service's loop, a burst of requests (500 stream
+connections to refuse) is one pass of the loop and a tick due meanwhile waits for all of
+it (hundreds of milliseconds); on their own thread, a due tick takes the GIL within about
+the interpreter's switch interval (`server.tuning`) even then, but under steady load the
+engines' thread waits for the GIL at every wake-up, and ticks and answers run later than
+on one loop. CPython has one GIL per process: only a process of their own would give the
+engines both.
 
 Two rules keep the two loops apart:
 
@@ -22,8 +26,8 @@ Two rules keep the two loops apart:
 Events cross the other way through `core.engine.bus.Subscription`, which an engine fills
 from its thread and the service reads on its own loop.
 
-With ``thread=False`` (``SRLAB_ENGINE_THREAD=false``) the engines tick on the service's own
-loop, through the same calls: the bench (`bench/service.py`) measures both side by side.
+With ``thread=False`` the engines tick on the service's own loop through the same calls,
+which then run directly (no hop).
 """
 
 from __future__ import annotations
@@ -103,12 +107,19 @@ class EngineLoop:
     async def run(self, coro: Coroutine[Any, Any, T]) -> T:
         """Run `coro` on the engines' loop and await its result here.
 
-        Cancelling the caller cancels it there too.
+        Cancelling the caller cancels it there too. Unthreaded, it is awaited directly.
         """
+        if not self.threaded:
+            return await coro
         return await asyncio.wrap_future(self.submit(coro))
 
     async def call(self, fn: Callable[..., T], *args: object) -> T:
-        """Call `fn(*args)` on the engines' loop, between two steps of its tasks."""
+        """Call `fn(*args)` on the engines' loop, between two steps of its tasks.
+
+        Unthreaded, it is called directly: the caller runs between two steps already.
+        """
+        if not self.threaded:
+            return fn(*args)
 
         async def there() -> T:
             return fn(*args)

@@ -1,9 +1,11 @@
-"""The runs tick on an event loop of their own (`server.engine_loop`), apart from HTTP.
+"""Where the runs tick (`server.engine_loop`): the service's loop, or a loop of their own.
 
-What it guarantees, without timing anything: a run's ticks, rewards and reads happen on the
-engines' thread; the service's loop blocked solid does not stop a run from ticking (while
-with ``engine_thread=False`` it does, which is what the bench compares); subscriptions
-cross the two threads; the service stops with no engines' thread left behind.
+What each placement guarantees, without timing anything: with ``engine_thread=True`` a
+run's ticks, rewards and reads happen on the engines' thread, the service's loop blocked
+solid does not stop a run from ticking (on the service's loop, the default, it does:
+the bench measures what each costs), and the service stops with no engines' thread left
+behind; in both, a control checks and acts in one step, subscriptions carry events to
+the service's loop, and a read sees one state of the run.
 """
 
 from __future__ import annotations
@@ -21,6 +23,9 @@ from core.engine import RunView, StatusChanged, Subscription, SubscriptionClosed
 from server.engines import EngineManager
 
 pytestmark = pytest.mark.anyio
+PLACEMENTS = pytest.mark.parametrize(
+    "engine_thread", [True, False], ids=["own-thread", "service-loop"]
+)
 
 BLOCK_S = 0.5
 """How long a test holds the service's loop: many 50 Hz periods on any machine."""
@@ -41,7 +46,7 @@ async def _running(client: httpx.AsyncClient) -> int:
 
 
 async def test_a_runs_reads_and_rewards_happen_on_the_engines_thread(tmp_path: Path) -> None:
-    async with client_for(settings_for(tmp_path)) as (client, app):
+    async with client_for(settings_for(tmp_path, engine_thread=True)) as (client, app):
         manager = _manager(app)
         run_id = await _running(client)
         live = manager.get(run_id)
@@ -53,7 +58,7 @@ async def test_a_runs_reads_and_rewards_happen_on_the_engines_thread(tmp_path: P
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
 
 
-@pytest.mark.parametrize("engine_thread", [True, False], ids=["own-thread", "service-loop"])
+@PLACEMENTS
 async def test_a_blocked_service_loop_stops_the_ticks_only_when_they_share_it(
     tmp_path: Path, engine_thread: bool
 ) -> None:
@@ -74,8 +79,11 @@ async def test_a_blocked_service_loop_stops_the_ticks_only_when_they_share_it(
         await until(client, run_id, "stopped")
 
 
-async def test_a_control_checks_and_acts_in_one_step_on_the_engines_loop(tmp_path: Path) -> None:
-    async with client_for(settings_for(tmp_path)) as (client, _):
+@PLACEMENTS
+async def test_a_control_checks_and_acts_in_one_step_on_the_engines_loop(
+    tmp_path: Path, engine_thread: bool
+) -> None:
+    async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, _):
         run_id = await _running(client)
         paused = await asyncio.gather(*(client.post(f"/api/runs/{run_id}/pause") for _ in range(4)))
         # One pause wins; the others find the run paused already.
@@ -84,10 +92,12 @@ async def test_a_control_checks_and_acts_in_one_step_on_the_engines_loop(tmp_pat
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
 
 
+@PLACEMENTS
 async def test_a_stream_reads_on_the_service_loop_what_the_engines_thread_offers(
     tmp_path: Path,
+    engine_thread: bool,
 ) -> None:
-    async with client_for(settings_for(tmp_path)) as (client, app):
+    async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
         manager = _manager(app)
         run_id = await _running(client)
         sub = manager.subscribe(run_id, maxsize=64, tick_hz=0.0)
@@ -108,10 +118,12 @@ async def test_a_stream_reads_on_the_service_loop_what_the_engines_thread_offers
         manager.unsubscribe(run_id, sub)
 
 
+@PLACEMENTS
 async def test_a_subscription_made_as_its_run_ends_is_closed_not_left_open(
     tmp_path: Path,
+    engine_thread: bool,
 ) -> None:
-    async with client_for(settings_for(tmp_path)) as (client, app):
+    async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
         manager = _manager(app)
         run_id = await _running(client)
         live = manager.get(run_id)
@@ -126,7 +138,7 @@ async def test_a_subscription_made_as_its_run_ends_is_closed_not_left_open(
 async def test_the_service_stops_with_no_engines_thread_left_and_its_run_resumable(
     tmp_path: Path,
 ) -> None:
-    settings = settings_for(tmp_path)
+    settings = settings_for(tmp_path, engine_thread=True)
     async with client_for(settings) as (client, app):
         run_id = await _running(client)
         await until(client, run_id, "running")
@@ -137,8 +149,9 @@ async def test_the_service_stops_with_no_engines_thread_left_and_its_run_resumab
         assert (await client.get(f"/api/runs/{run_id}")).json()["status"] == "interrupted"
 
 
-async def test_a_view_read_sees_one_state_of_the_run(tmp_path: Path) -> None:
-    async with client_for(settings_for(tmp_path)) as (client, app):
+@PLACEMENTS
+async def test_a_view_read_sees_one_state_of_the_run(tmp_path: Path, engine_thread: bool) -> None:
+    async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
         run_id = await _running(client)
         live = _manager(app).get(run_id)
         assert live is not None
