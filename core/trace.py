@@ -70,18 +70,43 @@ class TraceRecorder:
 
     def pack(self) -> bytes:
         """The trace as compressed bytes; the recorder is emptied."""
-        rows = []
-        for s in self._rows:
-            mask = 0
-            for i in s.stimuli:
-                mask |= 1 << i
-            rows.append(
-                (s.tick, s.x, s.y, s.heading_rad, s.behaviour, _HOW_INDEX[s.how.value],
-                 int(s.lamp), mask, _ORIGIN_INDEX[s.origin], s.released_by)
-            )  # fmt: skip
-        arr = np.array(rows, dtype=_DTYPE)
-        self._rows = []
+        rows, self._rows = self._rows, []
+        arr = np.empty(len(rows), dtype=_DTYPE)
+        if rows:
+            # Column by column: numpy fills a structured array from a list per field several
+            # times faster than from a tuple per row (this ran on the tick task, ~5% of a
+            # fast run's time).
+            _, tick, _, x, y, heading, stimuli, behaviour, how, lamp, *_, origin, by = zip(
+                *rows, strict=True
+            )
+            arr["tick"] = tick
+            arr["x"] = x
+            arr["y"] = y
+            arr["heading"] = heading
+            arr["behaviour"] = behaviour
+            arr["how"] = [_HOW_INDEX[h] for h in how]
+            arr["lamp"] = [int(c) for c in lamp]
+            arr["stimuli"] = [_mask(s) for s in stimuli]
+            arr["origin"] = [_ORIGIN_INDEX[o] for o in origin]
+            arr["released_by"] = by
         return MAGIC + zlib.compress(arr.tobytes(), 1)
+
+
+_MASKS: dict[tuple[int, ...], int] = {}
+"""Bit masks of the stimulus sets seen (a run meets few: the ticks' sets repeat)."""
+_MASKS_MAX = 65536
+
+
+def _mask(stimuli: tuple[int, ...]) -> int:
+    """The stimuli as a bit mask."""
+    mask = _MASKS.get(stimuli)
+    if mask is None:
+        mask = 0
+        for i in stimuli:
+            mask |= 1 << i
+        if len(_MASKS) < _MASKS_MAX:
+            _MASKS[stimuli] = mask
+    return mask
 
 
 def unpack(blob: bytes) -> list[TraceRow]:
