@@ -144,26 +144,21 @@ class EngineManager:
             return len(self._streams.get(run_id, ()))
         return sum(len(subs) for subs in self._streams.values())
 
-    def stream_refusal(self, run_id: int) -> str | None:
-        """Why a new stream to `run_id` would be refused now (None: it would not)."""
-        if self.streams() >= self.max_streams:
-            return f"{self.max_streams} event streams are open already (SRLAB_MAX_STREAMS)"
-        if self.streams(run_id) >= self.max_streams_per_run:
-            return (
-                f"run {run_id} has {self.max_streams_per_run} event streams open already "
-                "(SRLAB_MAX_STREAMS_PER_RUN)"
-            )
-        return None
-
     def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
         """A subscription to a run's events, now if it runs here, else from its next start.
 
         At most `max_streams` are open at once, `max_streams_per_run` to one run: past
         either, `TooManyStreamsError`, and nothing is subscribed.
         """
-        refusal = self.stream_refusal(run_id)
-        if refusal is not None:
-            raise TooManyStreamsError(refusal)
+        if self.streams() >= self.max_streams:
+            raise TooManyStreamsError(
+                f"{self.max_streams} event streams are open already (SRLAB_MAX_STREAMS)"
+            )
+        if self.streams(run_id) >= self.max_streams_per_run:
+            raise TooManyStreamsError(
+                f"run {run_id} has {self.max_streams_per_run} event streams open already "
+                "(SRLAB_MAX_STREAMS_PER_RUN)"
+            )
         live = self._engines.get(run_id)
         task = self._tasks.get(run_id)
         if live is not None and task is not None and not task.done():

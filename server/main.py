@@ -27,7 +27,6 @@ from core.errors import (
 from server.api import api_router, contract
 from server.api.contract import operation_id
 from server.api.methods import ApiMethods
-from server.api.routes.events import StreamCaps
 from server.api.strictjson import StrictJson
 from server.asgi import cut_off, send_error
 from server.bootstrap import StorageFactory, open_storage, service
@@ -135,7 +134,6 @@ def create_app(settings: Settings | None = None, storage: StorageFactory = open_
     editor = f"http://{settings.host}:{settings.port}"
     app.add_middleware(StrictJson)
     app.add_middleware(ApiMethods, schema=app.openapi)
-    app.add_middleware(StreamCaps)  # the excess of a burst of streams, refused cheaply
     app.add_middleware(
         CORSMiddleware,
         allow_origins=[editor, *settings.cors_origins],

@@ -49,28 +49,3 @@ async def test_event_streams_past_the_caps_are_503_with_retry_after(tmp_path: Pa
         for sub in subs:
             engines.unsubscribe(a["id"], sub)
         assert engines.streams() == 0
-
-
-async def test_a_stream_refused_early_gets_the_routes_own_answers(tmp_path: Path) -> None:
-    """The cheap refusal (`StreamCaps`) answers only what the route would answer 503."""
-    settings = settings_for(tmp_path, max_streams=1, max_streams_per_run=1)
-    async with client_for(settings) as (client, app):
-        engines = app.state.srlab.engines
-        run = await create(client, condition="expert", episodes=1, seed=1)
-        sub = engines.subscribe(run["id"], 8, 0.0)
-        for query in ("", "?tick_hz=2", "?tick_hz=0&other=1"):
-            r = await client.get(f"/api/runs/{run['id']}/events{query}")
-            assert r.status_code == 503 and r.headers["retry-after"] == "5", query
-        for path in (
-            f"/api/runs/{run['id']}/events?tick_hz=61",
-            f"/api/runs/{run['id']}/events?tick_hz=fast",
-            f"/api/runs/{run['id']}/events?tick_hz=1&tick_hz=2",
-            "/api/runs/0/events",
-            f"/api/runs/{2**62 + 1}/events",
-        ):
-            r = await client.get(path)
-            assert r.status_code in (422, 503), path
-            if "tick_hz=1&tick_hz=2" not in path:
-                assert r.status_code == 422, path  # the route's validation, not the cap
-        assert engines.streams() == 1
-        engines.unsubscribe(run["id"], sub)
