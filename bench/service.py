@@ -32,6 +32,12 @@ D4. ``--runs`` (32) realtime runs at 20 Hz under ``--rate`` req/s of mixed load 
    them for ``--seconds``: tick lateness p99 and max (worst run) and overruns over all runs
    (goals: <= 5 ms, <= 25 ms, 0).
 
+With ``--part engines`` it measures D3 and D4 with the engines on the service's loop and on
+a thread of their own (``SRLAB_ENGINE_THREAD``, `server/engine_loop.py`), a fresh server for
+each, alternated ``--rounds`` times, and prints the two side by side (medians over the
+rounds). ``--engines`` picks the placement of every other part's servers (default: the
+service's loop, as ``srlab serve``).
+
 Open loop: every request has a scheduled send time on a fixed-rate grid, whether earlier
 ones were answered or not, and its latency counts from that time; a slow answer cannot hide
 the requests that would have queued behind it (no coordinated omission). A request not
@@ -524,7 +530,7 @@ class Server:
     proc: subprocess.Popen[bytes] | None = None
     env: dict[str, str] = field(default_factory=lambda: {"SRLAB_VISER_PORT": str(free_port())})
     """More SRLAB_* settings (by default the 3D view on a free port, not on 8080)."""
-    placement: ClassVar[str] = "thread"
+    placement: ClassVar[str] = "loop"
     """Where servers tick their runs unless `env` says (``--engines``)."""
 
     @property
@@ -1464,10 +1470,10 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
     parser.add_argument(
         "--engines",
-        choices=["thread", "loop"],
-        default="thread",
-        help="where the servers tick their runs (SRLAB_ENGINE_THREAD): their own thread "
-        "(default, as srlab serve) or the service's loop; --part engines runs both",
+        choices=["loop", "thread"],
+        default="loop",
+        help="where the servers tick their runs (SRLAB_ENGINE_THREAD): the service's loop "
+        "(default, as srlab serve) or a thread of their own; --part engines runs both",
     )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")
