@@ -230,6 +230,7 @@ class EngineManager:
             engine.attach(sub)
         task = asyncio.current_task()
         assert task is not None
+        task.set_name(f"run {engine.run_id}")
         self._ticking[engine.run_id] = task
         try:
             return await engine.run()

@@ -1,4 +1,4 @@
-"""The 3D view's controller: it runs on the service's event loop, the engines on theirs.
+"""The 3D view's controller: on the service's event loop, reaching runs through `LiveRun`s.
 
 It carries out the panel's commands (select a run, reward it, change its rate, replay a
 stored episode) with the same engine calls and store reads the HTTP API uses, and feeds
