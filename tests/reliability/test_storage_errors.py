@@ -57,8 +57,19 @@ class Outcome:
 
 
 def _run_status(api: httpx.Client, run_id: int) -> dict[str, Any]:
-    run: dict[str, Any] = api.get(f"/api/runs/{run_id}").json()
-    return run
+    """The run as the API answers it.
+
+    A run that has ended is read from storage, and while the fault lasts that read may get
+    503 (the documented answer to a storage failure): it is asked again, for up to 10 s,
+    and a run still unreadable then says so in its status.
+    """
+    for _ in range(100):
+        r = api.get(f"/api/runs/{run_id}")
+        if r.status_code != 503:
+            run: dict[str, Any] = r.json()
+            return run
+        time.sleep(0.1)
+    return {"status": f"unreadable (503: {r.json().get('detail')})"}
 
 
 def _under_fault(
