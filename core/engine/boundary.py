@@ -3,8 +3,8 @@
 Every reward is stamped with the boundary it applies at: a trainer's with the next one
 (the one after the boundary being settled, if one is), the task's and the program's with
 the boundary after the tick that produced them. The tick task settles a boundary by
-releasing each reward due there, in stamp order, and waiting until the reward task has
-applied it; only then does it apply that boundary's edits and run the next tick. So a
+releasing the rewards due there and waiting until the reward task has applied them, in
+stamp order; only then does it apply that boundary's edits and run the next tick. So a
 reward credits exactly the STM records of the ticks before its boundary, whatever the
 timing, and a run replays from its seed and its log.
 
@@ -76,12 +76,18 @@ class Boundary:
         due = self.due
         self.settling = boundary
         try:
-            while due and due[0].stamp <= limit:
-                job = due[0]
-                if internal_only and job.external:
+            # Released together, the rewards are applied back to back (the reward task
+            # takes them in stamp order, each after the last), so the learning writer finds
+            # them all queued and commits them in one transaction instead of the second
+            # waiting for the first's commit.
+            released = 0
+            for job in due:
+                if job.stamp > limit or (internal_only and job.external):
                     break
                 job.release.set()
-                await job.applied.wait()
+                released += 1
+            for _ in range(released):
+                await due[0].applied.wait()
                 due.popleft()
         finally:
             self.settling = 0
