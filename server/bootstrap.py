@@ -9,6 +9,7 @@ e.g. the in-memory fakes of `tests/fakes.py`, and drive the same routes and engi
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import gc
 import os
 from collections.abc import AsyncIterator, Callable
@@ -83,67 +84,62 @@ async def service(
     stays resumable), then storage closes after the runs' last writes.
     """
     opened = await asyncio.to_thread(storage, settings)
-    try:
+    async with contextlib.AsyncExitStack() as stack:
+        # Undone in reverse: the 3D view, the runs, the engines' loop, then storage.
+        stack.push_async_callback(asyncio.to_thread, opened.close)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
         engine_loop = EngineLoop(thread=settings.engine_thread)
         await engine_loop.start()
-        try:
-            manager = EngineManager(
-                opened.runs,
-                catalog,
-                settings.max_runs,
-                loop=engine_loop,
-                max_streams=settings.max_streams,
-                max_streams_per_run=settings.max_streams_per_run,
-            )
-            await _warm_up()
-            # Routes run their blocking work in threads, which take the GIL from the event loop
-            # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
-            # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
-            # them short (tests/reliability/test_load.py).
-            anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
-            # A run stored as running or paused lost its process: it can be resumed from its
-            # checkpoint and log.
-            await asyncio.to_thread(opened.runs.interrupt_active)
-            limiter = RateLimiter(
-                settings.reward_rate_per_s,
-                settings.reward_burst,
-                run_rate=settings.reward_run_rate_per_s,
-                run_burst=settings.reward_run_burst,
-            )
-            viewer = None
-            if settings.viser:
-                from server.viewer import Viewer
+        stack.push_async_callback(engine_loop.stop)
+        manager = EngineManager(
+            opened.runs,
+            catalog,
+            settings.max_runs,
+            loop=engine_loop,
+            max_streams=settings.max_streams,
+            max_streams_per_run=settings.max_streams_per_run,
+        )
+        stack.push_async_callback(manager.shutdown)
+        await _warm_up()
+        # Routes run their blocking work in threads, which take the GIL from the event loop
+        # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
+        # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
+        # them short (tests/reliability/test_load.py).
+        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+        # A run stored as running or paused lost its process: it can be resumed from its
+        # checkpoint and log.
+        await asyncio.to_thread(opened.runs.interrupt_active)
+        limiter = RateLimiter(
+            settings.reward_rate_per_s,
+            settings.reward_burst,
+            run_rate=settings.reward_run_rate_per_s,
+            run_burst=settings.reward_run_burst,
+        )
+        viewer = None
+        if settings.viser:
+            from server.viewer import Viewer
 
-                viewer = await Viewer.start(
-                    host=settings.host,
-                    port=settings.viser_port,
-                    manager=manager,
-                    store=opened.runs,
-                    catalog=catalog,
-                    limiter=limiter,
-                    writable=not settings.writes_need_token,
-                    policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
-                )
-            try:
-                yield AppState(
-                    settings=settings,
-                    catalog=catalog,
-                    database=opened.database,
-                    store=opened.runs,
-                    networks=opened.networks,
-                    engines=manager,
-                    rewards_limiter=limiter,
-                    viewer=viewer,
-                )
-            finally:
-                if viewer is not None:
-                    await viewer.stop()
-                await manager.shutdown()
-        finally:
-            await engine_loop.stop()
-    finally:
-        await asyncio.to_thread(opened.close)
+            viewer = await Viewer.start(
+                host=settings.host,
+                port=settings.viser_port,
+                manager=manager,
+                store=opened.runs,
+                catalog=catalog,
+                limiter=limiter,
+                writable=not settings.writes_need_token,
+                policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
+            )
+            stack.push_async_callback(viewer.stop)
+        yield AppState(
+            settings=settings,
+            catalog=catalog,
+            database=opened.database,
+            store=opened.runs,
+            networks=opened.networks,
+            engines=manager,
+            rewards_limiter=limiter,
+            viewer=viewer,
+        )
 
 
 async def _warm_up() -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
@@ -51,33 +50,9 @@ def _ms(x: float) -> float | None:
     return None if math.isnan(x) else x * 1000
 
 
-@dataclass(frozen=True, slots=True)
-class _Reading:
-    """What a read of a live run takes on the engines' loop: plain values, nothing built."""
-
-    spec: RunSpec
-    status: str
-    error: str | None
-    totals: RunTotals
-    tick: int
-    episode: int
-    hz: float
-    ticks_run: int
-    lateness_p99_ms: float | None
-    lateness_max_ms: float | None
-    overruns: int
-    reward_ack_p99_ms: float | None
-    ticks_by_origin: dict[str, int]
-
-
-def _reading(view: RunView) -> _Reading:
-    """Read on the engines' loop (`LiveRun.read`): one consistent state of the run."""
+def _live_state(view: RunView) -> LiveState:
     stats = view.stats
-    return _Reading(
-        spec=view.spec,
-        status=view.status.value,
-        error=view.error,
-        totals=view.totals,
+    return LiveState(
         tick=view.tick,
         episode=view.episode,
         hz=view.hz,
@@ -119,20 +94,14 @@ def _public(
     )
 
 
-def _of_reading(run_id: int, r: _Reading) -> RunPublic:
-    """A live run's state, without touching the database (built on the service's loop)."""
-    live = LiveState(
-        tick=r.tick,
-        episode=r.episode,
-        hz=r.hz,
-        ticks_run=r.ticks_run,
-        lateness_p99_ms=r.lateness_p99_ms,
-        lateness_max_ms=r.lateness_max_ms,
-        overruns=r.overruns,
-        reward_ack_p99_ms=r.reward_ack_p99_ms,
-        ticks_by_origin=r.ticks_by_origin,
+def _of_view(view: RunView) -> RunPublic:
+    """A live run's state, without touching the database.
+
+    Read on the engines' loop (`LiveRun.read`): one consistent state of the run.
+    """
+    return _public(
+        view.run_id, view.spec, view.status.value, view.error, view.totals, _live_state(view)
     )
-    return _public(run_id, r.spec, r.status, r.error, r.totals, live)
 
 
 def _of_stored(run: StoredRun) -> RunPublic:
@@ -142,7 +111,7 @@ def _of_stored(run: StoredRun) -> RunPublic:
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
     live = engines.get(run_id)
     if live is not None:
-        return _of_reading(run_id, await live.read(_reading))
+        return await live.read(_of_view)
     # Database work runs in a thread: the event loop also paces realtime ticks.
     return _of_stored(await io(store.run_summary, run_id))
 
@@ -196,9 +165,7 @@ async def list_runs(
     data = []
     for r in page:
         live = engines.get(r.id)
-        data.append(
-            _of_reading(r.id, await live.read(_reading)) if live is not None else _of_stored(r)
-        )
+        data.append(await live.read(_of_view) if live is not None else _of_stored(r))
     return RunsPublic(data=data, count=total)
 
 
