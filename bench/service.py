@@ -32,9 +32,10 @@ D4. ``--runs`` (32) realtime runs at 20 Hz under ``--rate`` req/s of mixed load 
    them for ``--seconds``: tick lateness p99 and max (worst run) and overruns over all runs
    (goals: <= 5 ms, <= 25 ms, 0).
 
-With ``--part engines`` it measures D3 and D4 with the engines on the service's loop and on
-a thread of their own (``SRLAB_ENGINE_THREAD``, `server/engine_loop.py`), a fresh server for
-each, alternated ``--rounds`` times, and prints the two side by side (medians over the
+With ``--part engines`` it measures D3 and D4 with the engines on the service's loop, on
+a thread of their own (``SRLAB_ENGINE_THREAD``, `server/engine_loop.py`) and in a process
+of their own (``SRLAB_ENGINE_PROCESS``, `server/engine_process.py`), a fresh server for
+each, alternated ``--rounds`` times, and prints them side by side (medians over the
 rounds). ``--engines`` picks the placement of every other part's servers (default: the
 service's loop, as ``srlab serve``).
 
@@ -547,7 +548,7 @@ class Server:
         """Start it; it migrates the database first."""
         env = {k: v for k, v in os.environ.items() if not k.startswith("SRLAB_")}
         env.update(
-            SRLAB_ENGINE_THREAD=str(self.placement == "thread").lower(),
+            **placement_env(self.placement),
             SRLAB_DATABASE_URL=self.url,
             SRLAB_HOST=HOST,
             SRLAB_PORT=str(self.port),
@@ -1319,13 +1320,13 @@ async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
     Each round starts a fresh `srlab serve` per placement (``SRLAB_ENGINE_THREAD``), so
     both see the same machine within minutes of each other.
     """
-    rows: dict[str, list[dict[str, float]]] = {"loop": [], "thread": []}
+    rows: dict[str, list[dict[str, float]]] = {p: [] for p in PLACEMENTS}
     for k in range(args.rounds):
-        for placement in ("loop", "thread"):
+        for placement in PLACEMENTS:
             server = Server(folder / f"{placement}-{k}")
             server.folder.mkdir(parents=True)
             server.env["SRLAB_MAX_RUNS"] = str(args.runs + 4)
-            server.env["SRLAB_ENGINE_THREAD"] = str(placement == "thread").lower()
+            server.env.update(placement_env(placement))
             server.start()
             try:
                 print(f"\n== round {k + 1}, engines on {placement_name(placement)} ==")
@@ -1339,7 +1340,7 @@ async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
             finally:
                 server.stop()
     print(f"\nD3 and D4 side by side, {args.rounds} round(s), medians over rounds:")
-    print(f"  {'':44}{placement_name('loop'):>22}{placement_name('thread'):>22}")
+    print(f"  {'':44}" + "".join(f"{placement_name(p):>22}" for p in PLACEMENTS))
     for key, label in (
         ("d3_overruns", "D3 overruns (goal 0)"),
         ("d3_max_ms", "D3 lateness max, ms"),
@@ -1350,8 +1351,8 @@ async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
         ("request_p99_ms", "D4 requests p99, ms"),
         ("errors", "D4 request errors"),
     ):
-        cells = [statistics.median(r[key] for r in rows[p]) for p in ("loop", "thread")]
-        print(f"  {label:<44}{cells[0]:>22.2f}{cells[1]:>22.2f}")
+        cells = [statistics.median(r[key] for r in rows[p]) for p in PLACEMENTS]
+        print(f"  {label:<44}" + "".join(f"{c:>22.2f}" for c in cells))
 
 
 async def one_run_part(args: argparse.Namespace, server: Server) -> None:
@@ -1359,9 +1360,23 @@ async def one_run_part(args: argparse.Namespace, server: Server) -> None:
     await many_runs(args, server)
 
 
+PLACEMENTS = ("loop", "thread", "process")
+"""Where a server's engines tick: the service's loop, a thread, a process of their own."""
+
+
+def placement_env(placement: str) -> dict[str, str]:
+    """The settings that put a server's engines there."""
+    return {
+        "SRLAB_ENGINE_THREAD": str(placement == "thread").lower(),
+        "SRLAB_ENGINE_PROCESS": str(placement == "process").lower(),
+    }
+
+
 def placement_name(placement: str) -> str:
     """How the comparison names where the engines tick."""
-    return "the service's loop" if placement == "loop" else "their own thread"
+    return {"loop": "the service's loop", "thread": "their own thread"}.get(
+        placement, "their own process"
+    )
 
 
 async def many_runs(args: argparse.Namespace, server: Server) -> dict[str, float]:
@@ -1465,15 +1480,16 @@ def main() -> None:
         choices=["all", "load", "day", "runs", "engines"],
         default="all",
         help="the load figures (1-2), the long day's (D1-D4), both (default), D4 alone, or "
-        "D3 and D4 with the engines on the service's loop and on their own thread",
+        "D3 and D4 with the engines on the service's loop, their own thread and process",
     )
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
     parser.add_argument(
         "--engines",
-        choices=["loop", "thread"],
+        choices=list(PLACEMENTS),
         default="loop",
-        help="where the servers tick their runs (SRLAB_ENGINE_THREAD): the service's loop "
-        "(default, as srlab serve) or a thread of their own; --part engines runs both",
+        help="where the servers tick their runs: the service's loop (default, as srlab "
+        "serve), a thread (SRLAB_ENGINE_THREAD) or a process (SRLAB_ENGINE_PROCESS) of "
+        "their own; --part engines runs all three",
     )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")

@@ -1,9 +1,11 @@
 """The composition root: what the service is made of, built in one place.
 
 `create_app`'s lifespan calls `service(settings, storage)`: storage first (SQLAlchemy in
-this process, or in a store process as `srlab serve` runs it), then the runs' manager,
-the reward rate limiter and the 3D view over it. Tests give another `storage` factory,
-e.g. the in-memory fakes of `tests/fakes.py`, and drive the same routes and engines.
+this process, or in a store process as `srlab serve` runs it), then the runs' manager
+(the engines on an event loop of this process, or in a process of their own:
+`server.engine_process`), the reward rate limiter and the 3D view over it. Tests give
+another `storage` factory, e.g. the in-memory fakes of `tests/fakes.py`, and drive the
+same routes and engines.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from core.setup import Setup
 from server.api.deps import AppState
 from server.config import Settings
 from server.engine_loop import EngineLoop
-from server.engines import EngineManager
+from server.engine_process import ProcessEngines
+from server.engines import EngineManager, Engines
 from server.guard import SitePolicy
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 from server.persistence.db import DatabaseCheck
@@ -83,24 +86,42 @@ async def service(
     On the way out: the 3D view closes, every run is interrupted at a tick boundary (and
     stays resumable), then storage closes after the runs' last writes.
     """
+    if settings.engine_process and storage is not open_storage:
+        # The engines' process opens its own, from the settings: it would not be this one.
+        raise ValueError("SRLAB_ENGINE_PROCESS opens storage by SRLAB_DATABASE_URL only")
     opened = await asyncio.to_thread(storage, settings)
     async with contextlib.AsyncExitStack() as stack:
-        # Undone in reverse: the 3D view, the runs, the engines' loop, then storage.
+        # Undone in reverse: the 3D view, the runs, the engines' loop or process, then storage.
         stack.push_async_callback(asyncio.to_thread, opened.close)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
-        engine_loop = EngineLoop(thread=settings.engine_thread)
-        await engine_loop.start()
-        stack.push_async_callback(engine_loop.stop)
-        manager = EngineManager(
-            opened.runs,
-            catalog,
-            settings.max_runs,
-            loop=engine_loop,
-            max_streams=settings.max_streams,
-            max_streams_per_run=settings.max_streams_per_run,
-        )
+        manager: Engines
+        if settings.engine_process:
+            remote = ProcessEngines(
+                opened.runs,
+                catalog,
+                settings.max_runs,
+                max_streams=settings.max_streams,
+                max_streams_per_run=settings.max_streams_per_run,
+            )
+            await remote.start_process(
+                settings.model_dump(include={"database_url", "store_process", "max_runs"})
+            )
+            stack.push_async_callback(remote.close)
+            manager = remote
+        else:
+            engine_loop = EngineLoop(thread=settings.engine_thread)
+            await engine_loop.start()
+            stack.push_async_callback(engine_loop.stop)
+            manager = EngineManager(
+                opened.runs,
+                catalog,
+                settings.max_runs,
+                loop=engine_loop,
+                max_streams=settings.max_streams,
+                max_streams_per_run=settings.max_streams_per_run,
+            )
         stack.push_async_callback(manager.shutdown)
-        await _warm_up()
+        await warm_up()
         # Routes run their blocking work in threads, which take the GIL from the event loop
         # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
         # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
@@ -142,7 +163,7 @@ async def service(
         )
 
 
-async def _warm_up() -> None:
+async def warm_up() -> None:
     """Load the sensing kernel's machine code now, not in the first run's first tick.
 
     Then keep everything loaded so far (it lives as long as the process) out of the cyclic

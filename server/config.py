@@ -6,7 +6,7 @@ import ipaddress
 import json
 from typing import Annotated
 
-from pydantic import Field, ValidationError, field_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from server.persistence.db import DEFAULT_DATABASE_URL
@@ -55,6 +55,9 @@ class Settings(BaseSettings):
             switch interval, but under steady load the engines' thread waits for the GIL
             at every wake-up and ticks run later than on the service's loop (the default;
             `bench/service.py --part engines` measures both).
+        engine_process: tick the runs in a process of their own
+            (`server.engine_process`): the ticks get a GIL and a core of their own, and
+            every call, read and event crosses a pipe. Not with `engine_thread`.
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -79,6 +82,7 @@ class Settings(BaseSettings):
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
     store_process: bool = False
     engine_thread: bool = False
+    engine_process: bool = False
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
     @classmethod
@@ -92,6 +96,14 @@ class Settings(BaseSettings):
             except json.JSONDecodeError as e:
                 raise ValueError(f"not a JSON list: {e}") from None
         return [item.strip() for item in v.split(",") if item.strip()]
+
+    @model_validator(mode="after")
+    def _one_placement(self) -> Settings:
+        if self.engine_thread and self.engine_process:
+            raise ValueError(
+                "SRLAB_ENGINE_THREAD and SRLAB_ENGINE_PROCESS exclude each other: choose one"
+            )
+        return self
 
     @field_validator("token")
     @classmethod

@@ -1,21 +1,31 @@
-"""The service's run engines: created, started, paused and stopped over HTTP."""
+"""The service's run engines: created, started, paused and stopped over HTTP.
+
+What the routes, the 3D view and the network service need of the runs is two protocols:
+`Engines` (the runs of this service: start, find, subscribe, shut down) and `Live` (one
+run as it ticks: read it, reward it, edit it, control it). `EngineManager` and
+`server.engine_loop.LiveRun` are them with the engines on an event loop of this process;
+`server.engine_process` is them with the engines in a process of their own.
+"""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
+from typing import Protocol, TypeVar
 
 from core.brain.catalog import Catalog
 from core.brain.network import Association
-from core.engine import RunEngine, Subscription
+from core.commands import EditAssociation, RewardSource
+from core.engine import RewardAck, RunEngine, RunView, Subscription
 from core.errors import RunStateError, StorageError
-from core.ports import NetworkPair, RunSpec, RunStatus, RunStore
+from core.ports import NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
 from core.setup import Setup
 from server.engine_loop import EngineLoop, LiveRun
 
 log = logging.getLogger("srlab.engines")
+T = TypeVar("T")
 
 ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
 
@@ -26,6 +36,167 @@ class TooManyRunsError(RunStateError):
 
 class TooManyStreamsError(RunStateError):
     """The service (or the run) has as many live event streams open as it may."""
+
+
+class Live(Protocol):
+    """One run ticking (or paused, or ended but not yet let go), as the service reaches it.
+
+    Readers and actions run where the run ticks, between two steps of its tasks; with the
+    engines in a process of their own they are pickled, so pass module-level functions,
+    `functools.partial`s or `operator.methodcaller`s, never lambdas or closures.
+    """
+
+    @property
+    def run_id(self) -> int:
+        """The run's id."""
+        ...
+
+    @property
+    def spec(self) -> RunSpec:
+        """What the run was started with (its mode as it runs)."""
+        ...
+
+    @property
+    def status(self) -> RunStatus:
+        """The run's status as last known here."""
+        ...
+
+    @property
+    def error(self) -> str | None:
+        """Why the run failed (None: it has not)."""
+        ...
+
+    @property
+    def hz(self) -> float:
+        """The realtime tick rate."""
+        ...
+
+    @property
+    def catalog(self) -> Catalog:
+        """The brain's catalogue of now (immutable: KP's growth replaces it)."""
+        ...
+
+    async def read(self, reader: Callable[[RunView], T]) -> T:
+        """`reader(view)` where the run ticks: one consistent state of the run."""
+        ...
+
+    async def totals(self) -> RunTotals:
+        """Episodes, successes and ticks so far."""
+        ...
+
+    async def reward(
+        self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
+    ) -> RewardAck:
+        """`RunEngine.reward`: answered once the reward is in the reward log."""
+        ...
+
+    async def edit(self, command: EditAssociation) -> int:
+        """`RunEngine.edit`: the edit's log id once it is applied and stored."""
+        ...
+
+    async def edit_all(self, commands: Sequence[EditAssociation]) -> list[int | BaseException]:
+        """Edits landing at one tick boundary, in order: each one's log id or its error."""
+        ...
+
+    async def step(self) -> int:
+        """`RunEngine.step`: one tick of a paused realtime run; the tick it ran."""
+        ...
+
+    async def control(self, action: Callable[[RunEngine], T]) -> T:
+        """`action(engine)` where the run ticks (pause, resume, stop, a rate change)."""
+        ...
+
+    def subscribe(self, maxsize: int, tick_hz: float) -> Subscription:
+        """A subscription to the run's events; `unsubscribe` it when done."""
+        ...
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        """Stop feeding a subscription (closed here at once)."""
+        ...
+
+
+class Engines(Protocol):
+    """The runs of this service (`EngineManager`'s docstrings say more of each call)."""
+
+    def get(self, run_id: int) -> Live | None:
+        """The run ticking or paused here (or one whose end is not stored)."""
+        ...
+
+    def engines(self) -> Iterable[Live]:
+        """Every run there is an engine for (a copy: safe to await over)."""
+        ...
+
+    def running(self) -> int:
+        """How many runs are ticking, paused or starting."""
+        ...
+
+    def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
+        """Store a new run (`create_run`; blocking: call in a thread)."""
+        ...
+
+    async def start(self, run_id: int) -> Live:
+        """Start a stored run from its checkpoint and log."""
+        ...
+
+    async def started(self, run_id: int, timeout_s: float = 5.0) -> None:
+        """Wait until a started run ticks (or has already ended)."""
+        ...
+
+    async def ended(self, run_id: int, timeout_s: float) -> bool:
+        """Wait up to `timeout_s` for a run to end; whether it has."""
+        ...
+
+    def streams(self, run_id: int | None = None) -> int:
+        """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
+        ...
+
+    def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
+        """A subscription to a run's events, now or from its next start (capped)."""
+        ...
+
+    def unsubscribe(self, run_id: int, sub: Subscription) -> None:
+        """Stop feeding a subscription `subscribe` gave."""
+        ...
+
+    def interrupt_all(self) -> None:
+        """Ask every run to end at its next tick boundary, as interrupted."""
+        ...
+
+    async def shutdown(self, grace_s: float = 5.0) -> None:
+        """Interrupt every run and wait for them (runs stay resumable)."""
+        ...
+
+
+def create_run(store: RunStore, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
+    """Store a new run (status created) and return its id (blocking: call in a thread).
+
+    `network` overrides the condition's. It runs in the spec's world preset and sensor
+    definition (an unknown name raises `UnknownNameError`).
+    """
+    assoc = None
+    if network is not None:
+        cat = Setup(spec.world, spec.sensors).catalog()
+        assoc = tuple(
+            Association(
+                cat.stimulus(p.stimulus).id,
+                cat.behaviour(p.behaviour).id,
+                p.strength,
+                p.source,  # type: ignore[arg-type]
+                p.locked,
+            )
+            for p in network
+        )
+    return RunEngine.create(spec, store, network=assoc).run_id
+
+
+def check_stream_caps(engines: Engines, run_id: int, total: int, per_run: int) -> None:
+    """`TooManyStreamsError` if one more stream would pass the caps (see `subscribe`)."""
+    if engines.streams() >= total:
+        raise TooManyStreamsError(f"{total} event streams are open already (SRLAB_MAX_STREAMS)")
+    if engines.streams(run_id) >= per_run:
+        raise TooManyStreamsError(
+            f"run {run_id} has {per_run} event streams open already (SRLAB_MAX_STREAMS_PER_RUN)"
+        )
 
 
 class EngineManager:
@@ -86,25 +257,8 @@ class EngineManager:
         return len(self._starting) + sum(1 for t in self._tasks.values() if not t.done())
 
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
-        """Store a new run (status created) and return its id (blocking: call in a thread).
-
-        `network` overrides the condition's. It runs in the spec's world preset and sensor
-        definition (an unknown name raises `UnknownNameError`).
-        """
-        assoc = None
-        if network is not None:
-            cat = Setup(spec.world, spec.sensors).catalog()
-            assoc = tuple(
-                Association(
-                    cat.stimulus(p.stimulus).id,
-                    cat.behaviour(p.behaviour).id,
-                    p.strength,
-                    p.source,  # type: ignore[arg-type]
-                    p.locked,
-                )
-                for p in network
-            )
-        return RunEngine.create(spec, self.store, network=assoc).run_id
+        """Store a new run (`create_run`; blocking: call in a thread)."""
+        return create_run(self.store, spec, network)
 
     async def start(self, run_id: int) -> LiveRun:
         """Start a stored run from its checkpoint and log (created, stopped, interrupted).
@@ -150,15 +304,7 @@ class EngineManager:
         At most `max_streams` are open at once, `max_streams_per_run` to one run: past
         either, `TooManyStreamsError`, and nothing is subscribed.
         """
-        if self.streams() >= self.max_streams:
-            raise TooManyStreamsError(
-                f"{self.max_streams} event streams are open already (SRLAB_MAX_STREAMS)"
-            )
-        if self.streams(run_id) >= self.max_streams_per_run:
-            raise TooManyStreamsError(
-                f"run {run_id} has {self.max_streams_per_run} event streams open already "
-                "(SRLAB_MAX_STREAMS_PER_RUN)"
-            )
+        check_stream_caps(self, run_id, self.max_streams, self.max_streams_per_run)
         live = self._engines.get(run_id)
         task = self._tasks.get(run_id)
         if live is not None and task is not None and not task.done():
@@ -215,6 +361,12 @@ class EngineManager:
                 await asyncio.wait((task, waiting), return_when=asyncio.FIRST_COMPLETED)
         finally:
             waiting.cancel()
+
+    def when_ended(self, run_id: int, callback: Callable[[object], None]) -> None:
+        """Call `callback` when the run's task ends, after its engine is let go (if it is)."""
+        task = self._tasks.get(run_id)
+        if task is not None:
+            task.add_done_callback(callback)
 
     async def ended(self, run_id: int, timeout_s: float) -> bool:
         """Wait up to `timeout_s` for a run's task to end; whether it has."""

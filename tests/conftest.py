@@ -287,6 +287,7 @@ SLOW_MODULES = frozenset(
         "reliability/test_sigterm.py",
         "reliability/test_storage_errors.py",
         "server/test_e2e_serve.py",
+        "server/test_engine_process.py",  # each test starts an engines' process
         "server/test_proxy.py",
         "server/test_ray_backend.py",
         "server/test_schemathesis.py",

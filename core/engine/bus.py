@@ -68,8 +68,9 @@ class TickPublished:
     With what a top-down view draws besides the pose: the sonars' readings of that tick
     (in the robot's sonar order, noisy as the robot read them), the obstacle's centre
     (None: the episode has none), the competition among the behaviours its stimuli
-    released and the run's totals at that tick (None: not taken). Read only when a tick is
-    published, never per tick.
+    released and the run's totals at that tick (None: not taken), and whether its behaviour
+    was released through an association KP taught. Read only when a tick is published,
+    never per tick.
     """
 
     run_id: int
@@ -78,6 +79,7 @@ class TickPublished:
     obstacle: tuple[float, float] | None = None
     competition: Competition | None = None
     totals: RunTotals | None = None
+    kp: bool = False
 
 
 class SubscriptionClosed(Exception):

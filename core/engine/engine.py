@@ -722,6 +722,7 @@ class RunEngine:
             sim.world.layout.obstacle_center,
             Competition.of(sim.brain.selector, snap.stimuli),
             self.totals,
+            self.view().released_by_kp(snap),
         )
 
     def _enqueue_internal(self, e: RewardDue) -> None:

@@ -114,6 +114,17 @@ class RunView:
         """Knowledge propagation's state (None: the condition does not propagate)."""
         return self._engine.sim.brain.kp
 
+    def released_by_kp(self, snap: Snapshot) -> bool:
+        """Whether `snap`'s behaviour was released through an association KP taught."""
+        if snap.how.value != "released":
+            return False
+        network, b = self._engine.sim.brain.network, snap.behaviour
+        for s in snap.stimuli:
+            a = network.get(s, b)
+            if a is not None and a.source == "kp":
+                return True
+        return False
+
     @property
     def tick_watchers(self) -> int:
         """How many subscriptions take tick snapshots (0: a tick publishes nothing)."""

@@ -11,7 +11,7 @@ from fastapi import Depends, HTTPException, Request, status
 from core.brain.catalog import Catalog
 from core.ports import NetworkRepository, RunQueries
 from server.config import Settings
-from server.engines import EngineManager
+from server.engines import Engines
 from server.ratelimit import RateLimiter
 
 if TYPE_CHECKING:
@@ -28,7 +28,7 @@ class AppState:
     database: DatabaseProbe
     store: RunQueries
     networks: NetworkRepository
-    engines: EngineManager
+    engines: Engines
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
     run_networks: dict[int, int | None] = field(default_factory=dict)
@@ -44,7 +44,7 @@ def _state(request: Request) -> AppState:
 StateDep = Annotated[AppState, Depends(_state)]
 
 
-def _engines(state: StateDep) -> EngineManager:
+def _engines(state: StateDep) -> Engines:
     return state.engines
 
 
@@ -56,7 +56,7 @@ def _networks(state: StateDep) -> NetworkRepository:
     return state.networks
 
 
-EnginesDep = Annotated[EngineManager, Depends(_engines)]
+EnginesDep = Annotated[Engines, Depends(_engines)]
 NetworksDep = Annotated[NetworkRepository, Depends(_networks)]
 StoreDep = Annotated[RunQueries, Depends(_store)]
 

@@ -21,16 +21,16 @@ from core.commands import EditAssociation
 from core.errors import RunStateError, StorageError
 from core.networks import AssociationChange, NetworkEdit, Precondition, StoredNetwork
 from core.ports import NetworkPair, NetworkRepository, RunStatus
-from server.engine_loop import LiveRun
+from server.engines import Live
 
 log = logging.getLogger("srlab.networks")
 _T = TypeVar("_T")
 
 
 class Engines(Protocol):
-    """The engines running in this process (`server.engines.EngineManager`)."""
+    """The service's runs (`server.engines.Engines`)."""
 
-    def engines(self) -> Iterable[LiveRun]:
+    def engines(self) -> Iterable[Live]:
         """Every engine this process has."""
         ...
 
@@ -53,7 +53,7 @@ def edit_command(change: AssociationChange) -> EditAssociation:
     )
 
 
-async def _push(engine: LiveRun, edits: Sequence[EditAssociation]) -> bool:
+async def _push(engine: Live, edits: Sequence[EditAssociation]) -> bool:
     # Queued together, the edits land at the same tick boundary, in order.
     results = await engine.edit_all(edits)
     failed = [r for r in results if isinstance(r, BaseException)]
@@ -86,7 +86,7 @@ class NetworkService:
         """A repository call off the event loop, so ticking runs never wait on the database."""
         return await run_in_threadpool(fn, *args, **kwargs)
 
-    def started_from(self, engine: LiveRun, network: StoredNetwork) -> bool:
+    def started_from(self, engine: Live, network: StoredNetwork) -> bool:
         """Whether a run was started from this very network (not an earlier one of its name).
 
         A run keeps its network's id (`RunSpec.network_id`, stored with the run); deleting

@@ -17,7 +17,7 @@ from core.brain.catalog import Catalog
 from core.ports import RunQueries
 from core.sim.world import WorldConfig
 from core.worlds import load_world
-from server.engines import EngineManager
+from server.engines import Engines
 from server.guard import SitePolicy
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
@@ -192,7 +192,7 @@ class Viewer:
         *,
         host: str,
         port: int,
-        manager: EngineManager,
+        manager: Engines,
         store: RunQueries,
         catalog: Catalog,
         limiter: RateLimiter,

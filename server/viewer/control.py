@@ -1,4 +1,4 @@
-"""The 3D view's controller: on the service's event loop, reaching runs through `LiveRun`s.
+"""The 3D view's controller: on the service's event loop, reaching runs through `Live`s.
 
 It carries out the panel's commands (select a run, reward it, change its rate, replay a
 stored episode) with the same engine calls and store reads the HTTP API uses, and feeds
@@ -15,6 +15,7 @@ import contextlib
 import logging
 import time
 from dataclasses import replace
+from operator import methodcaller
 
 from core.brain.catalog import Catalog
 from core.commands import RewardSource
@@ -24,8 +25,7 @@ from core.events import EpisodeEnded
 from core.ports import Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
-from server.engine_loop import LiveRun
-from server.engines import EngineManager
+from server.engines import Engines, Live
 from server.ratelimit import RateLimiter
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
 from server.viewer.replay import ReplayClock, load_replay
@@ -58,25 +58,17 @@ LIMITER_KEY = "3d-view"
 """The rate limiter's client name for rewards given from the panel, with the viewer's id."""
 
 
-def tick_view(live: LiveRun, snap: Snapshot, totals: RunTotals) -> TickView:
+def tick_view(live: Live, snap: Snapshot, totals: RunTotals, kp: bool) -> TickView:
     """A live snapshot as the view shows it, with the run's totals at that tick.
 
-    Read on the service's loop: the catalogue is immutable (KP's growth replaces it) and
-    the network is read by one lookup per stimulus.
+    Read on the service's loop: the catalogue is immutable (KP's growth replaces it whole);
+    `kp` (the behaviour was released through an association KP taught) was read where the
+    run ticks, with the tick.
     """
-    view = live.engine.view()
-    cat = view.catalog
+    cat = live.catalog
     stimuli = tuple(cat.stimuli[i].name for i in snap.stimuli)
     b = snap.behaviour
     behaviour = cat.behaviours[b].name if 0 <= b < len(cat.behaviours) else None
-    kp = False
-    if snap.how.value == "released" and behaviour is not None:
-        network = view.network
-        for s in snap.stimuli:
-            a = network.get(s, b)
-            if a is not None and a.source == "kp":
-                kp = True
-                break
     return TickView(
         run_id=live.run_id,
         episode=snap.episode,
@@ -99,6 +91,15 @@ def tick_view(live: LiveRun, snap: Snapshot, totals: RunTotals) -> TickView:
     )
 
 
+def _latest(view: RunView) -> tuple[Snapshot, RunTotals, bool] | None:
+    """The run's latest tick, its totals and its KP flag (None: no episode yet)."""
+    try:
+        snap = view.snapshot
+    except SimulationStateError:  # not reset yet
+        return None
+    return snap, view.totals, view.released_by_kp(snap)
+
+
 class Controller:
     """Owns the view's state on the service's event loop.
 
@@ -116,7 +117,7 @@ class Controller:
     def __init__(
         self,
         inbox: Inbox,
-        manager: EngineManager,
+        manager: Engines,
         store: RunQueries,
         catalog: Catalog,
         limiter: RateLimiter,
@@ -391,7 +392,7 @@ class Controller:
 
     async def _follow_run(self, run_id: int) -> None:
         """Push the run's tick snapshots to the renderer; wait out its pauses and restarts."""
-        shown: LiveRun | None = None
+        shown: Live | None = None
         while True:
             live = self.manager.get(run_id)
             if live is None or live.status not in ACTIVE:
@@ -412,23 +413,16 @@ class Controller:
                         break
                     if isinstance(event, TickPublished):
                         if event.totals is not None:
-                            self.inbox.push(tick_view(live, event.snapshot, event.totals))
+                            self.inbox.push(tick_view(live, event.snapshot, event.totals, event.kp))
                     elif isinstance(event, StatusChanged | EpisodeEnded):
                         self._publish(live=self._live_info(run_id))
             finally:
                 live.unsubscribe(sub)
             self._publish(live=self._live_info(run_id))
 
-    async def _show_now(self, live: LiveRun) -> None:
+    async def _show_now(self, live: Live) -> None:
         """Push the run's latest tick (none before its first episode)."""
-
-        def latest(view: RunView) -> tuple[Snapshot, RunTotals] | None:
-            try:
-                return view.snapshot, view.totals
-            except SimulationStateError:  # not reset yet
-                return None
-
-        now = await live.read(latest)
+        now = await live.read(_latest)
         if now is not None:
             self.inbox.push(tick_view(live, *now))
 
@@ -442,7 +436,7 @@ class Controller:
         if live.spec.mode is not Mode.REALTIME:
             raise ValueError("a fast run has no tick rate to change")
         check_hz(hz)  # ValueError (shown) out of HZ_MIN..HZ_MAX
-        await live.control(lambda engine: engine.set_rate(hz))
+        await live.control(methodcaller("set_rate", hz))
         self._publish(live=self._live_info(st.run_id), notice=f"Tick rate set to {hz:g} Hz")
 
     async def _reward(self, value: float, client: int | None = None) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from functools import partial
 
 from fastapi import APIRouter
 from starlette.concurrency import run_in_threadpool as io
@@ -200,7 +201,7 @@ async def get_run_kp(
     """
     live = engines.get(run_id)
     if live is not None:
-        return await live.read(lambda view: _of_view(run_id, view))
+        return await live.read(partial(_of_view, run_id))
     run = await io(store.run_summary, run_id)
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
@@ -18,7 +20,7 @@ from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
-from server.engine_loop import LiveRun
+from server.engines import Live
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
@@ -187,11 +189,28 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     return await _run(store, engines, run_id)
 
 
-def _live(engines: EnginesDep, run_id: int) -> LiveRun:
+def _live(engines: EnginesDep, run_id: int) -> Live:
     live = engines.get(run_id)
     if live is None:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
     return live
+
+
+@dataclass(frozen=True, slots=True)
+class _Guarded:
+    """An action taken only if the run's status is one of `allowed`; else why not.
+
+    A class, not a closure: it is pickled when the engines run in a process of their own.
+    """
+
+    run_id: int
+    allowed: tuple[str, ...]
+    action: Callable[[RunEngine], str | None]
+
+    def __call__(self, engine: RunEngine) -> str | None:
+        if engine.status.value not in self.allowed:
+            return f"run {self.run_id} is {engine.status.value}"
+        return self.action(engine)
 
 
 async def _control(
@@ -209,12 +228,7 @@ async def _control(
     await io(store.run_summary, run_id)
     live = _live(engines, run_id)
 
-    def act(engine: RunEngine) -> str | None:
-        if engine.status.value not in allowed:
-            return f"run {run_id} is {engine.status.value}"
-        return action(engine)
-
-    refused = await live.control(act)
+    refused = await live.control(_Guarded(run_id, allowed, action))
     if refused is not None:
         raise HTTPException(status.HTTP_409_CONFLICT, refused)
     return await _run(store, engines, run_id)
@@ -257,15 +271,15 @@ async def set_run_rate(
     run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
 ) -> RunPublic:
     """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
-    hz = body.hz
-
-    def rate(engine: RunEngine) -> str | None:
-        if engine.spec.mode is not Mode.REALTIME:
-            return f"run {run_id} is fast: it has no rate"
-        engine.set_rate(hz)
-        return None
-
+    rate = partial(_set_rate, body.hz)
     return await _control(run_id, store, engines, ("running", "paused"), rate)
+
+
+def _set_rate(hz: float, engine: RunEngine) -> str | None:
+    if engine.spec.mode is not Mode.REALTIME:
+        return f"run {engine.run_id} is fast: it has no rate"
+    engine.set_rate(hz)
+    return None
 
 
 def world_public(name: str) -> RunWorldPublic:

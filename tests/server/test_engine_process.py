@@ -1,0 +1,186 @@
+"""The runs in a process of their own (`server.engine_process`), through the service's API.
+
+What the placement guarantees, without timing anything: a run ticks, reads and takes its
+rewards in the engines' process, not the service's; every control and read of the API
+works as with the engines on the service's loop; the event stream carries the run's
+events across and ends with it; the service's loop blocked solid does not stop a run from
+ticking; if the engines' process dies, its runs read as failed with an error that says so,
+calls on them answer 503 and the service stays up; and the service stops with the
+engines' process gone and its runs resumable.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from apphelpers import client_for, create, settings_for, until
+
+from core.engine import RunView, StatusChanged
+from server.bootstrap import Storage, open_storage
+from server.config import Settings
+from server.engine_process import ProcessEngines
+
+pytestmark = pytest.mark.anyio
+
+BLOCK_S = 0.5
+"""How long a test holds the service's loop: many 50 Hz periods on any machine."""
+
+
+def _engines(app: object) -> ProcessEngines:
+    engines = app.state.srlab.engines  # type: ignore[attr-defined]
+    assert isinstance(engines, ProcessEngines)
+    return engines
+
+
+def _pid(_: RunView) -> int:
+    return os.getpid()
+
+
+def _tick(view: RunView) -> int:
+    return view.tick
+
+
+async def _running(client: httpx.AsyncClient, **body: object) -> int:
+    run = await create(client, condition="rp", mode="realtime", hz=50, **body)
+    run_id = int(run["id"])
+    r = await client.post(f"/api/runs/{run_id}/start")
+    assert r.status_code == 200, r.text
+    return run_id
+
+
+async def test_a_run_ticks_reads_and_takes_rewards_in_the_engines_process(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        engines = _engines(app)
+        run_id = await _running(client)
+        live = engines.get(run_id)
+        assert live is not None
+        assert await live.read(_pid) == engines.pid != os.getpid()
+        await until(client, run_id, "running")
+        r = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})
+        assert r.status_code == 202, r.text
+        reward_id = r.json()["id"]
+        assert (await client.post(f"/api/runs/{run_id}/pause")).json()["status"] == "paused"
+        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 409
+        step = await client.post(f"/api/runs/{run_id}/step")
+        assert step.status_code == 200, step.text
+        assert (await client.post(f"/api/runs/{run_id}/resume")).json()["status"] == "running"
+        rate = await client.post(f"/api/runs/{run_id}/rate", json={"hz": 20})
+        assert rate.status_code == 200, rate.text
+        assert rate.json()["live"]["hz"] == 20
+        stopped = await client.post(f"/api/runs/{run_id}/stop")
+        assert stopped.status_code == 200, stopped.text
+        assert stopped.json()["status"] == "stopped"
+        assert engines.get(run_id) is None  # its end is stored: let go there and here
+        log = (await client.get(f"/api/runs/{run_id}/rewards")).json()
+        assert any(r["id"] == reward_id and r["applied"] for r in log["data"]), log
+        # Started again from its checkpoint, in the engines' process again.
+        again = await client.post(f"/api/runs/{run_id}/start")
+        assert again.status_code == 200, again.text
+        assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
+
+
+async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        engines = _engines(app)
+        run_id = await _running(client)
+        sub = engines.subscribe(run_id, maxsize=256, tick_hz=50.0)
+        assert engines.streams(run_id) == 1
+        await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})
+        kinds: set[str] = set()
+        async with asyncio.timeout(30):  # a hang guard: both come within a few ticks
+            while not {"TickPublished", "RewardApplied"} <= kinds:
+                kinds.add(type(await sub.get()).__name__)
+        await client.post(f"/api/runs/{run_id}/stop")
+        seen: list[object] = []
+        async with asyncio.timeout(30):  # a hang guard: the run's end closes it
+            async for e in sub:
+                seen.append(e)
+        last = seen[-1]
+        assert isinstance(last, StatusChanged) and last.status.value == "stopped"
+        engines.unsubscribe(run_id, sub)
+        assert engines.streams() == 0
+
+
+async def test_a_blocked_service_loop_does_not_stop_the_ticks(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        run_id = await _running(client)
+        live = _engines(app).get(run_id)
+        assert live is not None
+        await until(client, run_id, "running")
+        before = await live.read(_tick)
+        time.sleep(BLOCK_S)  # the service's loop (this test's) does nothing else meanwhile
+        # What ticked meanwhile is read after: the process ticked on its own.
+        assert await live.read(_tick) > before
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_process_dies(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        engines = _engines(app)
+        run_id = await _running(client)
+        sub = engines.subscribe(run_id, maxsize=64, tick_hz=0.0)
+        assert engines.pid is not None
+        os.kill(engines.pid, signal.SIGKILL)
+        async with asyncio.timeout(30):  # a hang guard: its stream ends
+            async for _ in sub:
+                pass
+        async with asyncio.timeout(30):  # a hang guard: stored as failed
+            while (run := (await client.get(f"/api/runs/{run_id}")).json()).get("status") != (
+                "failed"
+            ):
+                await asyncio.sleep(0.05)
+        assert "engines' process is gone" in run["error"]
+        r = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})
+        assert r.status_code in (409, 503), r.text
+        other = await create(client, condition="rp", mode="realtime", hz=50)
+        started = await client.post(f"/api/runs/{other['id']}/start")
+        assert started.status_code == 503, started.text
+        assert "engines' process is gone" in started.json()["detail"]
+        assert (await client.get("/api/health")).status_code in (200, 503)
+
+
+async def test_the_service_stops_with_the_engines_process_gone_and_its_run_resumable(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path, engine_process=True)
+    async with client_for(settings) as (client, app):
+        run_id = await _running(client)
+        await until(client, run_id, "running")
+        pid = _engines(app).pid
+    assert pid is not None
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)  # reaped: gone
+    async with client_for(settings) as (client, _):
+        assert (await client.get(f"/api/runs/{run_id}")).json()["status"] == "interrupted"
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
+
+
+def test_the_engines_cannot_be_on_a_thread_and_in_a_process_at_once(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="exclude each other"):
+        settings_for(tmp_path, engine_process=True, engine_thread=True)
+
+
+async def test_the_engines_process_refuses_storage_it_could_not_open_itself(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path, engine_process=True)
+
+    def storage(s: Settings) -> Storage:  # any factory but the default
+        return open_storage(s)
+
+    with pytest.raises(ValueError, match="by SRLAB_DATABASE_URL only"):
+        async with client_for(settings, storage=storage):
+            pass
