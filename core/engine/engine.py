@@ -576,16 +576,35 @@ class RunEngine:
                 await self._realtime()
             else:
                 await self._fast()
-            # No more rewards now; those that arrived after the last tick apply at the
-            # boundary after it.
+            # No more rewards now; those that arrived after the last tick apply at their
+            # boundaries, reached as the run would have reached them.
             self._closing = True
             self._boundary.release_held()
+            await self._reach_last_boundary()
             await self._settle(self.sim.tick_count + 1, until=math.inf)
         finally:
             self._closing = True
             self._refuse_steps(RunStateError(f"run {self.run_id} ended before the step"))
             self._boundary.close()
             self._writer.end_of_ticks()
+
+    async def _reach_last_boundary(self) -> None:
+        """Bring a stopping run to the boundary its last due reward was stamped with.
+
+        A reward is stored as applied at its stamp, and a replay of the log (a resumed
+        run's) applies it there: after the ticks before the stamp, and after the reset when
+        an episode ended just before it, so it credits the new episode's STM (cleared at
+        the reset), not the ended one's. Applied instead to whatever state the run stops
+        in, its stored learning would differ from the replay's, and a resumed run would go
+        on from an LTM other than the stored one. So the run ticks on to a reward held past
+        the next boundary (stamped while an episode's own rewards settled), and starts the
+        next episode before the rewards due after an episode's end.
+        """
+        due = self._boundary.due
+        while due and max(job.stamp for job in due) > self.sim.tick_count + 1:
+            await self._step()
+        if due and self._need_reset:
+            self._start_episode()
 
     def _episodes_left(self) -> bool:
         limit = self.spec.episodes

@@ -15,7 +15,7 @@ import pytest
 from fakes import InMemoryRunStore, ManualPacer
 
 from core.brain.catalog import Catalog, load_catalog
-from core.commands import EditAssociation
+from core.commands import EditAssociation, InjectReward, RewardSource
 from core.conditions import get_condition
 from core.engine import (
     HZ_MAX,
@@ -38,8 +38,12 @@ from core.ports import (
     RewardRecord,
     RunSpec,
     RunStatus,
+    StoredReward,
 )
 from core.runner import run as headless_run
+from core.simulation import Simulation, TickInputs
+
+LtmByName = dict[tuple[str, str], float]
 
 CATALOG: Catalog = load_catalog()
 
@@ -450,6 +454,83 @@ def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
     assert resumed.sim.brain.ltm.as_dict() == whole.sim.brain.ltm.as_dict()
     assert resumed.totals == whole.totals
     assert len(store.episodes(engine.run_id)) == 16
+
+
+def headless_ltm(condition: str, seed: int, rewards: Sequence[StoredReward]) -> LtmByName:
+    """The LTM of the plain headless loop given a run's log up to its last stamp.
+
+    Trainers' rewards go in at the boundaries they were stamped with; the run's own come
+    from the ticks, as in a resumed run's replay.
+    """
+    sim = Simulation(get_condition(condition), seed, catalog=CATALOG)
+    sim.reset()
+    last = max(r.record.tick for r in rewards)
+    while sim.tick_count < last:
+        if sim.snapshot.done:
+            sim.reset()
+        boundary = sim.tick_count + 1
+        due = tuple(
+            InjectReward(r.record.value, note=r.record.note, source=r.record.source)
+            for r in rewards
+            if r.record.source is RewardSource.TRAINER and r.record.tick == boundary
+        )
+        sim.tick(TickInputs(rewards=due))
+    cat = sim.brain.catalog
+    return {(cat.stimuli[s].name, cat.behaviours[b].name): v for (s, b), v in sim.brain.ltm.items()}
+
+
+@pytest.mark.parametrize("arrival", ["after the end", "while the end settles"])
+def test_a_stop_right_after_an_episode_ends_stores_what_the_log_replays(arrival: str) -> None:
+    """A trainer's reward arriving after an episode's last tick is due at a boundary after
+    the reset: the next one, or the one after if it arrives while the episode's own rewards
+    settle. A resumed run and a replay of the log apply it there, so a run stopped before
+    that boundary must reach it on the way out; it used to apply the reward to the ended
+    episode's STM, and the stored LTM disagreed with the log's replay (the PostgreSQL fault
+    test's "LTM != replay"). The first case fails without the fix; the second (the stop
+    ticks once more to the reward's stamp) pins the other path, which this seed's
+    episode ends happen not to tell apart from the old one (the episode's own rewards
+    leave STM empty)."""
+    pacer = ManualPacer()
+    store = InMemoryRunStore(CATALOG)
+    hz = 100.0
+    engine = RunEngine.create(realtime("rp", 11, hz=hz), store, catalog=CATALOG, pacer=pacer)
+    settling = arrival == "while the end settles"
+    episodes = 0
+
+    def ending() -> bool:
+        """The last tick ended its episode, whose own rewards are being applied."""
+        return engine.sim.snapshot.done and engine.totals.episodes == episodes
+
+    async def main() -> tuple[RewardAck, int]:
+        nonlocal episodes
+        task = asyncio.create_task(engine.run())
+        ticks = 0
+        while True:  # tick by tick, to an episode whose end leaves records in STM
+            while not (engine.stats.ticks > ticks and pacer.sleeping == 1):
+                if settling and engine.stats.ticks > ticks and ending():
+                    break
+                await asyncio.sleep(0)
+            ticks = engine.stats.ticks
+            if settling and ending() and pacer.sleeping == 0:
+                break
+            if not settling and engine.totals.episodes > episodes and list(engine.sim.brain.stm):
+                break
+            episodes = engine.totals.episodes
+            assert ticks < 20_000, "no such episode end"
+            pacer.advance(1.0 / hz)
+        end = engine.sim.tick_count
+        ack = await engine.reward(1.0, note="late")
+        engine.stop()
+        async with asyncio.timeout(30):
+            assert await task is RunStatus.STOPPED
+        return ack, end
+
+    ack, end = asyncio.run(main())
+    assert ack.tick == end + (2 if settling else 1)
+    rewards = store.rewards(engine.run_id)
+    (late,) = (r for r in rewards if r.record.note == "late")
+    assert late.applied
+    assert store.ltm(engine.run_id) == headless_ltm("rp", 11, rewards)
 
 
 def test_a_finished_run_cannot_be_resumed_and_unknown_params_are_refused() -> None:

@@ -14,9 +14,9 @@ import httpx
 from core.brain.catalog import load_catalog
 from core.commands import InjectReward, RewardSource
 from core.conditions import get_condition
-from core.events import RewardApplied
+from core.events import RewardDue
 from core.ports import StoredReward
-from core.simulation import Simulation, TickInputs
+from core.simulation import Simulation
 
 INTERNAL = ("task", "program")
 """Reward sources the run itself produces (the rest are trainers')."""
@@ -160,9 +160,17 @@ def replay_ltm(
 ) -> dict[tuple[str, str], float]:
     """LTM after replaying the log headless up to the last applied reward.
 
-    Trainers' rewards are injected at the ticks they were stamped with; the run's own are
-    produced again by the replayed ticks. Equal to the stored LTM only if every reward was
-    applied exactly once, in log order.
+    Trainers' rewards are applied at the boundaries they were stamped with; the run's own
+    are produced again by the replayed ticks. As in the engine, a boundary applies the
+    run's own rewards first, then the trainers'; an episode's own rewards apply before it
+    ends and trainers' stamped after its last tick after the reset. Equal to the stored
+    LTM only if every reward was applied exactly once, in that order.
+
+    The simulation defers its rewards, as the engine's does, so that the replay can stop
+    right after the last applied reward: a run stopped between a boundary and its tick has
+    applied the boundary's rewards but not run the tick, and when that tick would have
+    ended an episode, a simulation applying its own rewards would apply the episode's
+    last ones in the same `tick()` call, which the run never did.
     """
     catalog = load_catalog()
     applied = [r.applied for r in rewards]
@@ -171,24 +179,39 @@ def replay_ltm(
     assert all(applied[: last + 1]), "an unapplied reward precedes an applied one"
     target = last + 1
     external = [r for r in rewards if r.record.source not in INTERNAL]
-    sim = Simulation(get_condition(condition), seed, catalog=catalog)
+    sim = Simulation(get_condition(condition), seed, catalog=catalog, defer_rewards=True)
     count = 0
+
+    def apply(due: list[RewardDue]) -> None:
+        nonlocal count
+        for e in due:
+            if count == target:
+                return
+            reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
+            sim.apply_reward(reward, e.tick, e.episode)
+            count += 1
+
+    own: list[RewardDue] = []
     sim.reset()
     while count < target:
         boundary = sim.tick_count + 1
-        now = tuple(
-            InjectReward(r.record.value, note=r.record.note, source=RewardSource(r.record.source))
-            for r in external
-            if r.record.tick == boundary
+        apply(own)
+        apply(
+            [
+                RewardDue(boundary, sim.episode, r.record.value, r.record.source, r.record.note)
+                for r in external
+                if r.record.tick == boundary
+            ]
         )
-        result = sim.tick(TickInputs(rewards=now))
-        for e in result.events:
-            if isinstance(e, RewardApplied):
-                count += 1
-                if count == target:
-                    break
-        if result.snapshot.done and count < target:
-            sim.reset()
+        if count == target:
+            break
+        result = sim.tick()
+        own = [e for e in result.events if isinstance(e, RewardDue)]
+        if result.snapshot.done:
+            apply(own)
+            own = []
+            if count < target:
+                sim.reset()
     return {
         (catalog.stimuli[s].name, catalog.behaviours[b].name): v
         for (s, b), v in sim.brain.ltm.items()
