@@ -473,6 +473,26 @@ def cpu_seconds(pid: int) -> float | None:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def tree_cpu_seconds(pid: int) -> float | None:
+    """`cpu_seconds` of a process and every process under it (its store and engines' ones)."""
+    parents: dict[int, int] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        parents[int(stat.parent.name)] = int(fields[1])
+    tree, grew = {pid}, True
+    while grew:
+        below = {child for child, parent in parents.items() if parent in tree} - tree
+        tree |= below
+        grew = bool(below)
+    own = cpu_seconds(pid)
+    if own is None:
+        return None
+    return own + sum(cpu_seconds(p) or 0.0 for p in tree - {pid})
+
+
 def machine_busy_s() -> float | None:
     """CPU time the whole machine spent busy, summed over its cores (Linux)."""
     try:
@@ -486,6 +506,8 @@ def machine_busy_s() -> float | None:
 class CpuMeter:
     """Who used the CPU from now on: the bench, the server and the rest of the machine.
 
+    The server's share is its process's and those it started (the store's, the engines').
+
     The bench counts the children it waited for (wrk); other work on the machine skews
     every figure, so it is shown too.
     """
@@ -494,7 +516,7 @@ class CpuMeter:
         self._pid = server_pid
         self._started = time.perf_counter()
         self._client = self._client_s()
-        self._server = cpu_seconds(server_pid)
+        self._server = tree_cpu_seconds(server_pid)
         self._machine = machine_busy_s()
 
     @staticmethod
@@ -510,7 +532,7 @@ class CpuMeter:
         """Each one's share of one core since the start."""
         wall = time.perf_counter() - self._started
         mine = self._client_s() - self._client
-        server1, machine1 = cpu_seconds(self._pid), machine_busy_s()
+        server1, machine1 = tree_cpu_seconds(self._pid), machine_busy_s()
         parts = [f"{client} {mine / wall:.0%}"]
         server = None
         if self._server is not None and server1 is not None:
