@@ -1337,10 +1337,10 @@ async def event_streams(
 
 
 async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
-    """D3 and D4 with the engines on the service's loop and on their own, alternated.
+    """D3 and D4 with the engines in each of `PLACEMENTS`, alternated.
 
-    Each round starts a fresh `srlab serve` per placement (``SRLAB_ENGINE_THREAD``), so
-    both see the same machine within minutes of each other.
+    Each round starts a fresh `srlab serve` per placement (`placement_env`), so all of
+    them see the same machine within minutes of each other.
     """
     rows: dict[str, list[dict[str, float]]] = {p: [] for p in PLACEMENTS}
     for k in range(args.rounds):

@@ -98,8 +98,6 @@ async def service(
         if settings.engine_process:
             remote = ProcessEngines(
                 opened.runs,
-                catalog,
-                settings.max_runs,
                 max_streams=settings.max_streams,
                 max_streams_per_run=settings.max_streams_per_run,
             )

@@ -56,7 +56,7 @@ from server.engine_loop import LiveRun
 from server.engines import (
     ACTIVE,
     EngineManager,
-    check_stream_caps,
+    StreamBook,
     create_run,
 )
 
@@ -201,19 +201,12 @@ class ProcessEngines:
     """
 
     def __init__(
-        self,
-        store: RunStore,
-        catalog: Catalog,
-        max_runs: int,
-        *,
-        max_streams: int = 64,
-        max_streams_per_run: int = 16,
+        self, store: RunStore, *, max_streams: int = 64, max_streams_per_run: int = 16
     ) -> None:
         self.store = store
-        self.catalog = catalog
-        self.max_runs = max_runs
-        self.max_streams = max_streams
-        self.max_streams_per_run = max_streams_per_run
+        """The service's storage: runs are created here, and failures stored when the
+        child is gone (the child has its own for everything else)."""
+        self._streams = StreamBook(max_streams, max_streams_per_run)
         self._proc: asyncio.subprocess.Process | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._pump: asyncio.Task[None] | None = None
@@ -221,11 +214,9 @@ class ProcessEngines:
         self._calls: dict[int, asyncio.Future[Any]] = {}
         self._runs: dict[int, RemoteRun] = {}
         self._starting: set[int] = set()
-        self._subs: dict[int, tuple[int, Subscription]] = {}
-        """Subscription id -> (run id, the subscription here)."""
-        self._sub_ids: dict[int, int] = {}
-        """id(subscription) -> its subscription id."""
-        self._streams: dict[int, set[Subscription]] = {}
+        self._subs: dict[int, Subscription] = {}
+        """The subscriptions here fed from the child, by the id their copy there has."""
+        self._sub_ids: dict[Subscription, int] = {}
         self._gone: EngineProcessError | None = None
         self._closing = False
         self._new: dict[int, RemoteRun] = {}
@@ -312,12 +303,12 @@ class ProcessEngines:
                 if (run := self._runs.get(run_id)) is not None:
                     run.update(state)
             case ("events", sub_id, events):
-                if (entry := self._subs.get(sub_id)) is not None:
+                if (sub := self._subs.get(sub_id)) is not None:
                     for event in events:
-                        entry[1].offer(event)
+                        sub.offer(event)
             case ("closed", sub_id):
-                if (entry := self._subs.get(sub_id)) is not None:
-                    entry[1].close()
+                if (sub := self._subs.get(sub_id)) is not None:
+                    sub.close()
             case ("ended", run_id, state, let_go):
                 if (run := self._runs.get(run_id)) is not None:
                     run.update(state)
@@ -341,7 +332,7 @@ class ProcessEngines:
             if run.status in ACTIVE:
                 run.update(RunState(RunStatus.FAILED, str(self._gone), run.hz, None))
             run.done.set()
-        for _, sub in self._subs.values():
+        for sub in self._subs.values():
             sub.close()
 
     def _store_failed(self, runs: tuple[RemoteRun, ...]) -> list[int]:
@@ -423,15 +414,13 @@ class ProcessEngines:
 
     def streams(self, run_id: int | None = None) -> int:
         """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
-        if run_id is not None:
-            return len(self._streams.get(run_id, ()))
-        return sum(len(subs) for subs in self._streams.values())
+        return self._streams.count(run_id)
 
     def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
         """A run's events, now or from its next start (`EngineManager.subscribe`'s caps)."""
-        check_stream_caps(self, run_id, self.max_streams, self.max_streams_per_run)
+        self._streams.admit(run_id)
         sub = self.mirror(run_id, maxsize, tick_hz)
-        self._streams.setdefault(run_id, set()).add(sub)
+        self._streams.add(run_id, sub)
         return sub
 
     def mirror(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
@@ -441,15 +430,15 @@ class ProcessEngines:
             sub.close()
             return sub
         sub_id = next(self._ids)
-        self._subs[sub_id] = (run_id, sub)
-        self._sub_ids[id(sub)] = sub_id
+        self._subs[sub_id] = sub
+        self._sub_ids[sub] = sub_id
         self._send(("subscribe", sub_id, run_id, maxsize, tick_hz))
         return sub
 
     def drop(self, sub: Subscription) -> None:
         """Stop feeding a subscription `mirror` made, and close it."""
         sub.close()
-        sub_id = self._sub_ids.pop(id(sub), None)
+        sub_id = self._sub_ids.pop(sub, None)
         if sub_id is None:
             return
         self._subs.pop(sub_id, None)
@@ -459,11 +448,7 @@ class ProcessEngines:
     def unsubscribe(self, run_id: int, sub: Subscription) -> None:
         """Stop feeding a subscription `subscribe` gave."""
         self.drop(sub)
-        open_ = self._streams.get(run_id)
-        if open_ is not None:
-            open_.discard(sub)
-            if not open_:
-                del self._streams[run_id]
+        self._streams.discard(run_id, sub)
 
     def interrupt_all(self) -> None:
         """Ask every run to end at its next tick boundary, as interrupted (resumable)."""
@@ -478,15 +463,6 @@ class ProcessEngines:
 
 
 # --------------------------------------------------------------------------- in the child
-
-
-@dataclass(frozen=True, slots=True)
-class _Mirror:
-    """A subscription in the child whose events go to the service's copy."""
-
-    sub_id: int
-    run_id: int
-    sub: Subscription
 
 
 class _Host:
@@ -532,8 +508,7 @@ class _Host:
             elif kind == "subscribe":
                 _, sub_id, run_id, maxsize, tick_hz = message
                 sub = self.manager.subscribe(run_id, maxsize, tick_hz)
-                mirror = _Mirror(sub_id, run_id, sub)
-                self._mirrors[sub_id] = asyncio.create_task(self._forward(mirror))
+                self._mirrors[sub_id] = asyncio.create_task(self._forward(sub_id, run_id, sub))
             elif kind == "unsubscribe":
                 task = self._mirrors.pop(message[1], None)
                 if task is not None:
@@ -565,9 +540,8 @@ class _Host:
             frame = _frame(("result", call_id, False, RuntimeError(f"{op}: {e!r} ({value!r})")))
         self.writer.write(frame)
 
-    async def _forward(self, mirror: _Mirror) -> None:
+    async def _forward(self, sub_id: int, run_id: int, sub: Subscription) -> None:
         """Send a subscription's events in batches; the service's copy reads them."""
-        sub, run_id = mirror.sub, mirror.run_id
         try:
             while True:
                 try:
@@ -576,13 +550,13 @@ class _Host:
                     break
                 events = [first, *sub.drain()]
                 self.sync(run_id)  # a new catalogue before the events that name it
-                self.send(("events", mirror.sub_id, events))
+                self.send(("events", sub_id, events))
                 if self.writer.transport.get_write_buffer_size() > EVENTS_HIGH_WATER:
                     await self.writer.drain()
-            self.send(("closed", mirror.sub_id))
+            self.send(("closed", sub_id))
         finally:
             self.manager.unsubscribe(run_id, sub)
-            self._mirrors.pop(mirror.sub_id, None)
+            self._mirrors.pop(sub_id, None)
 
     def _watch(self, run_id: int) -> None:
         """Send the run's status changes as they come, and its end."""
@@ -671,6 +645,7 @@ def _configure_child() -> tuple[int, int]:
 
 
 async def _child(read_fd: int, write_fd: int) -> None:
+    from core.setup import Setup
     from server.bootstrap import open_storage, warm_up
     from server.config import Settings
     from server.engine_loop import EngineLoop
@@ -695,8 +670,6 @@ async def _child(read_fd: int, write_fd: int) -> None:
         await writer.drain()
         return
     try:
-        from core.setup import Setup
-
         engine_loop = EngineLoop(thread=False)
         await engine_loop.start()
         manager = EngineManager(

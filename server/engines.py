@@ -189,14 +189,43 @@ def create_run(store: RunStore, spec: RunSpec, network: tuple[NetworkPair, ...] 
     return RunEngine.create(spec, store, network=assoc).run_id
 
 
-def check_stream_caps(engines: Engines, run_id: int, total: int, per_run: int) -> None:
-    """`TooManyStreamsError` if one more stream would pass the caps (see `subscribe`)."""
-    if engines.streams() >= total:
-        raise TooManyStreamsError(f"{total} event streams are open already (SRLAB_MAX_STREAMS)")
-    if engines.streams(run_id) >= per_run:
-        raise TooManyStreamsError(
-            f"run {run_id} has {per_run} event streams open already (SRLAB_MAX_STREAMS_PER_RUN)"
-        )
+class StreamBook:
+    """The event streams `Engines.subscribe` gave and not yet took back, by run, capped."""
+
+    def __init__(self, total: int, per_run: int) -> None:
+        self.total = total
+        self.per_run = per_run
+        self._open: dict[int, set[Subscription]] = {}
+
+    def count(self, run_id: int | None = None) -> int:
+        """How many are open (to one run, or to all)."""
+        if run_id is not None:
+            return len(self._open.get(run_id, ()))
+        return sum(len(subs) for subs in self._open.values())
+
+    def admit(self, run_id: int) -> None:
+        """`TooManyStreamsError` if one more stream to `run_id` would pass a cap."""
+        if self.count() >= self.total:
+            raise TooManyStreamsError(
+                f"{self.total} event streams are open already (SRLAB_MAX_STREAMS)"
+            )
+        if self.count(run_id) >= self.per_run:
+            raise TooManyStreamsError(
+                f"run {run_id} has {self.per_run} event streams open already "
+                "(SRLAB_MAX_STREAMS_PER_RUN)"
+            )
+
+    def add(self, run_id: int, sub: Subscription) -> None:
+        """Count a stream given."""
+        self._open.setdefault(run_id, set()).add(sub)
+
+    def discard(self, run_id: int, sub: Subscription) -> None:
+        """Stop counting a stream taken back."""
+        open_ = self._open.get(run_id)
+        if open_ is not None:
+            open_.discard(sub)
+            if not open_:
+                del self._open[run_id]
 
 
 class EngineManager:
@@ -237,9 +266,7 @@ class EngineManager:
         """Runs whose slot is taken while their engine is rebuilt."""
         self._waiting: dict[int, list[Subscription]] = {}
         """Subscriptions to runs not running here: fed from the run's next start."""
-        self.max_streams = max_streams
-        self.max_streams_per_run = max_streams_per_run
-        self._streams: dict[int, set[Subscription]] = {}
+        self._streams = StreamBook(max_streams, max_streams_per_run)
         """The subscriptions `subscribe` gave, by run, until `unsubscribe`."""
         self._ticking: dict[int, asyncio.Task[RunStatus]] = {}
         """The engines' loop's own: each run's task there, while it runs."""
@@ -294,9 +321,7 @@ class EngineManager:
 
     def streams(self, run_id: int | None = None) -> int:
         """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
-        if run_id is not None:
-            return len(self._streams.get(run_id, ()))
-        return sum(len(subs) for subs in self._streams.values())
+        return self._streams.count(run_id)
 
     def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
         """A subscription to a run's events, now if it runs here, else from its next start.
@@ -304,7 +329,7 @@ class EngineManager:
         At most `max_streams` are open at once, `max_streams_per_run` to one run: past
         either, `TooManyStreamsError`, and nothing is subscribed.
         """
-        check_stream_caps(self, run_id, self.max_streams, self.max_streams_per_run)
+        self._streams.admit(run_id)
         live = self._engines.get(run_id)
         task = self._tasks.get(run_id)
         if live is not None and task is not None and not task.done():
@@ -313,7 +338,7 @@ class EngineManager:
         else:
             sub = Subscription(maxsize, tick_hz)
             self._waiting.setdefault(run_id, []).append(sub)
-        self._streams.setdefault(run_id, set()).add(sub)
+        self._streams.add(run_id, sub)
         return sub
 
     def unsubscribe(self, run_id: int, sub: Subscription) -> None:
@@ -326,11 +351,7 @@ class EngineManager:
             waiting.remove(sub)
             if not waiting:
                 del self._waiting[run_id]
-        open_ = self._streams.get(run_id)
-        if open_ is not None:
-            open_.discard(sub)
-            if not open_:
-                del self._streams[run_id]
+        self._streams.discard(run_id, sub)
         sub.close()
 
     def _settle_status(self, engine: RunEngine) -> None:

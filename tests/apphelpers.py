@@ -54,6 +54,14 @@ async def create(client: httpx.AsyncClient, **body: Any) -> dict[str, Any]:
     return out
 
 
+async def started_realtime(client: httpx.AsyncClient) -> int:
+    """A 50 Hz realtime `rp` run, created and started (200); its id."""
+    run_id = int((await create(client, condition="rp", mode="realtime", hz=50))["id"])
+    r = await client.post(f"/api/runs/{run_id}/start")
+    assert r.status_code == 200, r.text
+    return run_id
+
+
 async def until(
     client: httpx.AsyncClient, run_id: int, status: str, timeout: float = 30
 ) -> dict[str, Any]:

@@ -15,9 +15,8 @@ import threading
 import time
 from pathlib import Path
 
-import httpx
 import pytest
-from apphelpers import client_for, create, settings_for, until
+from apphelpers import client_for, settings_for, started_realtime, until
 
 from core.engine import RunView, StatusChanged, Subscription, SubscriptionClosed
 from server.engines import EngineManager
@@ -37,18 +36,10 @@ def _manager(app: object) -> EngineManager:
     return manager
 
 
-async def _running(client: httpx.AsyncClient) -> int:
-    run = await create(client, condition="rp", mode="realtime", hz=50)
-    run_id = int(run["id"])
-    r = await client.post(f"/api/runs/{run_id}/start")
-    assert r.status_code == 200, r.text
-    return run_id
-
-
 async def test_a_runs_reads_and_rewards_happen_on_the_engines_thread(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=True)) as (client, app):
         manager = _manager(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = manager.get(run_id)
         assert live is not None
         there = await live.read(lambda _: threading.get_ident())
@@ -63,7 +54,7 @@ async def test_a_blocked_service_loop_stops_the_ticks_only_when_they_share_it(
     tmp_path: Path, engine_thread: bool
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = _manager(app).get(run_id)
         assert live is not None
         engine = live.engine
@@ -84,7 +75,7 @@ async def test_a_control_checks_and_acts_in_one_step_on_the_engines_loop(
     tmp_path: Path, engine_thread: bool
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, _):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         paused = await asyncio.gather(*(client.post(f"/api/runs/{run_id}/pause") for _ in range(4)))
         # One pause wins; the others find the run paused already.
         assert sorted(r.status_code for r in paused) == [200, 409, 409, 409]
@@ -99,7 +90,7 @@ async def test_a_stream_reads_on_the_service_loop_what_the_engines_thread_offers
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
         manager = _manager(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         sub = manager.subscribe(run_id, maxsize=64, tick_hz=0.0)
         await client.post(f"/api/runs/{run_id}/pause")
         statuses: list[str] = []
@@ -125,7 +116,7 @@ async def test_a_subscription_made_as_its_run_ends_is_closed_not_left_open(
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
         manager = _manager(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = manager.get(run_id)
         assert live is not None
         await client.post(f"/api/runs/{run_id}/stop")
@@ -140,7 +131,7 @@ async def test_the_service_stops_with_no_engines_thread_left_and_its_run_resumab
 ) -> None:
     settings = settings_for(tmp_path, engine_thread=True)
     async with client_for(settings) as (client, app):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         await until(client, run_id, "running")
         thread_id = _manager(app).loop.thread_id
         # The thread itself: once it has ended, a new thread may get its ident.
@@ -154,7 +145,7 @@ async def test_the_service_stops_with_no_engines_thread_left_and_its_run_resumab
 @PLACEMENTS
 async def test_a_view_read_sees_one_state_of_the_run(tmp_path: Path, engine_thread: bool) -> None:
     async with client_for(settings_for(tmp_path, engine_thread=engine_thread)) as (client, app):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = _manager(app).get(run_id)
         assert live is not None
 

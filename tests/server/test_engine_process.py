@@ -17,9 +17,8 @@ import signal
 import time
 from pathlib import Path
 
-import httpx
 import pytest
-from apphelpers import client_for, create, settings_for, until
+from apphelpers import client_for, create, settings_for, started_realtime, until
 
 from core.engine import RunView, StatusChanged
 from server.bootstrap import Storage, open_storage
@@ -46,20 +45,12 @@ def _tick(view: RunView) -> int:
     return view.tick
 
 
-async def _running(client: httpx.AsyncClient, **body: object) -> int:
-    run = await create(client, condition="rp", mode="realtime", hz=50, **body)
-    run_id = int(run["id"])
-    r = await client.post(f"/api/runs/{run_id}/start")
-    assert r.status_code == 200, r.text
-    return run_id
-
-
 async def test_a_run_ticks_reads_and_takes_rewards_in_the_engines_process(
     tmp_path: Path,
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
         engines = _engines(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = engines.get(run_id)
         assert live is not None
         assert await live.read(_pid) == engines.pid != os.getpid()
@@ -92,7 +83,7 @@ async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
         engines = _engines(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         sub = engines.subscribe(run_id, maxsize=256, tick_hz=50.0)
         assert engines.streams(run_id) == 1
         await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})
@@ -113,7 +104,7 @@ async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
 
 async def test_a_blocked_service_loop_does_not_stop_the_ticks(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         live = _engines(app).get(run_id)
         assert live is not None
         await until(client, run_id, "running")
@@ -129,7 +120,7 @@ async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_proce
 ) -> None:
     async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
         engines = _engines(app)
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         sub = engines.subscribe(run_id, maxsize=64, tick_hz=0.0)
         assert engines.pid is not None
         os.kill(engines.pid, signal.SIGKILL)
@@ -156,7 +147,7 @@ async def test_the_service_stops_with_the_engines_process_gone_and_its_run_resum
 ) -> None:
     settings = settings_for(tmp_path, engine_process=True)
     async with client_for(settings) as (client, app):
-        run_id = await _running(client)
+        run_id = await started_realtime(client)
         await until(client, run_id, "running")
         pid = _engines(app).pid
     assert pid is not None
