@@ -289,7 +289,9 @@ class RunPublic(BaseModel):
     episodes_done: int
     successes: int
     ticks: int
-    live: LiveState | None = None
+    live: LiveState | None = Field(
+        default=None, description="its live figures while it runs here (null once it has ended)"
+    )
 
 
 class RunRate(Strict):

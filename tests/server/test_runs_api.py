@@ -10,6 +10,9 @@ from typing import Any
 import pytest
 from apphelpers import client_for, create, settings_for, until
 
+from core.engine import RunEngine
+from core.ports import RunStatus
+from server.api.routes import runs as runs_routes
 from server.schemas import EpisodeDetail
 
 pytestmark = pytest.mark.anyio
@@ -190,9 +193,27 @@ async def test_only_ticking_runs_keep_an_engine_in_memory(tmp_path: Path) -> Non
         assert (await client.post(f"/api/runs/{run}/start")).status_code == 200
         done = await until(client, run, "finished")
         assert done["episodes_done"] == 1 and done["live"] is None
+        # Its status is stored before its task ends; the engine goes when the task has.
+        assert await engines.ended(run, timeout_s=30)
         assert list(engines.engines()) == []  # its state is in storage: the engine is gone
         episodes = (await client.get(f"/api/runs/{run}/episodes")).json()
         assert episodes["count"] == 1
+
+
+async def test_a_run_that_has_ended_has_no_live_figures_while_its_engine_is_still_held(
+    tmp_path: Path,
+) -> None:
+    # The engine is let go only after its task ends: a read in between meets a finished run
+    # still in memory, and must answer what the read of the stored run answers.
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        run = await create(client, condition="innate", episodes=1)
+        engine = RunEngine.restore(run["id"], app.state.srlab.store)
+        assert runs_routes._of_view(engine.view()).live is not None  # created: starting
+        assert await engine.run() == RunStatus.FINISHED
+        held = runs_routes._of_view(engine.view())
+        stored = (await client.get(f"/api/runs/{run['id']}")).json()
+    assert (held.status, held.live) == ("finished", None)
+    assert held.model_dump(mode="json") == stored
 
 
 async def test_a_stopped_run_starts_again_from_its_checkpoint(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import RunEngine, RunView
 from core.errors import UnknownNameError
-from core.ports import Mode, RunSpec, RunTotals, StoredRun
+from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
 from core.sim.track import TrackGeometry
 from core.trace import unpack
 from core.worlds import load_world
@@ -46,6 +46,10 @@ MAX_PAGE = 1000
 """The longest page a list answers: a read's cost never grows with a run's age."""
 Offset = Annotated[int, Query(ge=0, le=2**62, description="items to skip")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items to answer at most")]
+
+
+_GOING = frozenset((RunStatus.CREATED, RunStatus.RUNNING, RunStatus.PAUSED))
+"""A run in memory in one of these is starting or going: it has live figures."""
 
 
 def _ms(x: float) -> float | None:
@@ -99,11 +103,12 @@ def _public(
 def _of_view(view: RunView) -> RunPublic:
     """A live run's state, without touching the database.
 
-    Read on the engines' loop (`LiveRun.read`): one consistent state of the run.
+    Read on the engines' loop (`LiveRun.read`): one consistent state of the run. A run that
+    has ended has no live figures, whether or not its engine is let go yet: the answer does
+    not depend on when that happens.
     """
-    return _public(
-        view.run_id, view.spec, view.status.value, view.error, view.totals, _live_state(view)
-    )
+    live = _live_state(view) if view.status in _GOING else None
+    return _public(view.run_id, view.spec, view.status.value, view.error, view.totals, live)
 
 
 def _of_stored(run: StoredRun) -> RunPublic:
