@@ -208,6 +208,19 @@ class Renderer:
         sc = self.server.scene
         if isinstance(self.server, viser.ViserServer):  # a client's scene has no axes of its own
             sc.world_axes.visible = False
+        # Lit by viser's default lights and a sky light, not by an environment map: with the
+        # map a frame took a software renderer (a machine without a GPU, CI's Chromium) about
+        # 1.7 CPU-seconds, so an open view kept two cores busy; without it, a third of one
+        # core, and the scene looks the same (docs/viewer.md). Nothing here casts a shadow.
+        sc.configure_environment_map(hdri=None)
+        sc.configure_default_lights(enabled=True, cast_shadow=False)
+        sc.add_light_hemisphere(
+            "/light/sky",
+            sky_color=(255, 255, 255),
+            ground_color=(200, 200, 200),
+            intensity=2.0,
+            position=(0.0, 0.0, 1.0),  # the sky is up: +z
+        )
         cx, cy, _ = s.center
         ox0, oy0, ox1, oy1 = s.outer_box
         camera: Any = (

@@ -8,9 +8,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import viser
+from viser._messages import EnableLightsMessage, EnvironmentMapMessage, HemisphereLightMessage
 
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, LampColor, MotorCommand, PymunkWorld, WorldConfig
+from server.viewer.render import Renderer
 from server.viewer.scene import (
     DIM,
     FLOOR_COLOR,
@@ -288,3 +291,22 @@ def test_the_stop_line_stands_out_on_the_floor() -> None:
     # Defect 10: the white line on light grey was hard to see. WCAG's 3:1 for graphics.
     assert contrast_ratio(STOPLINE_COLOR, FLOOR_COLOR) >= 3.0
     assert contrast_ratio((0, 0, 0), (255, 255, 255)) == pytest.approx(21.0)
+
+
+def test_the_scene_is_lit_without_an_environment_map_or_shadows() -> None:
+    # An environment map made every frame cost a software renderer (CI's Chromium, a
+    # machine without a GPU) about 1.7 CPU-seconds: an open view kept two cores busy.
+    # Read from viser's message buffer, what a browser that connects is sent.
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        Renderer(server, SCENE, WORLD, lambda _: None)
+        buffer = server._websock_server.get_message_buffer()  # viser internals
+        sent = list(buffer.message_from_id.values())
+    finally:
+        server.stop()
+    environment = [m for m in sent if isinstance(m, EnvironmentMapMessage)]
+    lights = [m for m in sent if isinstance(m, EnableLightsMessage)]
+    assert environment and environment[-1].hdri_data is None
+    assert lights and (lights[-1].enabled, lights[-1].cast_shadow) == (True, False)
+    sky = [m for m in sent if isinstance(m, HemisphereLightMessage)]
+    assert sky and sky[-1].props.intensity > 0
