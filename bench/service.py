@@ -36,7 +36,9 @@ With ``--part engines`` it measures D3 and D4 with the engines on the service's 
 a thread of their own (``SRLAB_ENGINE_THREAD``, `server/engine_loop.py`) and in a process
 of their own (``SRLAB_ENGINE_PROCESS``, `server/engine_process.py`), a fresh server for
 each, alternated ``--rounds`` times, and prints them side by side (medians over the
-rounds). ``--engines`` picks the placement of every other part's servers (default: the
+rounds). ``--part costs`` measures what a request of each kind in D4's mix costs the
+server in CPU, one at a time, and what the mix at ``--rate`` would cost it in cores.
+``--engines`` picks the placement of every other part's servers (default: the
 service's loop, as ``srlab serve``).
 
 Open loop: every request has a scheduled send time on a fixed-rate grid, whether earlier
@@ -1377,6 +1379,46 @@ async def compare_engines(args: argparse.Namespace, folder: Path) -> None:
         print(f"  {label:<44}" + "".join(f"{c:>22.2f}" for c in cells))
 
 
+async def request_costs(args: argparse.Namespace, server: Server) -> None:
+    """``--part costs``: the server's CPU per request of each kind in D4's mix.
+
+    Sent one at a time on one connection, ``--samples`` of each kind after 20 uncounted,
+    to a realtime run at ``--hz``; the server's CPU counts the processes it started. Then
+    what ``--rate`` requests/s of the mix would cost it, in cores: above what the machine
+    has left beside the ticks, D4's load cannot be served on time.
+    """
+    control = RawClient(server.port, 1, CONTROL_TIMEOUT_S)
+    await wait_healthy(control, server, args.startup_timeout)
+    run_id = await start_run(control, args.hz)
+    edits, why = await edit_target(control, args.seed)
+    if edits is None:
+        print(f"costs: no edits ({why})")
+    plan = mixed(run_id, edits, args.mix, args.seed)
+    drawn = [plan(i) for i in range(20_000)]
+    share = {k: n / len(drawn) for k, n in Counter(r.kind for r in drawn).items()}
+    cores = 0.0
+    print(f"server CPU per request, one at a time, {args.samples} of each kind:")
+    for kind in sorted(share):
+        requests = [r for r in drawn if r.kind == kind][: args.samples + 20]
+        for r in requests[:20]:
+            await control.request(r.method, r.path, r.body)
+        before, started = tree_cpu_seconds(server.pid), time.perf_counter()
+        statuses = Counter(
+            [(await control.request(r.method, r.path, r.body))[0] for r in requests[20:]]
+        )
+        after, wall = tree_cpu_seconds(server.pid), time.perf_counter() - started
+        if before is None or after is None:
+            raise SystemExit("costs: the server's CPU time cannot be read (/proc)")
+        cpu_ms = (after - before) / len(requests[20:]) * 1000
+        cores += args.rate * share[kind] * cpu_ms / 1000
+        print(
+            f"  {kind:28} {cpu_ms:6.2f} ms CPU, {wall / len(requests[20:]) * 1000:6.2f} ms "
+            f"wall; {share[kind]:4.0%} of the mix; statuses {dict(sorted(statuses.items()))}"
+        )
+    print(f"the mix at {args.rate:g} requests/s: {cores:.2f} cores of the server's CPU")
+    await stop_run(control, run_id)
+
+
 async def one_run_part(args: argparse.Namespace, server: Server) -> None:
     """``--part runs``: D4 alone."""
     await many_runs(args, server)
@@ -1499,10 +1541,11 @@ def main() -> None:
     parser.add_argument("--server-log", type=Path, help="keep the server's log here")
     parser.add_argument(
         "--part",
-        choices=["all", "load", "day", "runs", "engines"],
+        choices=["all", "load", "day", "runs", "engines", "costs"],
         default="all",
-        help="the load figures (1-2), the long day's (D1-D4), both (default), D4 alone, or "
-        "D3 and D4 with the engines on the service's loop, their own thread and process",
+        help="the load figures (1-2), the long day's (D1-D4), both (default), D4 alone, "
+        "D3 and D4 with the engines on the service's loop, their own thread and process, or "
+        "the server's CPU per request of each kind in D4's mix",
     )
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
     parser.add_argument(
@@ -1554,6 +1597,9 @@ def main() -> None:
                 server.env["SRLAB_MAX_RUNS"] = str(args.runs + 4)
                 server.start()
                 runner(one_run_part(args, server))
+            if args.part == "costs":
+                server.start()
+                runner(request_costs(args, server))
         finally:
             code = server.stop()
             if server.proc is not None:
