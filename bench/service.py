@@ -1400,19 +1400,18 @@ async def request_costs(args: argparse.Namespace, server: Server) -> None:
     print(f"server CPU per request, one at a time, {args.samples} of each kind:")
     for kind in sorted(share):
         requests = [r for r in drawn if r.kind == kind][: args.samples + 20]
-        for r in requests[:20]:
+        warm, counted = requests[:20], requests[20:]
+        for r in warm:
             await control.request(r.method, r.path, r.body)
         before, started = tree_cpu_seconds(server.pid), time.perf_counter()
-        statuses = Counter(
-            [(await control.request(r.method, r.path, r.body))[0] for r in requests[20:]]
-        )
+        statuses = Counter([(await control.request(r.method, r.path, r.body))[0] for r in counted])
         after, wall = tree_cpu_seconds(server.pid), time.perf_counter() - started
         if before is None or after is None:
             raise SystemExit("costs: the server's CPU time cannot be read (/proc)")
-        cpu_ms = (after - before) / len(requests[20:]) * 1000
+        cpu_ms = (after - before) / len(counted) * 1000
         cores += args.rate * share[kind] * cpu_ms / 1000
         print(
-            f"  {kind:28} {cpu_ms:6.2f} ms CPU, {wall / len(requests[20:]) * 1000:6.2f} ms "
+            f"  {kind:28} {cpu_ms:6.2f} ms CPU, {wall / len(counted) * 1000:6.2f} ms "
             f"wall; {share[kind]:4.0%} of the mix; statuses {dict(sorted(statuses.items()))}"
         )
     print(f"the mix at {args.rate:g} requests/s: {cores:.2f} cores of the server's CPU")

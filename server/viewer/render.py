@@ -198,29 +198,34 @@ class Renderer:
         self._version = -1
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._light()
         self._build_scene()
         self._build_panel()
 
     # --- building -------------------------------------------------------------------
 
-    def _build_scene(self) -> None:
-        s = self.static
-        sc = self.server.scene
-        if isinstance(self.server, viser.ViserServer):  # a client's scene has no axes of its own
-            sc.world_axes.visible = False
+    def _light(self) -> None:
+        """Light the scene once: the lights do not depend on the world shown."""
+        scene = self.server.scene
         # Lit by viser's default lights and a sky light, not by an environment map: with the
         # map a frame took a software renderer (a machine without a GPU, CI's Chromium) about
         # 1.7 CPU-seconds, so an open view kept two cores busy; without it, a third of one
         # core, and the scene looks the same (docs/viewer.md). Nothing here casts a shadow.
-        sc.configure_environment_map(hdri=None)
-        sc.configure_default_lights(enabled=True, cast_shadow=False)
-        sc.add_light_hemisphere(
+        scene.configure_environment_map(hdri=None)
+        scene.configure_default_lights(enabled=True, cast_shadow=False)
+        scene.add_light_hemisphere(
             "/light/sky",
             sky_color=(255, 255, 255),
             ground_color=(200, 200, 200),
             intensity=2.0,
             position=(0.0, 0.0, 1.0),  # the sky is up: +z
         )
+
+    def _build_scene(self) -> None:
+        s = self.static
+        sc = self.server.scene
+        if isinstance(self.server, viser.ViserServer):  # a client's scene has no axes of its own
+            sc.world_axes.visible = False
         cx, cy, _ = s.center
         ox0, oy0, ox1, oy1 = s.outer_box
         camera: Any = (

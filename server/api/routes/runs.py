@@ -20,7 +20,7 @@ from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
-from server.engines import Live
+from server.engines import ACTIVE, Live
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
@@ -48,7 +48,7 @@ Offset = Annotated[int, Query(ge=0, le=2**62, description="items to skip")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items to answer at most")]
 
 
-_GOING = frozenset((RunStatus.CREATED, RunStatus.RUNNING, RunStatus.PAUSED))
+_GOING = (RunStatus.CREATED, *ACTIVE)
 """A run in memory in one of these is starting or going: it has live figures."""
 
 
