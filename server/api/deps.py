@@ -1,4 +1,10 @@
-"""Dependencies of the routes: the app's state, and the write guard."""
+"""Dependencies of the routes: the app's state, and the write guard.
+
+They are coroutines because they do no I/O: FastAPI runs a plain function dependency on a
+worker thread, a hand-off there and back for each dependency of each request (most of
+what a cheap request cost, see docs/benchmarks.md). The same goes for route handlers that
+only read memory.
+"""
 
 from __future__ import annotations
 
@@ -36,7 +42,7 @@ class AppState:
     `RunSpec.network_id` of the engine's spec."""
 
 
-def _state(request: Request) -> AppState:
+async def _state(request: Request) -> AppState:
     state: AppState = request.app.state.srlab
     return state
 
@@ -44,15 +50,15 @@ def _state(request: Request) -> AppState:
 StateDep = Annotated[AppState, Depends(_state)]
 
 
-def _engines(state: StateDep) -> Engines:
+async def _engines(state: StateDep) -> Engines:
     return state.engines
 
 
-def _store(state: StateDep) -> RunQueries:
+async def _store(state: StateDep) -> RunQueries:
     return state.store
 
 
-def _networks(state: StateDep) -> NetworkRepository:
+async def _networks(state: StateDep) -> NetworkRepository:
     return state.networks
 
 
@@ -67,7 +73,7 @@ def bearer(request: Request) -> str | None:
     return (given.strip() or None) if scheme.lower() == "bearer" else None
 
 
-def require_write(request: Request, state: StateDep) -> None:
+async def require_write(request: Request, state: StateDep) -> None:
     """Writes need `Authorization: Bearer $SRLAB_TOKEN` when the service is reachable."""
     settings = state.settings
     if not settings.writes_need_token:

@@ -60,7 +60,7 @@ def _rule(s: Stimulus) -> str:
 
 
 @router.get("/stimuli")
-def list_stimuli(state: StateDep) -> list[StimulusPublic]:
+async def list_stimuli(state: StateDep) -> list[StimulusPublic]:
     """Every stimulus the logical sensors emit, with its meaning and its rule."""
     return [
         StimulusPublic(
@@ -77,7 +77,7 @@ def list_stimuli(state: StateDep) -> list[StimulusPublic]:
 
 
 @router.get("/conditions")
-def list_conditions() -> list[ConditionPublic]:
+async def list_conditions() -> list[ConditionPublic]:
     """The conditions a run may name (`condition`), with what each means."""
     return [
         ConditionPublic(
@@ -94,7 +94,7 @@ def list_conditions() -> list[ConditionPublic]:
 
 
 @router.get("/behaviours")
-def list_behaviours(state: StateDep) -> list[BehaviourPublic]:
+async def list_behaviours(state: StateDep) -> list[BehaviourPublic]:
     """Every behaviour (motor primitive) with its motion vector."""
     dt = 0.1
     return [
@@ -112,7 +112,7 @@ def list_behaviours(state: StateDep) -> list[BehaviourPublic]:
 
 
 @router.get("/sensors")
-def list_sensors(state: StateDep) -> list[SensorPublic]:
+async def list_sensors(state: StateDep) -> list[SensorPublic]:
     """Every logical sensor as declared in data, under the default sensor definition."""
     return [SensorPublic.model_validate(s, from_attributes=True) for s in state.catalog.sensors]
 

@@ -86,7 +86,7 @@ _ETAG = {
 }
 
 
-def _precondition(
+async def _precondition(
     if_match: Annotated[
         str | None,
         Header(
@@ -116,7 +116,7 @@ def _precondition(
 Expected = Annotated[Precondition | None, Depends(_precondition)]
 
 
-def _service(state: StateDep) -> NetworkService:
+async def _service(state: StateDep) -> NetworkService:
     return NetworkService(state.networks, state.engines, state.run_networks)
 
 
