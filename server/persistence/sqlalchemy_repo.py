@@ -8,7 +8,7 @@ from contextlib import AbstractContextManager
 from dataclasses import replace
 from typing import Any, TypeVar
 
-from sqlalchemy import bindparam, delete, func, insert, select
+from sqlalchemy import ColumnElement, Row, Select, bindparam, delete, func, insert, select
 from sqlalchemy import update as sql_update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session, aliased
@@ -527,16 +527,8 @@ class SqlAlchemyRunStore:
             assert run.checkpoint_episode is not None and run.checkpoint is not None
             after = run.checkpoint_tick
             checkpoint = Checkpoint(run.checkpoint_episode, after, bytes(run.checkpoint))
-        rewards = s.scalars(
-            select(RewardRow)
-            .where(RewardRow.run_id == run.id, RewardRow.tick > after)
-            .order_by(RewardRow.id)
-        )
-        commands = s.scalars(
-            select(RunCommandRow)
-            .where(RunCommandRow.run_id == run.id, RunCommandRow.tick > after)
-            .order_by(RunCommandRow.id)
-        )
+        rewards = s.execute(_rewards(RewardRow.run_id == run.id, RewardRow.tick > after))
+        commands = s.execute(_commands(RunCommandRow.run_id == run.id, RunCommandRow.tick > after))
         return replace(
             _summary(run),
             checkpoint=checkpoint,
@@ -594,10 +586,7 @@ class SqlAlchemyRunStore:
         """The run's whole reward log, in log order."""
         with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
             self._require_run(s, run_id)
-            rows = s.scalars(
-                select(RewardRow).where(RewardRow.run_id == run_id).order_by(RewardRow.id)
-            )
-            return [_reward(r) for r in rows]
+            return [_reward(r) for r in s.execute(_rewards(RewardRow.run_id == run_id))]
 
     def rewards_page(
         self, run_id: int, offset: int = 0, limit: int = 100
@@ -608,25 +597,14 @@ class SqlAlchemyRunStore:
             total = s.scalar(
                 select(func.count()).select_from(RewardRow).where(RewardRow.run_id == run_id)
             )
-            rows = s.scalars(
-                select(RewardRow)
-                .where(RewardRow.run_id == run_id)
-                .order_by(RewardRow.id)
-                .offset(offset)
-                .limit(limit)
-            )
+            rows = s.execute(_rewards(RewardRow.run_id == run_id).offset(offset).limit(limit))
             return [_reward(r) for r in rows], int(total or 0)
 
     def commands(self, run_id: int) -> list[StoredCommand]:
         """The run's whole command log, in log order."""
         with self._transaction(f"reading the commands of run {run_id}", write=False) as s:
             self._require_run(s, run_id)
-            rows = s.scalars(
-                select(RunCommandRow)
-                .where(RunCommandRow.run_id == run_id)
-                .order_by(RunCommandRow.id)
-            )
-            return [_command(c) for c in rows]
+            return [_command(c) for c in s.execute(_commands(RunCommandRow.run_id == run_id))]
 
     def episodes(self, run_id: int) -> list[EpisodeRecord]:
         """The run's episodes, by episode number."""
@@ -744,11 +722,28 @@ def _spec(run: RunRow) -> RunSpec:
     )
 
 
-def _reward(r: RewardRow) -> StoredReward:
-    return StoredReward(
-        r.id, RewardRecord(r.tick, r.episode, r.value, r.source, r.note), r.applied, r.credited
-    )
+def _rewards(*where: ColumnElement[bool]) -> Select[int, int, int, float, str, str, bool, int]:
+    """Reward log rows in log order, as plain columns.
+
+    Not ORM objects: their identity map, change tracking and the unused `created_at`
+    (parsed from SQLite's text) cost more than the rows' values.
+    """
+    r = RewardRow
+    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.applied, r.credited)
+    return select(*columns).where(*where).order_by(r.id)
 
 
-def _command(c: RunCommandRow) -> StoredCommand:
-    return StoredCommand(c.id, CommandRecord(c.tick, c.kind, dict(c.payload)))
+def _reward(row: Row[int, int, int, float, str, str, bool, int]) -> StoredReward:
+    id_, tick, episode, value, source, note, applied, credited = row
+    return StoredReward(id_, RewardRecord(tick, episode, value, source, note), applied, credited)
+
+
+def _commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:
+    """Command log rows in log order, as plain columns (as `_rewards`)."""
+    c = RunCommandRow
+    return select(c.id, c.tick, c.kind, c.payload).where(*where).order_by(c.id)
+
+
+def _command(row: Row[int, int, str, dict[str, Any]]) -> StoredCommand:
+    id_, tick, kind, payload = row
+    return StoredCommand(id_, CommandRecord(tick, kind, dict(payload)))
