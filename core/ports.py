@@ -37,6 +37,10 @@ class RunStatus(StrEnum):
     FAILED = "failed"
 
 
+ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
+"""The statuses of a run that is going (its ticks run, or wait for a resume)."""
+
+
 class Mode(StrEnum):
     """How the engine's tick task is paced."""
 

@@ -51,10 +51,9 @@ from core.brain.catalog import Catalog
 from core.commands import EditAssociation, RewardSource
 from core.engine import RewardAck, RunEngine, RunView, Subscription, SubscriptionClosed
 from core.errors import RunStateError, StorageError
-from core.ports import NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
+from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
 from server.engine_loop import LiveRun
 from server.engines import (
-    ACTIVE,
     EngineManager,
     StreamBook,
     create_run,

@@ -20,14 +20,12 @@ from core.brain.network import Association
 from core.commands import EditAssociation, RewardSource
 from core.engine import RewardAck, RunEngine, RunView, Subscription
 from core.errors import RunStateError, StorageError
-from core.ports import NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
+from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
 from core.setup import Setup
 from server.engine_loop import EngineLoop, LiveRun
 
 log = logging.getLogger("srlab.engines")
 T = TypeVar("T")
-
-ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
 
 
 class TooManyRunsError(RunStateError):

@@ -32,6 +32,7 @@ from core.networks import (
     etag_of,
 )
 from core.ports import (
+    ACTIVE,
     BehaviourSpec,
     Checkpoint,
     CommandRecord,
@@ -471,9 +472,7 @@ class InMemoryRunStore:
 
     def interrupt_active(self) -> int:
         """Mark every run stored as running or paused interrupted (its process died)."""
-        active = [
-            r for r in self._runs.values() if r.status in (RunStatus.RUNNING, RunStatus.PAUSED)
-        ]
+        active = [r for r in self._runs.values() if r.status in ACTIVE]
         for run in active:
             run.status = RunStatus.INTERRUPTED
         return len(active)

@@ -61,6 +61,7 @@ from core.errors import CatalogError, RunStateError, StorageError
 from core.events import EpisodeEnded, Outcome, RewardDue
 from core.params import applicable, configure
 from core.ports import (
+    ACTIVE,
     Checkpoint,
     EpisodeRecord,
     Mode,
@@ -388,7 +389,7 @@ class RunEngine:
         Checked before waiting for a replay too: a run that was never started answers at
         once instead of holding a reward until it is.
         """
-        ok = (RunStatus.RUNNING, RunStatus.PAUSED) if paused else (RunStatus.RUNNING,)
+        ok = ACTIVE if paused else (RunStatus.RUNNING,)
         if self.status not in ok or self._closing:
             raise RunStateError(f"run {self.run_id} is {self.status.value}, not running")
 

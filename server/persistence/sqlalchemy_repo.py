@@ -15,6 +15,7 @@ from sqlalchemy.orm import Session, aliased
 
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
 from core.ports import (
+    ACTIVE,
     BehaviourSpec,
     Checkpoint,
     CommandRecord,
@@ -684,7 +685,7 @@ class SqlAlchemyRunStore:
 
     def interrupt_active(self) -> int:
         """Mark every run stored as running or paused interrupted (its process died)."""
-        active = (RunStatus.RUNNING.value, RunStatus.PAUSED.value)
+        active = [s.value for s in ACTIVE]
         with self._transaction("marking runs interrupted", write=True) as s:
             result = s.execute(
                 sql_update(RunRow)

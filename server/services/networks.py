@@ -20,7 +20,7 @@ from starlette.concurrency import run_in_threadpool
 from core.commands import EditAssociation
 from core.errors import RunStateError, StorageError
 from core.networks import AssociationChange, NetworkEdit, Precondition, StoredNetwork
-from core.ports import NetworkPair, NetworkRepository, RunStatus
+from core.ports import ACTIVE, NetworkPair, NetworkRepository
 from server.engines import Live
 
 log = logging.getLogger("srlab.networks")
@@ -111,7 +111,7 @@ class NetworkService:
         targets = [
             e
             for e in self._engines.engines()
-            if e.status in (RunStatus.RUNNING, RunStatus.PAUSED) and self.started_from(e, network)
+            if e.status in ACTIVE and self.started_from(e, network)
         ]
         reached = await asyncio.gather(*(_push(e, edits) for e in targets))
         return sorted(e.run_id for e, ok in zip(targets, reached, strict=True) if ok)

@@ -22,7 +22,7 @@ from core.commands import RewardSource
 from core.engine import RunView, StatusChanged, SubscriptionClosed, TickPublished, check_hz
 from core.errors import CoreError, SimulationStateError
 from core.events import EpisodeEnded
-from core.ports import Mode, RunQueries, RunStatus, RunTotals
+from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
 from server.engines import Engines, Live
@@ -51,7 +51,6 @@ from server.viewer.state import (
 
 log = logging.getLogger("srlab.viewer")
 
-ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
 WATCH_S = 1.0
 """How often, while someone watches, the controller looks for runs started or ended."""
 LIMITER_KEY = "3d-view"

@@ -14,13 +14,13 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import RunEngine, RunView
 from core.errors import UnknownNameError
-from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
+from core.ports import ACTIVE, Mode, RunSpec, RunStatus, RunTotals, StoredRun
 from core.sim.track import TrackGeometry
 from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
-from server.engines import ACTIVE, Live
+from server.engines import Live
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
