@@ -1,9 +1,9 @@
 """Dependencies of the routes: the app's state, and the write guard.
 
 They are coroutines because they do no I/O: FastAPI runs a plain function dependency on a
-worker thread, a hand-off there and back for each dependency of each request (most of
-what a cheap request cost, see docs/benchmarks.md). The same goes for route handlers that
-only read memory.
+worker thread, a hand-off there and back for each dependency of each request (about half
+of what a cheap request cost, see docs/benchmarks.md). The same goes for route handlers
+that only read memory.
 """
 
 from __future__ import annotations
