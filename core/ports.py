@@ -39,6 +39,8 @@ class RunStatus(StrEnum):
 
 ACTIVE = (RunStatus.RUNNING, RunStatus.PAUSED)
 """The statuses of a run that is going (its ticks run, or wait for a resume)."""
+NOT_ENDED = (RunStatus.CREATED, *ACTIVE)
+"""The statuses of a run that has not ended: going, or not started yet."""
 
 
 class Mode(StrEnum):

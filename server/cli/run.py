@@ -19,7 +19,7 @@ from rich.table import Table
 from core.brain.catalog import sensor_definitions
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
-from core.ports import ACTIVE, Mode, RunStatus, StoredRun
+from core.ports import NOT_ENDED, Mode, RunStatus, StoredRun
 from core.setup import default_sensors
 from core.worlds import default_world, world_names
 from server.cli.common import (
@@ -164,7 +164,7 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
 
     async def watch(live: Live | None) -> None:
         last_line = time.monotonic()
-        while engine.status in (RunStatus.CREATED, *ACTIVE):
+        while engine.status in NOT_ENDED:
             await asyncio.sleep(0.25)
             episode_ended = take(sub.drain())
             if live is not None:

@@ -14,7 +14,7 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.engine import RunEngine, RunView
 from core.errors import UnknownNameError
-from core.ports import ACTIVE, Mode, RunSpec, RunStatus, RunTotals, StoredRun
+from core.ports import NOT_ENDED, Mode, RunSpec, RunTotals, StoredRun
 from core.sim.track import TrackGeometry
 from core.trace import unpack
 from core.worlds import load_world
@@ -46,10 +46,6 @@ MAX_PAGE = 1000
 """The longest page a list answers: a read's cost never grows with a run's age."""
 Offset = Annotated[int, Query(ge=0, le=2**62, description="items to skip")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items to answer at most")]
-
-
-_GOING = (RunStatus.CREATED, *ACTIVE)
-"""A run in memory in one of these is starting or going: it has live figures."""
 
 
 def _ms(x: float) -> float | None:
@@ -107,7 +103,7 @@ def _of_view(view: RunView) -> RunPublic:
     has ended has no live figures, whether or not its engine is let go yet: the answer does
     not depend on when that happens.
     """
-    live = _live_state(view) if view.status in _GOING else None
+    live = _live_state(view) if view.status in NOT_ENDED else None
     return _public(view.run_id, view.spec, view.status.value, view.error, view.totals, live)
 
 
