@@ -26,6 +26,7 @@ from server.viewer.inbound import quiet_malformed
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
+from server.viewer.wakeups import install as install_loop_safe_buffers
 
 log = logging.getLogger("srlab.viewer")
 
@@ -259,6 +260,7 @@ class Viewer:
 
 def _listen() -> viser.ViserServer:
     """The viser server, on an ephemeral loopback port reached only through the gate."""
+    install_loop_safe_buffers()
     return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
 
 
