@@ -133,7 +133,7 @@ def create_app(settings: Settings | None = None, storage: StorageFactory = open_
     hosts = settings.host_names()
     editor = f"http://{settings.host}:{settings.port}"
     app.add_middleware(StrictJson)
-    app.add_middleware(ApiMethods, schema=app.openapi)
+    app.add_middleware(ApiMethods, routes=lambda: app.routes)
     app.add_middleware(
         CORSMiddleware,
         allow_origins=[editor, *settings.cors_origins],
