@@ -10,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from apphelpers import migrated_copy, migrated_template
 from browser import chromium
 from fakes import InMemoryRunStore, InspectableRunStore
 from hypothesis import settings
@@ -127,19 +128,15 @@ def postgres_database(postgres_url: str) -> Iterator[str]:
 
 
 @pytest.fixture(scope="session")
-def migrated_sqlite(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def migrated_sqlite() -> Path:
     """A SQLite file migrated to head and seeded once, for tests to copy."""
-    path = tmp_path_factory.mktemp("template") / "srlab.db"
-    upgrade(f"sqlite:///{path}")
-    return path
+    return migrated_template()
 
 
 @pytest.fixture
 def sqlite_engine(migrated_sqlite: Path, tmp_path: Path) -> Iterator[Engine]:
     """An engine on a fresh copy of the migrated SQLite database."""
-    path = tmp_path / "srlab.db"
-    shutil.copyfile(migrated_sqlite, path)
-    engine = make_engine(f"sqlite:///{path}")
+    engine = make_engine(migrated_copy(tmp_path / "srlab.db"))
     yield engine
     engine.dispose()
 

@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import asyncio
-import shutil
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
-from apphelpers import client_for
+from apphelpers import client_for, settings_for
 
 from core.brain.catalog import load_catalog
-from server.config import Settings
 
 pytestmark = pytest.mark.anyio
 
@@ -21,10 +19,8 @@ A = "/api/networks"
 
 
 @pytest.fixture
-async def client(migrated_sqlite: Path, tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
-    path = tmp_path / "api.db"
-    shutil.copyfile(migrated_sqlite, path)  # faster than migrating for every test
-    async with client_for(Settings(database_url=f"sqlite:///{path}", viser=False)) as (c, _):
+async def client(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
+    async with client_for(settings_for(tmp_path)) as (c, _):
         yield c
 
 
