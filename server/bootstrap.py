@@ -34,6 +34,7 @@ from server.persistence.db import DatabaseCheck
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.process import StoreProcess
 from server.ratelimit import RateLimiter
+from server.tuning import step_back
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
 """Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
@@ -105,6 +106,7 @@ async def service(
                 settings.model_dump(include={"database_url", "store_process", "max_runs"})
             )
             stack.push_async_callback(remote.close)
+            step_back(settings.service_nice)
             manager = remote
         else:
             engine_loop = EngineLoop(thread=settings.engine_thread)

@@ -58,6 +58,11 @@ class Settings(BaseSettings):
         engine_process: tick the runs in a process of their own
             (`server.engine_process`): the ticks get a GIL and a core of their own, and
             every call, read and event crosses a pipe. Not with `engine_thread`.
+        service_nice: with `engine_process`, how far the service's own processes (HTTP,
+            the 3D view and their store process) step back for the engines' process when
+            the machine is busy: a nice increment, 0-19, applied once the engines' process
+            runs (`server.tuning.step_back`). `srlab serve` makes it 10 unless the
+            environment says; `create_app` alone leaves it 0 (it would renice the caller).
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -83,6 +88,7 @@ class Settings(BaseSettings):
     store_process: bool = False
     engine_thread: bool = False
     engine_process: bool = False
+    service_nice: int = Field(0, ge=0, le=19)
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
     @classmethod

@@ -20,6 +20,11 @@ from server.tuning import configure_process
 
 log = logging.getLogger("srlab.serve")
 
+SERVICE_NICE = 10
+"""`srlab serve`'s `service_nice`: measured on 2 busy cores (docs/benchmarks.md, eighth
+session), 10 gave the engines' ticks most of what 19 did, and leaves the service a share
+beside other programs at the default priority (19 would leave it almost none)."""
+
 
 class _Server(uvicorn.Server):
     """uvicorn's server, which interrupts the runs as soon as it starts shutting down.
@@ -52,6 +57,9 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     # environment says otherwise.
     if "SRLAB_STORE_PROCESS" not in os.environ:
         overrides["store_process"] = True
+    # With the engines in a process of their own, the ticks come first on a busy machine.
+    if "SRLAB_SERVICE_NICE" not in os.environ:
+        overrides["service_nice"] = SERVICE_NICE
     settings = Settings.load(**overrides)
     settings.check()
     upgrade(settings.database_url)

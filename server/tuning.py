@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
+import os
 import sys
+from pathlib import Path
 
 SWITCH_INTERVAL_S = 0.0005
 """How long a thread may hold the GIL while another waits for it."""
@@ -17,3 +21,38 @@ def configure_process() -> None:
     both under a millisecond (bench/engine.py measures the effect).
     """
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+
+
+def _threads(pid: int | str) -> list[int]:
+    """The thread ids of process `pid` (Linux); [] where /proc does not tell."""
+    try:
+        return [int(tid) for tid in os.listdir(Path("/proc") / str(pid) / "task")]
+    except OSError:
+        return []
+
+
+def _lower(who: int, increment: int) -> None:
+    with contextlib.suppress(OSError):  # gone meanwhile, or not ours to change
+        now = os.getpriority(os.PRIO_PROCESS, who)
+        os.setpriority(os.PRIO_PROCESS, who, min(19, now + increment))
+
+
+def step_back(increment: int) -> None:
+    """Lower this process's CPU priority by `increment` (nice), and its store process's.
+
+    For a service whose runs tick in the engines' process (`service_nice`): called once
+    that process runs, so it and the store process it starts keep the default priority,
+    and on a busy machine the ticks get a core before requests do. Linux gives each
+    thread its own nice value, so every thread of this process is lowered (threads made
+    later inherit it from the thread that makes them); elsewhere the process is. Children
+    started by `multiprocessing` (the service's store process) are lowered too. Raising
+    a priority needs privileges, so this cannot be undone in the process.
+    """
+    if increment <= 0:
+        return
+    for tid in _threads("self") or [0]:
+        _lower(tid, increment)
+    for child in multiprocessing.active_children():
+        if child.pid is not None:
+            for tid in _threads(child.pid) or [child.pid]:
+                _lower(tid, increment)

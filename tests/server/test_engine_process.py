@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
 
+from bench.liveserver import live_server
 from core.engine import RunView, StatusChanged
 from server.bootstrap import Storage, open_storage
 from server.config import Settings
@@ -175,3 +176,50 @@ async def test_the_engines_process_refuses_storage_it_could_not_open_itself(
     with pytest.raises(ValueError, match="by SRLAB_DATABASE_URL only"):
         async with client_for(settings, storage=storage):
             pass
+
+
+def _nices(pid: int) -> set[int]:
+    """The nice values of process `pid`'s threads (Linux gives each thread its own)."""
+    return {os.getpriority(os.PRIO_PROCESS, int(t)) for t in os.listdir(f"/proc/{pid}/task")}
+
+
+def _children(pid: int) -> dict[int, str]:
+    """The processes whose parent is `pid`, with their command lines."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            command = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found[int(entry)] = command.decode(errors="replace")
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
+def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
+    """The service's threads and its store process yield to the ticks; the ticks' side not.
+
+    `srlab serve` with the engines in their own process lowers its own priority by
+    SRLAB_SERVICE_NICE (10 unless set) once that process runs, so on a busy machine the
+    ticks get a core before requests do (docs/benchmarks.md measures the effect).
+    """
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
+    with live_server(tmp_path / "nice.db", env=env) as server:
+        service = server.process.pid
+        children = _children(service)
+        (engines,) = [pid for pid, cmd in children.items() if "server.engine_process" in cmd]
+        stores = [pid for pid, cmd in children.items() if "spawn_main" in cmd]
+        assert stores, f"the service's store process, among {children}"
+        assert _nices(service) == {min(19, base + 10)}
+        for store in stores:
+            assert _nices(store) == {min(19, base + 10)}
+        assert _nices(engines) == {base}
+        engines_stores = [p for p, cmd in _children(engines).items() if "spawn_main" in cmd]
+        assert engines_stores, "the engines' own store process"
+        for store in engines_stores:
+            assert _nices(store) == {base}
