@@ -44,11 +44,17 @@ def migrated_copy(path: Path) -> str:
 
 
 def settings_for(tmp_path: Path, **overrides: Any) -> Settings:
-    """Settings on a fresh, migrated and seeded SQLite file under `tmp_path`.
+    """Settings on the migrated and seeded SQLite file under `tmp_path` (fresh the first time).
 
+    A second call for the same `tmp_path` keeps what the first service stored (a restart).
     The 3D view is off unless a test asks for it (`viser=True`): it needs a port.
     """
-    url = migrated_copy(tmp_path / "api.db")
+    path = tmp_path / "api.db"
+    if path.exists():
+        url = f"sqlite:///{path}"
+        upgrade(url)
+    else:
+        url = migrated_copy(path)
     overrides.setdefault("viser", False)
     return Settings(database_url=url, **overrides)
 
