@@ -144,6 +144,12 @@ function associationBlock(a, live) {
 
 function render(body) {
   const box = $("#kp-body");
+  // What is open now, read from the page: a click's "toggle" event comes a task later,
+  // and never from a block this render replaces, so a click just before a refresh was lost.
+  for (const d of box.querySelectorAll("details.kp-assoc")) {
+    if (d.open) open.add(d.dataset.pair);
+    else open.delete(d.dataset.pair);
+  }
   const parts = [];
   if (body.reason) parts.push(el("p", { class: "muted small kp-reason", text: body.reason }));
   if (body.kp && body.live) parts.push(rstmBlock(body));
