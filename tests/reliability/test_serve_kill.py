@@ -37,6 +37,9 @@ CONDITION, SEED = "rp", 11
 RUN = {"condition": CONDITION, "seed": SEED, "mode": "realtime", "hz": 200}
 KILL_WITHIN_S = 1.0
 """Kills fall uniformly within this long after the restarted server answers."""
+LAST_LIFE_S = 120.0
+"""How long the last life may take to acknowledge a reward: a bound for a hang, not a speed
+test."""
 
 
 def _resume(server: LiveServer, run_id: int, traffic: list[RewardTraffic], n: int) -> None:
@@ -94,8 +97,15 @@ def test_kill_9_of_the_service_loses_no_acknowledged_reward(
     assert resumer is not None
     resumer.join()
 
-    # The last life: the run goes on, then stops cleanly and everything must add up.
-    time.sleep(0.5)
+    # The last life: the run goes on until a client has been acknowledged a reward in it,
+    # then stops cleanly and everything must add up. How many rewards the earlier lives
+    # got acknowledged before their kill depends on the machine's speed (a slow one may
+    # get none); this wait makes the check below cover acknowledged rewards on any machine.
+    if not traffic:  # the resume's request timed out: post to the run anyway
+        traffic.append(RewardTraffic(server.url, run_id, f"k{kills + 1}", seed=kills + 1).start())
+    deadline = time.monotonic() + LAST_LIFE_S
+    while not any(t.acked for t in traffic) and time.monotonic() < deadline:
+        time.sleep(0.1)
     for t in traffic:
         t.stop()
         acked |= t.acked
@@ -126,7 +136,7 @@ def test_kill_9_of_the_service_loses_no_acknowledged_reward(
         f"{'=' if replayed_ltm == stored_ltm else '!='} a replay of the log"
         + ("; integrity_check ok after every kill" if backend == "sqlite" else ""),
     )
-    assert check.acknowledged >= kills, "clients were acknowledged rewards"
+    assert check.acknowledged >= 1, f"no reward acknowledged in {LAST_LIFE_S:g} s: {check}"
     assert not check.lost, f"acknowledged rewards lost: {check.lost[:20]}"
     assert not check.twice, f"stored twice: {check.twice[:20]}"
     assert check.unapplied == 0, "a logged reward was never applied"
