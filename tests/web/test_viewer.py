@@ -219,7 +219,14 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
                 text = page.inner_text("body")
                 return header_run(page) == chosen and "interrupted" in text
 
-            eventually(reconnected, what=f"the reconnected view on run {chosen}")
+            def shown() -> str:
+                """What the page shows, for a failure's message."""
+                return f"(the page shows run {header_run(page)}: {page.inner_text('body')[:400]!r})"
+
+            try:
+                eventually(reconnected, what=f"the reconnected view on run {chosen}")
+            except AssertionError as e:
+                raise AssertionError(f"{e} {shown()}") from None
             # The view looks for new runs every second: it stays put. The old service's
             # panel stays on the page until the new one's first messages replace it (and
             # it too names the chosen run, interrupted at shutdown), so the page may go
@@ -230,7 +237,10 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
                 time.sleep(0.3)
                 seen.add(header_run(page))
             assert seen <= {chosen, None}, f"the view showed runs {seen}, not only {chosen}"
-            eventually(reconnected, what=f"the view back on run {chosen}")
+            try:
+                eventually(reconnected, what=f"the view back on run {chosen}")
+            except AssertionError as e:
+                raise AssertionError(f"{e} {shown()}") from None
         finally:
             second.client.post(f"/api/runs/{newest}/stop")
             stop_server(second)
