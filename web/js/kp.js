@@ -9,10 +9,9 @@ import { $, el, fmt } from "./ui.js";
 
 const POLL_MS = 1000;
 const SHOWN_RUNS = 8;
-/** Associations whose details are open, kept across refreshes ("S -> B"). */
-const open = new Set();
 let busy = false;
-let lastRun = null;
+/** The run whose associations the panel shows (their open blocks stay open across refreshes). */
+let shownRun = null;
 
 function runId() {
   const m = location.hash.match(/^#\/console\/(\d+)/);
@@ -122,7 +121,7 @@ function provenanceBlock(p) {
         ` — reward after tick ${p.after_tick}.`)));
 }
 
-function associationBlock(a, live) {
+function associationBlock(a, live, open) {
   const key = `${a.stimulus} -> ${a.behaviour}`;
   const latest = a.provenance[a.provenance.length - 1];
   const runs = a.runs.slice(-SHOWN_RUNS).map((r) => (r.first_tick === r.last_tick ? `${r.first_tick}` : `${r.first_tick}–${r.last_tick}`));
@@ -138,25 +137,24 @@ function associationBlock(a, live) {
     el("h4", { text: "RLTM history" }), history(a.history),
     el("h4", { text: "Ticks where it ran" }),
     el("p", { class: "small kp-runs", text: runs.length ? `${runs.join(", ")}${a.runs.length > SHOWN_RUNS ? ` (latest ${SHOWN_RUNS} of ${a.runs.length} runs)` : ""}` : "Not run yet." }));
-  details.addEventListener("toggle", () => (details.open ? open.add(key) : open.delete(key)));
   return details;
 }
 
-function render(body) {
+function render(id, body) {
   const box = $("#kp-body");
-  // What is open now, read from the page: a click's "toggle" event comes a task later,
-  // and never from a block this render replaces, so a click just before a refresh was lost.
-  for (const d of box.querySelectorAll("details.kp-assoc")) {
-    if (d.open) open.add(d.dataset.pair);
-    else open.delete(d.dataset.pair);
-  }
+  // The blocks open now ("S -> B"), read from the page as it is: a click's "toggle" event
+  // comes a task later, and never from a block this render replaces.
+  const open = new Set(id === shownRun
+    ? Array.from(box.querySelectorAll("details.kp-assoc[open]"), (d) => d.dataset.pair)
+    : []);
+  shownRun = id;
   const parts = [];
   if (body.reason) parts.push(el("p", { class: "muted small kp-reason", text: body.reason }));
   if (body.kp && body.live) parts.push(rstmBlock(body));
   if (body.kp) {
     parts.push(el("h3", { text: `Associations KP made (${body.count})` }));
     parts.push(body.associations.length
-      ? el("div", { class: "kp-assocs" }, body.associations.map((a) => associationBlock(a, body.live)))
+      ? el("div", { class: "kp-assocs" }, body.associations.map((a) => associationBlock(a, body.live, open)))
       : el("p", { class: "muted small", text: "None yet: KP reasons when a reward arrives after sonar responses to a camera stimulus." }));
   }
   box.replaceChildren(...parts);
@@ -170,17 +168,13 @@ async function refresh() {
     section.hidden = true;
     return;
   }
-  if (id !== lastRun) {
-    open.clear();
-    lastRun = id;
-  }
   busy = true;
   try {
     const body = await get(`/runs/${id}/kp`);
     if (id !== runId()) return;
     section.hidden = false;
     $("#kp-run").textContent = `run ${id} · ${body.condition}${body.live ? " · live" : ""}`;
-    render(body);
+    render(id, body);
   } catch (error) {
     if (error instanceof ApiError && error.status !== 0) section.hidden = true;
   } finally {
