@@ -10,6 +10,9 @@ Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one ru
    reinforcement program's rewards, trainer rewards injected 5 times a second, episodes),
    once with each store: tick lateness p99 and max, overruns, and per-reward commit p99
    (goals: p99 <= 5 ms, max <= 25 ms, 0 overruns; commit p99 <= 5 ms).
+
+``--stores threads,sessions`` measures the store's writes on SQLite's driver (as it runs)
+against the same writes through SQLAlchemy sessions, side by side.
 """
 
 from __future__ import annotations
@@ -30,8 +33,10 @@ from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmake
 from server.persistence.process import StoreProcess
 from server.tuning import configure_process
 
-STORES = ("threads", "process")
-"""Where the store runs: in the engine's process (its worker threads) or in a store process."""
+STORES = ("threads", "process", "sessions")
+"""Where the store runs: in the engine's process (its worker threads) or in a store process;
+``sessions`` is ``threads`` with every write through a SQLAlchemy session instead of SQLite's
+driver (`server.persistence.driver`), for comparison."""
 
 
 class Stores:
@@ -49,7 +54,8 @@ class Stores:
             process = StoreProcess(url)
             self.processes.append(process)
             return process.runs
-        return SqlAlchemyRunStore(make_sessionmaker(make_engine(url)))
+        sessions = make_sessionmaker(make_engine(url))
+        return SqlAlchemyRunStore(sessions, driver=kind != "sessions")
 
     def close(self) -> None:
         """Stop the store processes."""
@@ -58,17 +64,17 @@ class Stores:
 
 
 def fast(
-    stores: Stores, condition: str, episodes: int, repeats: int
+    stores: Stores, kinds: list[str], condition: str, episodes: int, repeats: int
 ) -> tuple[float, dict[str, float], int]:
     """Median ticks/s of the plain loop and of the engine with each store, alternated."""
     catalog = load_catalog()
-    opened = {kind: stores.open(kind, "fast.db") for kind in STORES}
+    opened = {kind: stores.open(kind, "fast.db") for kind in kinds}
     run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of every path
     for store in opened.values():
         spec = RunSpec(condition, 0, 3, Mode.FAST)
         asyncio.run(RunEngine.create(spec, store, catalog=catalog).run())
     plain_rates: list[float] = []
-    engine_rates: dict[str, list[float]] = {kind: [] for kind in STORES}
+    engine_rates: dict[str, list[float]] = {kind: [] for kind in kinds}
     ticks = 0
     for seed in range(1, repeats + 1):
         started = time.perf_counter()
@@ -117,23 +123,32 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--condition", default="kp")
+    parser.add_argument(
+        "--stores",
+        default="threads,process",
+        help=f"comma-separated, of {', '.join(STORES)} (default: threads,process)",
+    )
     args = parser.parse_args()
+    kinds = [k.strip() for k in args.stores.split(",") if k.strip()]
+    unknown = sorted(set(kinds) - set(STORES))
+    if unknown or not kinds:
+        parser.error(f"--stores: unknown {', '.join(unknown) or 'nothing'}; of {STORES}")
     configure_process()  # as `srlab run` and `srlab serve` do
     with tempfile.TemporaryDirectory() as tmp:
         stores = Stores(Path(tmp))
         try:
-            plain, engine, ticks = fast(stores, args.condition, args.episodes, args.repeats)
+            plain, engine, ticks = fast(stores, kinds, args.condition, args.episodes, args.repeats)
             print(
                 f"fast mode, {args.condition}, {args.repeats} x {args.episodes} episodes "
                 f"({ticks:,} ticks each way), medians:"
             )
             print(f"  plain headless loop          {plain:10,.0f} ticks/s")
-            for kind in STORES:
+            for kind in kinds:
                 print(f"  engine + SQLite, {kind:9}   {engine[kind]:10,.0f} ticks/s")
-            for kind in STORES:
+            for kind in kinds:
                 ratio = engine[kind] / plain
                 print(f"  ratio, {kind:9}             {ratio:10.2f}   (goal: >= 0.8)")
-            for kind in STORES:
+            for kind in kinds:
                 print_realtime(
                     kind,
                     realtime(stores.open(kind, "realtime.db"), args.seconds, args.hz),

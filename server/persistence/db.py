@@ -262,6 +262,17 @@ def _writer(session: Session) -> _WriteLock | None:
     return _WRITERS.get(bind if isinstance(bind, Engine) else bind.engine)
 
 
+def write_lock(engine: Engine) -> _WriteLock:
+    """The one-writer lock of a SQLite engine `make_engine` made."""
+    return _WRITERS[engine]
+
+
+def storage_error(what: str, e: Exception) -> StorageError:
+    """A database failure as srlab reports it: what failed, and the database's message."""
+    detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
+    return StorageError(f"storage failed while {what}: {detail}")
+
+
 @contextmanager
 def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> Iterator[Session]:
     """A session whose work is committed at the end or rolled back on any error.
@@ -289,8 +300,7 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
     except _DB_ERRORS as e:
         with suppress(*_DB_ERRORS):
             session.rollback()
-        detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
-        raise StorageError(f"storage failed while {what}: {detail}") from e
+        raise storage_error(what, e) from e
     except BaseException:
         session.rollback()
         raise

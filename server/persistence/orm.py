@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from sqlalchemy import (
     JSON,
@@ -22,6 +22,10 @@ from sqlalchemy import (
     text,
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+if TYPE_CHECKING:
+    from core.brain.catalog import Behaviour
+    from core.ports import BehaviourSpec
 
 NAMING_CONVENTION = {
     "ix": "ix_%(column_0_label)s",
@@ -42,6 +46,12 @@ def _one_of(column: str, values: tuple[str, ...]) -> str:
 
 
 NAME = String(100)
+
+
+def motion_columns(b: Behaviour | BehaviourSpec) -> dict[str, Any]:
+    """A behaviour's motion primitive (the catalogue's or a run's) as its row's columns."""
+    names = ("family", "speed_mps", "turn_dps", "ticks", "mode")
+    return {name: getattr(b, name) for name in names}
 
 
 class Base(DeclarativeBase):

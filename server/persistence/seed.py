@@ -25,6 +25,7 @@ from server.persistence.orm import (
     NetworkRow,
     NetworkVersionRow,
     StimulusRow,
+    motion_columns,
 )
 
 SEEDED_NOTE = "seeded from the catalogue"
@@ -125,11 +126,7 @@ def _seed(session: Session, catalog: Catalog) -> SeedReport:
         values = {
             "name": b.name,
             "position": b.id,
-            "family": b.family,
-            "speed_mps": b.speed_mps,
-            "turn_dps": b.turn_dps,
-            "ticks": b.ticks,
-            "mode": b.mode,
+            **motion_columns(b),
             "synthesized": b.synthesized,
         }
         count.sync(session, brow or BehaviourRow(), brow is not None, values)

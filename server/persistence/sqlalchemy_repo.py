@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping, Sequence
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import replace
 from typing import Any, TypeVar
 
-from sqlalchemy import ColumnElement, Row, Select, bindparam, delete, func, insert, select
+from sqlalchemy import ColumnElement, Engine, Row, Select, bindparam, delete, func, insert, select
 from sqlalchemy import update as sql_update
 from sqlalchemy.dialects import postgresql, sqlite
-from sqlalchemy.orm import Session, aliased
+from sqlalchemy.orm import Session, aliased, sessionmaker
+from sqlalchemy.sql import Executable
 
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
 from core.ports import (
@@ -33,6 +34,13 @@ from core.ports import (
     StoredRun,
 )
 from server.persistence.db import transaction
+from server.persistence.driver import (
+    ConnectionSql,
+    DriverStatement,
+    Sql,
+    driver_transaction,
+    drives,
+)
 from server.persistence.orm import (
     BehaviourRow,
     EpisodeRow,
@@ -43,6 +51,7 @@ from server.persistence.orm import (
     RunCommandRow,
     RunRow,
     StimulusRow,
+    motion_columns,
 )
 from server.runspec import run_spec
 
@@ -66,11 +75,15 @@ _END_RUN = (
 _INSERT_EPISODE = insert(EpisodeRow)
 
 
-def _upsert(session: Session, table: Any) -> Any:
-    """INSERT for the session's dialect, with ON CONFLICT support."""
-    dialect = session.get_bind().dialect.name
+def _upsert(dialect: str, table: Any) -> Any:
+    """INSERT for the dialect, with ON CONFLICT support."""
     module = postgresql if dialect == "postgresql" else sqlite
     return module.insert(table)
+
+
+def _on(session: Session) -> ConnectionSql:
+    """`Sql` on a session's connection (inside its transaction)."""
+    return ConnectionSql(session.connection())
 
 
 def _json(value: Mapping[str, Any]) -> dict[str, Any]:
@@ -88,37 +101,58 @@ _MARK_APPLIED = (
     .where(RewardRow.id == bindparam("b_id"), RewardRow.run_id == bindparam("b_run"))
     .values(applied=True, credited=bindparam("b_credited"))
 )
+_REWARD_OF_RUN = select(RewardRow.id).where(
+    RewardRow.id == bindparam("b_id"), RewardRow.run_id == bindparam("b_run")
+)
+_STIMULUS_IDS = select(StimulusRow.name, StimulusRow.id)
+_CATALOGUE_BEHAVIOUR_IDS = select(BehaviourRow.name, BehaviourRow.id).where(
+    BehaviourRow.run_id.is_(None)
+)
+_RUN_BEHAVIOUR_IDS = select(BehaviourRow.name, BehaviourRow.id).where(
+    BehaviourRow.run_id == bindparam("b_run")
+)
+_MAX_POSITION = select(func.max(BehaviourRow.position))
+_INSERT_BEHAVIOUR = insert(BehaviourRow).returning(BehaviourRow.id)
+_UPDATE_BEHAVIOUR = sql_update(BehaviourRow).where(BehaviourRow.id == bindparam("b_id"))
+_DELETE_PAIR = delete(RunAssociationRow).where(
+    RunAssociationRow.run_id == bindparam("b_run"),
+    RunAssociationRow.stimulus_id == bindparam("b_stimulus"),
+    RunAssociationRow.behaviour_id == bindparam("b_behaviour"),
+)
+_EPISODES_BETWEEN = select(EpisodeRow.episode).where(
+    EpisodeRow.run_id == bindparam("b_run"),
+    EpisodeRow.episode >= bindparam("b_first"),
+    EpisodeRow.episode <= bindparam("b_last"),
+)
+_INSERT_COMMAND = insert(RunCommandRow).returning(RunCommandRow.id)
 
 
 class _Names:
-    """Stimulus and behaviour names <-> ids within one session, for one run."""
+    """Stimulus and behaviour names <-> ids within one transaction, for one run."""
 
-    def __init__(self, store: SqlAlchemyRunStore, session: Session, run_id: int | None) -> None:
+    def __init__(self, store: SqlAlchemyRunStore, sql: Sql, run_id: int | None) -> None:
         self._store = store
-        self._session = session
+        self._sql = sql
         self._run_id = run_id
         self._synth: dict[str, int] | None = None
 
     def stimulus(self, name: str) -> int:
-        found = self._store._stimulus_ids(self._session).get(name)
+        found = self._store._stimulus_ids(self._sql).get(name)
         if found is None:
-            found = self._store._stimulus_ids(self._session, refresh=True).get(name)
+            found = self._store._stimulus_ids(self._sql, refresh=True).get(name)
         if found is None:
             raise UnknownNameError(f"unknown stimulus {name!r}")
         return found
 
     def behaviour(self, name: str) -> int:
-        found = self._store._behaviour_ids(self._session).get(name)
+        found = self._store._behaviour_ids(self._sql).get(name)
         if found is not None:
             return found
         if self._synth is None:
-            query = select(BehaviourRow.name, BehaviourRow.id).where(
-                BehaviourRow.run_id == self._run_id
-            )
-            self._synth = dict(self._session.execute(query).all())
+            self._synth = dict(self._sql.rows(_RUN_BEHAVIOUR_IDS, {"b_run": self._run_id}))
         found = self._synth.get(name)
         if found is None:
-            found = self._store._behaviour_ids(self._session, refresh=True).get(name)
+            found = self._store._behaviour_ids(self._sql, refresh=True).get(name)
         if found is None:
             raise UnknownNameError(f"unknown behaviour {name!r}")
         return found
@@ -138,22 +172,38 @@ class SqlAlchemyRunStore:
     names, so this maps names to ids, caching the catalogue's and looking a run's
     synthesised behaviours up per transaction. Database failures come out as
     `StorageError` after the transaction is rolled back, so nothing committed before is
-    touched and nothing half-written remains.
+    touched and nothing half-written remains. On a SQLite file, the writes run their
+    statements straight on the driver (`server.persistence.driver`), unless ``driver`` is
+    False (every write through a session, as `bench.engine --stores sessions` measures).
     """
 
-    def __init__(self, sessions: Callable[[], Session]) -> None:
+    def __init__(self, sessions: Callable[[], Session], *, driver: bool = True) -> None:
         self._sessions = sessions
         self._stimuli: dict[str, int] = {}
         self._behaviours: dict[str, int] = {}
         self._upserts: dict[tuple[str, str], Any] = {}
+        kw: dict[str, Any] = sessions.kw if isinstance(sessions, sessionmaker) else {}
+        bind = kw.get("bind")
+        self._driver = bind if driver and isinstance(bind, Engine) and drives(bind) else None
+        self._compiled: dict[tuple[int, tuple[str, ...]], tuple[Executable, DriverStatement]] = {}
 
-    def _upsert_stmt(self, session: Session, table: Any, values: tuple[str, ...]) -> Any:
+    @contextmanager
+    def _writing(self, what: str) -> Iterator[Sql]:
+        """A write transaction, on SQLite's driver when the store has one (as `transaction`)."""
+        if self._driver is not None:
+            with driver_transaction(self._driver, what, self._compiled) as sql:
+                yield sql
+        else:
+            with self._transaction(what, write=True) as s:
+                yield _on(s)
+
+    def _upsert_stmt(self, sql: Sql, table: Any, values: tuple[str, ...]) -> Any:
         """An INSERT ... ON CONFLICT DO UPDATE for executemany, built once per dialect."""
-        dialect = session.get_bind().dialect.name
+        dialect = sql.dialect.name
         key = (dialect, table.name)
         stmt = self._upserts.get(key)
         if stmt is None:
-            base = _upsert(session, table)
+            base = _upsert(dialect, table)
             stmt = base.on_conflict_do_update(
                 index_elements=["run_id", "stimulus_id", "behaviour_id"],
                 set_={v: base.excluded[v] for v in values},
@@ -161,17 +211,14 @@ class SqlAlchemyRunStore:
             self._upserts[key] = stmt
         return stmt
 
-    def _stimulus_ids(self, session: Session, *, refresh: bool = False) -> dict[str, int]:
+    def _stimulus_ids(self, sql: Sql, *, refresh: bool = False) -> dict[str, int]:
         if refresh or not self._stimuli:
-            self._stimuli = dict(session.execute(select(StimulusRow.name, StimulusRow.id)).all())
+            self._stimuli = dict(sql.rows(_STIMULUS_IDS, {}))
         return self._stimuli
 
-    def _behaviour_ids(self, session: Session, *, refresh: bool = False) -> dict[str, int]:
+    def _behaviour_ids(self, sql: Sql, *, refresh: bool = False) -> dict[str, int]:
         if refresh or not self._behaviours:
-            rows = session.execute(
-                select(BehaviourRow.name, BehaviourRow.id).where(BehaviourRow.run_id.is_(None))
-            ).all()
-            self._behaviours = dict(rows)
+            self._behaviours = dict(sql.rows(_CATALOGUE_BEHAVIOUR_IDS, {}))
         return self._behaviours
 
     def _transaction(self, what: str, *, write: bool) -> AbstractContextManager[Session]:
@@ -185,19 +232,19 @@ class SqlAlchemyRunStore:
         return row
 
     @staticmethod
-    def _require_run(session: Session, run_id: int) -> None:
-        if session.connection().execute(_RUN_EXISTS, {"b_run": run_id}).first() is None:
+    def _require_run(sql: Sql, run_id: int) -> None:
+        if sql.first(_RUN_EXISTS, {"b_run": run_id}) is None:
             raise UnknownRunError(f"no run {run_id}")
 
     def _apply(
-        self, session: Session, run_id: int, change: LearningUpdate, names: _Names | None = None
+        self, sql: Sql, run_id: int, change: LearningUpdate, names: _Names | None = None
     ) -> None:
         """Store what an update changed: synthesised behaviours first, then what names them."""
-        names = names or _Names(self, session, run_id)
+        names = names or _Names(self, sql, run_id)
         for spec in change.behaviours_added:
-            self._add_behaviour(session, run_id, spec, names)
-        self._upsert_memory(session, LtmRow, run_id, change.ltm, names)
-        self._upsert_memory(session, RltmRow, run_id, change.rltm, names)
+            self._add_behaviour(sql, run_id, spec, names)
+        self._upsert_memory(sql, LtmRow, run_id, change.ltm, names)
+        self._upsert_memory(sql, RltmRow, run_id, change.rltm, names)
         if change.network_upserts:
             rows = []
             for pair in change.network_upserts:
@@ -213,45 +260,35 @@ class SqlAlchemyRunStore:
                     }
                 )
             stmt = self._upsert_stmt(
-                session, RunAssociationRow.__table__, ("strength", "source", "locked")
+                sql, RunAssociationRow.__table__, ("strength", "source", "locked")
             )
-            session.connection().execute(stmt, rows)
+            sql.many(stmt, rows)
         for removal in change.network_removals:
             st, be = names.pair(removal)
-            session.execute(
-                delete(RunAssociationRow).where(
-                    RunAssociationRow.run_id == run_id,
-                    RunAssociationRow.stimulus_id == st,
-                    RunAssociationRow.behaviour_id == be,
-                )
-            )
+            sql.run(_DELETE_PAIR, {"b_run": run_id, "b_stimulus": st, "b_behaviour": be})
 
-    def _add_behaviour(
-        self, session: Session, run_id: int, spec: BehaviourSpec, names: _Names
-    ) -> None:
-        row = session.scalar(
-            select(BehaviourRow).where(
-                BehaviourRow.run_id == run_id, BehaviourRow.name == spec.name
-            )
-        )
-        if row is None:
-            if spec.name in self._behaviour_ids(session):
+    def _add_behaviour(self, sql: Sql, run_id: int, spec: BehaviourSpec, names: _Names) -> None:
+        synthesised: dict[str, int] = dict(sql.rows(_RUN_BEHAVIOUR_IDS, {"b_run": run_id}))
+        found = synthesised.get(spec.name)
+        values = {**motion_columns(spec), "synthesized": True}
+        if found is None:
+            if spec.name in self._behaviour_ids(sql):
                 raise CatalogError(f"behaviour {spec.name!r} exists in the catalogue")
-            last = session.scalar(select(func.max(BehaviourRow.position)))
-            row = BehaviourRow(name=spec.name, run_id=run_id, position=(last or 0) + 1)
-            session.add(row)
-        row.family = spec.family
-        row.speed_mps = spec.speed_mps
-        row.turn_dps = spec.turn_dps
-        row.ticks = spec.ticks
-        row.mode = spec.mode
-        row.synthesized = True
-        session.flush()
-        names.added(spec.name, row.id)
+            last = sql.first(_MAX_POSITION, {})
+            position = ((last[0] if last else None) or 0) + 1
+            row = sql.first(
+                _INSERT_BEHAVIOUR,
+                {"name": spec.name, "run_id": run_id, "position": position, **values},
+            )
+            assert row is not None
+            found = int(row[0])
+        else:
+            sql.run(_UPDATE_BEHAVIOUR, {"b_id": found, **values})
+        names.added(spec.name, found)
 
     def _upsert_memory(
         self,
-        session: Session,
+        sql: Sql,
         table: type[_Row],
         run_id: int,
         values: Mapping[_Pair, float],
@@ -271,8 +308,8 @@ class SqlAlchemyRunStore:
                     "reliability": reliability,
                 }
             )
-        stmt = self._upsert_stmt(session, table.__table__, ("reliability",))
-        session.connection().execute(stmt, rows)
+        stmt = self._upsert_stmt(sql, table.__table__, ("reliability",))
+        sql.many(stmt, rows)
 
     def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
         """Store a new run (status created) with its starting network; returns its id."""
@@ -293,7 +330,7 @@ class SqlAlchemyRunStore:
             )
             s.add(row)
             s.flush()
-            names = _Names(self, s, row.id)
+            names = _Names(self, _on(s), row.id)
             seen: dict[tuple[int, int], RunAssociationRow] = {}
             for pair in network:
                 key = names.pair((pair.stimulus, pair.behaviour))
@@ -329,137 +366,95 @@ class SqlAlchemyRunStore:
 
     @staticmethod
     def _insert_reward(
-        s: Session, run_id: int, reward: RewardRecord, applied: bool, credited: int
+        sql: Sql, run_id: int, reward: RewardRecord, applied: bool, credited: int
     ) -> int:
-        row = {
-            "run_id": run_id,
-            "tick": reward.tick,
-            "episode": reward.episode,
-            "value": reward.value,
-            "source": reward.source,
-            "note": reward.note,
-            "applied": applied,
-            "credited": credited,
-        }
-        reward_id: int | None = s.connection().execute(_INSERT_REWARD, row).scalar()
-        assert reward_id is not None
-        return reward_id
+        row = sql.first(_INSERT_REWARD, _reward_row(run_id, reward, applied, credited))
+        assert row is not None
+        return int(row[0])
 
     def log_reward(self, run_id: int, reward: RewardRecord) -> int:
         """Append a reward to the log, committed before returning its id."""
-        with self._transaction(f"logging a reward for run {run_id}", write=True) as s:
-            self._require_run(s, run_id)
-            return self._insert_reward(s, run_id, reward, False, 0)
+        with self._writing(f"logging a reward for run {run_id}") as sql:
+            self._require_run(sql, run_id)
+            return self._insert_reward(sql, run_id, reward, False, 0)
 
     def apply_reward(
         self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
     ) -> None:
         """In one transaction: mark a logged reward applied and store what it changed."""
-        with self._transaction(f"applying reward {reward_id} of run {run_id}", write=True) as s:
-            self._mark_applied(s, run_id, reward_id, credited)
-            self._apply(s, run_id, update)
+        with self._writing(f"applying reward {reward_id} of run {run_id}") as sql:
+            self._mark_all_applied(sql, run_id, [(reward_id, credited)])
+            self._apply(sql, run_id, update)
 
     def record_reward(
         self, run_id: int, reward: RewardRecord, update: LearningUpdate, credited: int
     ) -> int:
         """In one transaction: log an already applied reward and store what it changed."""
-        with self._transaction(f"recording a reward for run {run_id}", write=True) as s:
-            self._require_run(s, run_id)
-            reward_id = self._insert_reward(s, run_id, reward, True, credited)
-            self._apply(s, run_id, update)
+        with self._writing(f"recording a reward for run {run_id}") as sql:
+            self._require_run(sql, run_id)
+            reward_id = self._insert_reward(sql, run_id, reward, True, credited)
+            self._apply(sql, run_id, update)
             return reward_id
 
     def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
         """In one transaction and in order: each reward applied or recorded, with its learning.
 
-        A batch costs one statement per table, not per reward: the new rewards are inserted
-        together (their ids in order), the logged ones marked applied together, and their
-        learning merged into one update that leaves the tables as applying each in turn
-        would (`LearningUpdate.merged`).
+        The rewards' learning is merged into one update that leaves the tables as applying
+        each in turn would (`LearningUpdate.merged`): one statement per table.
         """
         if not rewards:
             return ()
         what = f"committing {len(rewards)} reward(s) of run {run_id}"
-        with self._transaction(what, write=True) as s:
+        with self._writing(what) as sql:
             new = [r.record for r in rewards if r.logged_id is None]
             if new:
                 # A logged reward's UPDATE finds its run or says which is missing: only new
                 # rewards need the run looked up (a trainer's commit saves a statement).
-                self._require_run(s, run_id)
+                self._require_run(sql, run_id)
             credited = [r.credited for r in rewards if r.logged_id is None]
-            new_ids = iter(self._insert_rewards(s, run_id, new, credited))
+            new_ids = iter(self._insert_rewards(sql, run_id, new, credited))
             logged = [(r.logged_id, r.credited) for r in rewards if r.logged_id is not None]
-            self._mark_all_applied(s, run_id, logged)
+            self._mark_all_applied(sql, run_id, logged)
             ids = tuple(next(new_ids) if r.logged_id is None else r.logged_id for r in rewards)
-            self._apply(s, run_id, LearningUpdate.merged([r.update for r in rewards]))
+            self._apply(sql, run_id, LearningUpdate.merged([r.update for r in rewards]))
             return ids
 
     @staticmethod
     def _insert_rewards(
-        s: Session, run_id: int, records: Sequence[RewardRecord], credited: Sequence[int]
+        sql: Sql, run_id: int, records: Sequence[RewardRecord], credited: Sequence[int]
     ) -> list[int]:
-        """Insert applied rewards in one statement; their ids in the records' order."""
-        if len(records) <= 1:
-            return [
-                SqlAlchemyRunStore._insert_reward(s, run_id, r, True, c)
-                for r, c in zip(records, credited, strict=True)
-            ]
-        rows = [
-            {
-                "run_id": run_id,
-                "tick": r.tick,
-                "episode": r.episode,
-                "value": r.value,
-                "source": r.source,
-                "note": r.note,
-                "applied": True,
-                "credited": c,
-            }
-            for r, c in zip(records, credited, strict=True)
-        ]
-        # On the connection (Core's insertmanyvalues): the session's ORM bulk insert took
-        # a third of a fast run's reward commits and adds nothing here.
-        return list(s.connection().execute(_INSERT_REWARDS_IN_ORDER, rows).scalars())
+        """Insert applied rewards; their ids in the records' order."""
+        rows = [_reward_row(run_id, r, True, c) for r, c in zip(records, credited, strict=True)]
+        if len(rows) <= 1:
+            return [int(r[0]) for r in sql.returning(_INSERT_REWARD, rows)]
+        return [int(r[0]) for r in sql.returning(_INSERT_REWARDS_IN_ORDER, rows)]
 
-    def _mark_all_applied(self, s: Session, run_id: int, logged: Sequence[tuple[int, int]]) -> None:
+    def _mark_all_applied(self, sql: Sql, run_id: int, logged: Sequence[tuple[int, int]]) -> None:
         """Mark logged rewards applied with their credit (`StorageError` for a missing one)."""
-        if len(logged) <= 1:
-            for reward_id, credited in logged:
-                self._mark_applied(s, run_id, reward_id, credited)
+        if not logged:
             return
-        ids = [reward_id for reward_id, _ in logged]
-        found = set(
-            s.scalars(select(RewardRow.id).where(RewardRow.run_id == run_id, RewardRow.id.in_(ids)))
+        changed = sql.many(
+            _MARK_APPLIED, [{"b_id": i, "b_run": run_id, "b_credited": c} for i, c in logged]
         )
-        for reward_id in ids:
-            if reward_id not in found:
-                self._require_run(s, run_id)
+        if changed == len(logged):
+            return
+        for reward_id, _ in logged:  # the driver could not count, or one is missing
+            if sql.first(_REWARD_OF_RUN, {"b_id": reward_id, "b_run": run_id}) is None:
+                self._require_run(sql, run_id)
                 raise StorageError(f"run {run_id} has no reward {reward_id}")
-        s.connection().execute(
-            _MARK_APPLIED,
-            [{"b_id": i, "b_run": run_id, "b_credited": c} for i, c in logged],
-        )
-
-    def _mark_applied(self, s: Session, run_id: int, reward_id: int, credited: int) -> None:
-        done = s.connection().execute(
-            _MARK_APPLIED, {"b_id": reward_id, "b_run": run_id, "b_credited": credited}
-        )
-        if done.rowcount != 1:
-            self._require_run(s, run_id)
-            raise StorageError(f"run {run_id} has no reward {reward_id}")
 
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """In one transaction: append a command to the log and store what it changed."""
         payload = _json(command.payload)
-        with self._transaction(f"logging a command for run {run_id}", write=True) as s:
-            self._require_run(s, run_id)
-            self._apply(s, run_id, update)
-            row = RunCommandRow(
-                run_id=run_id, tick=command.tick, kind=command.kind, payload=payload
+        with self._writing(f"logging a command for run {run_id}") as sql:
+            self._require_run(sql, run_id)
+            self._apply(sql, run_id, update)
+            row = sql.first(
+                _INSERT_COMMAND,
+                {"run_id": run_id, "tick": command.tick, "kind": command.kind, "payload": payload},
             )
-            s.add(row)
-            s.flush()
-            return row.id
+            assert row is not None
+            return int(row[0])
 
     def end_episode(
         self, run_id: int, episode: EpisodeRecord, checkpoint: Checkpoint, totals: RunTotals
@@ -477,10 +472,8 @@ class SqlAlchemyRunStore:
         """In one transaction: store episodes, the checkpoint after the last, the totals."""
         numbers = [e.episode for e in episodes]
         what = f"ending episodes {numbers} of run {run_id}"
-        with self._transaction(what, write=True) as s:
-            # Core statements on the connection: the ORM adds nothing here but time.
-            conn = s.connection()
-            done = conn.execute(
+        with self._writing(what) as sql:
+            done = sql.run(
                 _END_RUN,
                 {
                     "rid": run_id,
@@ -492,19 +485,19 @@ class SqlAlchemyRunStore:
                     "ticks": totals.ticks,
                 },
             )
-            if done.rowcount != 1:
+            if done != 1:
                 raise UnknownRunError(f"no run {run_id}")
-            taken = conn.execute(
-                select(EpisodeRow.episode).where(
-                    EpisodeRow.run_id == run_id, EpisodeRow.episode.in_(numbers)
-                )
-            ).first()
+            stored: set[int] = set()
+            if numbers:
+                bounds = {"b_run": run_id, "b_first": min(numbers), "b_last": max(numbers)}
+                stored = {row[0] for row in sql.rows(_EPISODES_BETWEEN, bounds)}
+            taken = next((n for n in numbers if n in stored), None)
             duplicate = next((n for n in numbers if numbers.count(n) > 1), None)
             if taken is not None or duplicate is not None:
-                n = taken[0] if taken is not None else duplicate
+                n = taken if taken is not None else duplicate
                 raise StorageError(f"run {run_id} has an episode {n} already")
             if episodes:
-                conn.execute(
+                sql.many(
                     _INSERT_EPISODE,
                     [
                         {
@@ -538,7 +531,7 @@ class SqlAlchemyRunStore:
         )
 
     def _pairs(self, s: Session, table: type[_Row], run_id: int) -> dict[_Pair, float]:
-        self._require_run(s, run_id)
+        self._require_run(_on(s), run_id)
         query = (
             select(StimulusRow.name, BehaviourRow.name, table.reliability)
             .join(StimulusRow, StimulusRow.id == table.stimulus_id)
@@ -560,7 +553,7 @@ class SqlAlchemyRunStore:
     def network(self, run_id: int) -> tuple[NetworkPair, ...]:
         """The run's live behaviour network, in insertion order."""
         with self._transaction(f"reading the network of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             a = aliased(RunAssociationRow)
             query = (
                 select(StimulusRow.name, BehaviourRow.name, a.strength, a.source, a.locked)
@@ -574,7 +567,7 @@ class SqlAlchemyRunStore:
     def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]:
         """The behaviours the run synthesised, in the order they were added."""
         with self._transaction(f"reading the behaviours of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             rows = s.scalars(
                 select(BehaviourRow).where(BehaviourRow.run_id == run_id).order_by(BehaviourRow.id)
             )
@@ -586,7 +579,7 @@ class SqlAlchemyRunStore:
     def rewards(self, run_id: int) -> list[StoredReward]:
         """The run's whole reward log, in log order."""
         with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             return [_reward(r) for r in s.execute(_rewards(RewardRow.run_id == run_id))]
 
     def rewards_page(
@@ -594,7 +587,7 @@ class SqlAlchemyRunStore:
     ) -> tuple[list[StoredReward], int]:
         """A page of the run's reward log in log order, and the log's length."""
         with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             total = s.scalar(
                 select(func.count()).select_from(RewardRow).where(RewardRow.run_id == run_id)
             )
@@ -604,13 +597,13 @@ class SqlAlchemyRunStore:
     def commands(self, run_id: int) -> list[StoredCommand]:
         """The run's whole command log, in log order."""
         with self._transaction(f"reading the commands of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             return [_command(c) for c in s.execute(_commands(RunCommandRow.run_id == run_id))]
 
     def episodes(self, run_id: int) -> list[EpisodeRecord]:
         """The run's episodes, by episode number."""
         with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             rows = s.scalars(
                 select(EpisodeRow).where(EpisodeRow.run_id == run_id).order_by(EpisodeRow.episode)
             )
@@ -624,7 +617,7 @@ class SqlAlchemyRunStore:
     def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:
         """One episode of a run with its trace, None if it has no such episode."""
         with self._transaction(f"reading episode {episode} of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             e = s.scalars(
                 select(EpisodeRow).where(EpisodeRow.run_id == run_id, EpisodeRow.episode == episode)
             ).first()
@@ -637,7 +630,7 @@ class SqlAlchemyRunStore:
     def episode_summaries(self, run_id: int) -> list[EpisodeRecord]:
         """The run's episodes by number, without their traces (`trace` is empty)."""
         with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             e = EpisodeRow
             rows = s.execute(
                 select(e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards)
@@ -659,7 +652,7 @@ class SqlAlchemyRunStore:
         It reads the page's rows only (by the episodes' primary key): never a trace.
         """
         with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(s, run_id)
+            self._require_run(_on(s), run_id)
             e = EpisodeRow
             total = s.scalar(select(func.count()).select_from(e).where(e.run_id == run_id))
             rows = s.execute(
@@ -693,6 +686,19 @@ class SqlAlchemyRunStore:
                 .values(status=RunStatus.INTERRUPTED.value)
             )
             return int(getattr(result, "rowcount", 0) or 0)
+
+
+def _reward_row(run_id: int, r: RewardRecord, applied: bool, credited: int) -> dict[str, Any]:
+    return {
+        "run_id": run_id,
+        "tick": r.tick,
+        "episode": r.episode,
+        "value": r.value,
+        "source": r.source,
+        "note": r.note,
+        "applied": applied,
+        "credited": credited,
+    }
 
 
 def _summary(run: RunRow) -> StoredRun:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from apphelpers import migrated_copy
 from sqlalchemy import Engine, event, func, select, text, update
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session, sessionmaker
@@ -120,42 +121,58 @@ def test_deleting_a_run_cascades_to_what_it_owns(sqlite_engine: Engine) -> None:
     assert left == [0, 0, 0]
 
 
-class FailingSession(Session):
-    """A session whose commit fails as a full disk makes it fail, once armed."""
+class FailingCursor(sqlite3.Cursor):
+    """A driver cursor whose COMMIT fails as a full disk makes it fail, once armed."""
+
+    def execute(self, sql: str, parameters: Any = (), /) -> FailingCursor:
+        if FailingConnection.armed and sql.strip().upper() == "COMMIT":
+            raise sqlite3.OperationalError("database or disk is full")
+        super().execute(sql, parameters)
+        return self
+
+
+class FailingConnection(sqlite3.Connection):
+    """SQLite's driver with `FailingCursor`s and a commit that fails the same way."""
 
     armed = False
 
+    def cursor(self, factory: Any = FailingCursor) -> Any:
+        return super().cursor(factory)
+
     def commit(self) -> None:
-        if FailingSession.armed:
-            raise OperationalError(
-                "COMMIT", {}, sqlite3.OperationalError("database or disk is full")
-            )
+        if FailingConnection.armed and self.in_transaction:
+            raise sqlite3.OperationalError("database or disk is full")
         super().commit()
 
 
 @pytest.fixture
-def failing_sessions(sqlite_engine: Engine) -> Iterator[sessionmaker[FailingSession]]:
-    FailingSession.armed = False
-    yield sessionmaker(sqlite_engine, class_=FailingSession, expire_on_commit=False)
-    FailingSession.armed = False
+def failing_sessions(tmp_path: Path, migrated_sqlite: Path) -> Iterator[sessionmaker[Session]]:
+    """Sessions on an engine whose driver fails to commit while `FailingConnection.armed`."""
+    FailingConnection.armed = False
+    engine = make_engine(
+        migrated_copy(tmp_path / "failing.db"), connect_args={"factory": FailingConnection}
+    )
+    yield make_sessionmaker(engine)
+    FailingConnection.armed = False
+    engine.dispose()
 
 
 def test_a_failed_commit_raises_storage_error_and_loses_nothing_committed(
-    sqlite_engine: Engine, failing_sessions: sessionmaker[FailingSession]
+    failing_sessions: sessionmaker[Session],
 ) -> None:
     store = SqlAlchemyRunStore(failing_sessions)
     run_id = store.create_run(SPEC, NETWORK)
     kept = store.log_reward(run_id, reward(1))
 
-    FailingSession.armed = True
+    FailingConnection.armed = True
     with pytest.raises(StorageError, match="database or disk is full") as raised:
         store.log_reward(run_id, reward(2))
     with pytest.raises(StorageError, match="applying reward"):
         store.apply_reward(run_id, kept, LearningUpdate(ltm={("Red", "stop"): 0.9}), 1)
-    FailingSession.armed = False
+    FailingConnection.armed = False
 
     assert isinstance(raised.value.__cause__, OperationalError)
-    fresh = SqlAlchemyRunStore(make_sessionmaker(sqlite_engine))
+    fresh = SqlAlchemyRunStore(make_sessionmaker(make_engine(str(failing_sessions.kw["bind"].url))))
     assert [(r.id, r.applied) for r in fresh.rewards(run_id)] == [(kept, False)]
     assert fresh.ltm(run_id) == {}
     assert fresh.network(run_id) == NETWORK
@@ -197,16 +214,19 @@ def test_writes_take_the_write_lock_at_begin_and_reads_do_not(sqlite_engine: Eng
     run_id = store.create_run(SPEC, NETWORK)
     begins: list[str] = []
 
-    def record(_c: Any, _cursor: Any, statement: str, *_: Any) -> None:
+    def record(statement: str) -> None:
         if statement.startswith("BEGIN"):
             begins.append(statement)
 
-    event.listen(sqlite_engine, "before_cursor_execute", record)
+    def trace(connection: sqlite3.Connection, *_: Any) -> None:
+        connection.set_trace_callback(record)  # what SQLite itself is asked to run
+
+    event.listen(sqlite_engine, "checkout", trace)
     try:
         store.log_reward(run_id, reward(1))
         store.load_run(run_id)
     finally:
-        event.remove(sqlite_engine, "before_cursor_execute", record)
+        event.remove(sqlite_engine, "checkout", trace)
 
     assert begins == ["BEGIN IMMEDIATE", "BEGIN"]
 
