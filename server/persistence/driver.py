@@ -238,8 +238,10 @@ def driver_transaction(
     writer.acquire(what)
     try:
         try:
-            pooled = engine.raw_connection()
-        except sa_exc.DBAPIError as e:
+            pooled = engine.raw_connection()  # a new one checks the file guard first
+        except DatabaseIdentityError as e:
+            raise DatabaseIdentityError(f"storage failed while {what}: {e}") from e
+        except (sa_exc.DBAPIError, sa_exc.TimeoutError) as e:
             raise storage_error(what, e) from e
         try:
             cursor = pooled.cursor()

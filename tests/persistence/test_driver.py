@@ -121,3 +121,6 @@ def test_a_replaced_database_file_is_refused_before_anything_is_written(
     store = SqlAlchemyRunStore(make_sessionmaker(sqlite_engine))
     with pytest.raises(DatabaseIdentityError, match=r"logging a reward .* replaced"):
         store.log_reward(run_id, RewardRecord(1, 0, 1.0, "trainer", ""))
+    sqlite_engine.dispose()  # no pooled connection left: a new one is refused too
+    with pytest.raises(DatabaseIdentityError, match=r"storage failed while logging .* replaced"):
+        store.log_reward(run_id, RewardRecord(1, 0, 1.0, "trainer", ""))
