@@ -103,6 +103,8 @@ class ConnectionSql:
         """As `Sql.many`."""
         if not params:
             return 0
+        if len(params) == 1:  # one execution: its count is always the driver's own
+            return self.connection.execute(statement, dict(params[0])).rowcount
         done = self.connection.execute(statement, [dict(p) for p in params])
         return done.rowcount if self.dialect.supports_sane_multi_rowcount else None
 
