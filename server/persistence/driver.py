@@ -140,6 +140,8 @@ class DriverStatement:
                 raise ValueError("the statement needs column defaults computed at execution")
             self._defaults[column.key] = default.arg
         self.sql = str(compiled)
+        if "POSTCOMPILE" in self.sql:
+            raise ValueError("the statement has an expanding IN, rendered only at execution")
         self._compiled = compiled
         self._order: list[tuple[str, Callable[[Any], Any] | None]] = [
             (name, compiled.binds[name].type.dialect_impl(dialect).bind_processor(dialect))
@@ -148,7 +150,7 @@ class DriverStatement:
 
     def values(self, params: Params) -> tuple[Any, ...]:
         """The driver's parameters for `params`."""
-        given = self._compiled.construct_params({**self._defaults, **params}, _check=False)
+        given = self._compiled.construct_params({**self._defaults, **params})
         return tuple(
             given[name] if convert is None else convert(given[name])
             for name, convert in self._order

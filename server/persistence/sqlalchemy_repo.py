@@ -111,6 +111,9 @@ _CATALOGUE_BEHAVIOUR_IDS = select(BehaviourRow.name, BehaviourRow.id).where(
 _RUN_BEHAVIOUR_IDS = select(BehaviourRow.name, BehaviourRow.id).where(
     BehaviourRow.run_id == bindparam("b_run")
 )
+_RUN_BEHAVIOUR = select(BehaviourRow.id).where(
+    BehaviourRow.run_id == bindparam("b_run"), BehaviourRow.name == bindparam("b_name")
+)
 _MAX_POSITION = select(func.max(BehaviourRow.position))
 _INSERT_BEHAVIOUR = insert(BehaviourRow).returning(BehaviourRow.id)
 _UPDATE_BEHAVIOUR = sql_update(BehaviourRow).where(BehaviourRow.id == bindparam("b_id"))
@@ -268,8 +271,8 @@ class SqlAlchemyRunStore:
             sql.run(_DELETE_PAIR, {"b_run": run_id, "b_stimulus": st, "b_behaviour": be})
 
     def _add_behaviour(self, sql: Sql, run_id: int, spec: BehaviourSpec, names: _Names) -> None:
-        synthesised: dict[str, int] = dict(sql.rows(_RUN_BEHAVIOUR_IDS, {"b_run": run_id}))
-        found = synthesised.get(spec.name)
+        stored = sql.first(_RUN_BEHAVIOUR, {"b_run": run_id, "b_name": spec.name})
+        found = None if stored is None else int(stored[0])
         values = {**motion_columns(spec), "synthesized": True}
         if found is None:
             if spec.name in self._behaviour_ids(sql):

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from apphelpers import migrated_copy
 from sqlalchemy import Engine, insert, select
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, InvalidRequestError
 from sqlalchemy.sql import Executable
 
 from core.errors import StorageError
@@ -87,6 +87,15 @@ def test_a_statement_is_compiled_once_for_its_parameters(sqlite_engine: Engine) 
         with driver_transaction(sqlite_engine, "writing", cache) as sql:
             assert sql.many(statement, [row, row]) == 2  # rows changed, summed
     assert len(cache) == 1
+
+
+def test_statements_the_driver_cannot_run_as_compiled_are_refused(sqlite_engine: Engine) -> None:
+    expanding = select(RewardRow.id).where(RewardRow.id.in_([1, 2]))
+    with pytest.raises(ValueError, match="expanding IN"):
+        DriverStatement(expanding, sqlite_engine.dialect, ())
+    compiled = DriverStatement(insert(RewardRow), sqlite_engine.dialect, ("run_id", "tick"))
+    with pytest.raises(InvalidRequestError, match="tick"):
+        compiled.values({"run_id": 1})  # a value missing is an error, never a NULL
 
 
 def test_a_failure_rolls_back_the_whole_transaction_and_says_what_failed(
