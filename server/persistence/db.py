@@ -268,9 +268,13 @@ def write_lock(engine: Engine) -> _WriteLock:
 
 
 def storage_error(what: str, e: Exception) -> StorageError:
-    """A database failure as srlab reports it: what failed, and the database's message."""
+    """A database failure as srlab reports it: what failed, and the database's message.
+
+    A `DatabaseIdentityError` stays one, so that callers can tell a lost file apart.
+    """
     detail = str(getattr(e, "orig", None) or e).strip().splitlines()[0]
-    return StorageError(f"storage failed while {what}: {detail}")
+    kind = DatabaseIdentityError if isinstance(e, DatabaseIdentityError) else StorageError
+    return kind(f"storage failed while {what}: {detail}")
 
 
 @contextmanager
@@ -296,7 +300,7 @@ def transaction(sessions: Callable[[], Session], what: str, *, write: bool) -> I
     except DatabaseIdentityError as e:
         with suppress(*_DB_ERRORS, DatabaseIdentityError):
             session.rollback()
-        raise DatabaseIdentityError(f"storage failed while {what}: {e}") from e
+        raise storage_error(what, e) from e
     except _DB_ERRORS as e:
         with suppress(*_DB_ERRORS):
             session.rollback()

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import sqlite3
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager, suppress
+from contextlib import ExitStack, contextmanager, suppress
 from typing import Any, Protocol
 
 from sqlalchemy import Engine
@@ -70,7 +70,8 @@ class Sql(Protocol):
     def returning(self, statement: Executable, params: Sequence[Params]) -> list[Row]:
         """Run an INSERT ... RETURNING once for each parameter set; a row for each, in order.
 
-        A statement for several sets is built with ``sort_by_parameter_order``.
+        The statement is built with ``sort_by_parameter_order``, so that SQLAlchemy keeps
+        the order when it batches the sets.
         """
         ...
 
@@ -120,10 +121,10 @@ class ConnectionSql:
 class DriverStatement:
     """A Core statement compiled once for a dialect with positional parameters.
 
-    `values` turns named parameters into the driver's tuple, as SQLAlchemy would: the
-    statement's own bound values fill what is not given, and each type's conversion for
-    the dialect is applied, and a column's constant default fills it when not given.
-    Defaults computed at execution (a function; none of the store's) are refused.
+    `values` turns named parameters into the driver's tuple as SQLAlchemy would: what is
+    not given comes from the statement's own bound values or a column's constant default,
+    and each type's conversion for the dialect is applied. A default computed at execution
+    (a function; none of the store's) and an expanding IN are refused when compiled.
     """
 
     def __init__(self, statement: Executable, dialect: Dialect, keys: Sequence[str]) -> None:
@@ -184,21 +185,22 @@ class DriverSql:
             self._cache[key] = found
         return found[1]
 
+    def _execute(self, statement: Executable, params: Params) -> sqlite3.Cursor:
+        compiled = self._compiled(statement, params)
+        return self.cursor.execute(compiled.sql, compiled.values(params))
+
     def first(self, statement: Executable, params: Params) -> Row | None:
         """As `Sql.first`."""
-        compiled = self._compiled(statement, params)
-        row: Row | None = self.cursor.execute(compiled.sql, compiled.values(params)).fetchone()
+        row: Row | None = self._execute(statement, params).fetchone()
         return row
 
     def rows(self, statement: Executable, params: Params) -> list[Row]:
         """As `Sql.rows`."""
-        compiled = self._compiled(statement, params)
-        return self.cursor.execute(compiled.sql, compiled.values(params)).fetchall()
+        return self._execute(statement, params).fetchall()
 
     def run(self, statement: Executable, params: Params) -> int:
         """As `Sql.run`."""
-        compiled = self._compiled(statement, params)
-        return self.cursor.execute(compiled.sql, compiled.values(params)).rowcount
+        return self._execute(statement, params).rowcount
 
     def many(self, statement: Executable, params: Sequence[Params]) -> int | None:
         """As `Sql.many`."""
@@ -212,8 +214,7 @@ class DriverSql:
         """As `Sql.returning`."""
         rows = []
         for p in params:  # one execution each: a few microseconds on the driver
-            compiled = self._compiled(statement, p)
-            row = self.cursor.execute(compiled.sql, compiled.values(p)).fetchone()
+            row = self._execute(statement, p).fetchone()
             assert row is not None, "an INSERT ... RETURNING returned no row"
             rows.append(tuple(row))
         return rows
@@ -239,40 +240,34 @@ def driver_transaction(
     guard = sqlite_guard(engine)
     assert guard is not None, "driver transactions are for SQLite files (see `drives`)"
     writer = write_lock(engine)
-    writer.acquire(what)
-    try:
+    with ExitStack() as held:  # given back in reverse: the cursor, the connection, the lock
+        writer.acquire(what)
+        held.callback(writer.release)
         try:
             pooled = engine.raw_connection()  # a new one checks the file guard first
-        except DatabaseIdentityError as e:
-            raise DatabaseIdentityError(f"storage failed while {what}: {e}") from e
-        except (sa_exc.DBAPIError, sa_exc.TimeoutError) as e:
+        except (DatabaseIdentityError, sa_exc.DBAPIError, sa_exc.TimeoutError) as e:
             raise storage_error(what, e) from e
+        held.callback(pooled.close)
+        cursor = pooled.cursor()
+        assert isinstance(cursor, sqlite3.Cursor)
+        held.callback(cursor.close)
         try:
-            cursor = pooled.cursor()
-            assert isinstance(cursor, sqlite3.Cursor)
-            try:
-                guard.check()
-                cursor.execute("BEGIN IMMEDIATE")
-                yield DriverSql(cursor, engine.dialect, cache)
-                cursor.execute("COMMIT")
-            except DatabaseIdentityError as e:
-                _rollback(cursor)
-                raise DatabaseIdentityError(f"storage failed while {what}: {e}") from e
-            except sqlite3.Error as e:
-                _rollback(cursor)
-                wrapped = sa_exc.DBAPIError.instance(
-                    None, None, e, sqlite3.Error, dialect=engine.dialect
-                )
-                raise storage_error(what, wrapped) from wrapped
-            except BaseException:
-                _rollback(cursor)
-                raise
-            finally:
-                cursor.close()
-        finally:
-            pooled.close()
-    finally:
-        writer.release()
+            guard.check()
+            cursor.execute("BEGIN IMMEDIATE")
+            yield DriverSql(cursor, engine.dialect, cache)
+            cursor.execute("COMMIT")
+        except DatabaseIdentityError as e:
+            _rollback(cursor)
+            raise storage_error(what, e) from e
+        except sqlite3.Error as e:
+            _rollback(cursor)
+            wrapped = sa_exc.DBAPIError.instance(
+                None, None, e, sqlite3.Error, dialect=engine.dialect
+            )
+            raise storage_error(what, wrapped) from wrapped
+        except BaseException:
+            _rollback(cursor)
+            raise
 
 
 def _rollback(cursor: sqlite3.Cursor) -> None:

@@ -428,8 +428,6 @@ class SqlAlchemyRunStore:
     ) -> list[int]:
         """Insert applied rewards; their ids in the records' order."""
         rows = [_reward_row(run_id, r, True, c) for r, c in zip(records, credited, strict=True)]
-        if len(rows) <= 1:
-            return [int(r[0]) for r in sql.returning(_INSERT_REWARD, rows)]
         return [int(r[0]) for r in sql.returning(_INSERT_REWARDS_IN_ORDER, rows)]
 
     def _mark_all_applied(self, sql: Sql, run_id: int, logged: Sequence[tuple[int, int]]) -> None:

@@ -219,14 +219,15 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
                 text = page.inner_text("body")
                 return header_run(page) == chosen and "interrupted" in text
 
-            def shown() -> str:
-                """What the page shows, for a failure's message."""
-                return f"(the page shows run {header_run(page)}: {page.inner_text('body')[:400]!r})"
+            def on_chosen(what: str) -> None:
+                """Wait until the view shows the chosen run; a timeout says what it shows."""
+                try:
+                    eventually(reconnected, what=f"{what} on run {chosen}")
+                except AssertionError as e:
+                    shown = f"run {header_run(page)}: {page.inner_text('body')[:400]!r}"
+                    raise AssertionError(f"{e} (the page shows {shown})") from None
 
-            try:
-                eventually(reconnected, what=f"the reconnected view on run {chosen}")
-            except AssertionError as e:
-                raise AssertionError(f"{e} {shown()}") from None
+            on_chosen("the reconnected view")
             # The view looks for new runs every second: it stays put. The old service's
             # panel stays on the page until the new one's first messages replace it (and
             # it too names the chosen run, interrupted at shutdown), so the page may go
@@ -237,10 +238,7 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
                 time.sleep(0.3)
                 seen.add(header_run(page))
             assert seen <= {chosen, None}, f"the view showed runs {seen}, not only {chosen}"
-            try:
-                eventually(reconnected, what=f"the view back on run {chosen}")
-            except AssertionError as e:
-                raise AssertionError(f"{e} {shown()}") from None
+            on_chosen("the view back")
         finally:
             second.client.post(f"/api/runs/{newest}/stop")
             stop_server(second)
