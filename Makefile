@@ -21,7 +21,12 @@ $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
 	$(UV) sync --frozen --extra ray --compile-bytecode --quiet
 	@touch $@
 
+# The project's own modules are compiled too, on every target that starts Python: the
+# environment may set PYTHONDONTWRITEBYTECODE (this machine's does), and then each
+# `srlab serve`, store or engines process, CLI and test worker compiled core/ and server/
+# again (about 1 s of CPU a process). A stale .pyc is never used: Python checks its source.
 install: $(BIN)/srlab
+	@$(BIN)/python -m compileall -q -j0 core server bench migrations tests
 
 # The optional srlab[baselines] extra (stable-baselines3, DQN and PPO) on a CPU-only torch,
 # into .venv, without CUDA's ~5 GB: torch from a CPU wheel in $$TORCH_WHEELS (default pip's

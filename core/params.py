@@ -28,6 +28,18 @@ Params = tuple[tuple[str, ParamValue], ...]
 """Parameter settings as sorted (name, value) pairs: hashable, so tasks can be compared."""
 
 
+def point_label(point: Mapping[str, ParamValue]) -> str:
+    """``eta=0.1 epsilon=0.05``."""
+    return " ".join(f"{n}={format_value(v)}" for n, v in point.items())
+
+
+def format_value(v: ParamValue) -> str:
+    """A parameter value as people write it."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return f"{v:g}"
+
+
 class ParameterError(CoreError):
     """A learning parameter's name or value is not acceptable."""
 

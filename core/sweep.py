@@ -25,7 +25,12 @@ from core.experiment import (
     run_tasks,
     summarise,
 )
-from core.params import ParameterError, ParamValue, applicable, get_parameter
+from core.params import (
+    ParameterError,
+    ParamValue,
+    applicable,
+    get_parameter,
+)
 from core.setup import Setup
 from core.stats import paired_difference
 
@@ -138,18 +143,6 @@ def run_sweep(
 ) -> list[TaskResult]:
     """Run every distinct task of the sweep; results in `sweep.tasks()` order."""
     return run_tasks(sweep.tasks(), backend, on_result)
-
-
-def point_label(point: Mapping[str, ParamValue]) -> str:
-    """``eta=0.1 epsilon=0.05``."""
-    return " ".join(f"{n}={format_value(v)}" for n, v in point.items())
-
-
-def format_value(v: ParamValue) -> str:
-    """A parameter value as people write it."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    return f"{v:g}"
 
 
 def _per_seed(r: TaskResult) -> dict[str, float]:

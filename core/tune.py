@@ -17,9 +17,9 @@ import numpy as np
 from core.errors import CatalogError
 from core.events import Outcome
 from core.experiment import Backend, LocalBackend, TaskResult, run_tasks
-from core.params import ParamValue
+from core.params import ParamValue, point_label
 from core.setup import Setup
-from core.sweep import Axes, Sweep, point_label
+from core.sweep import Axes, Sweep
 
 TUNING_SEED_BASE = 1000
 """Tuning seeds start here: experiments use seeds below 1,000, held-out evaluation

@@ -5,9 +5,12 @@ code. `core.experiment.Backend` is the protocol; the local process pool,
 `core.experiment.LocalBackend`, stays in the core because the core's own
 `run_experiment`, `tune` and `world_check` run on it when given no backend. This room
 holds the backends that need more than the standard library: `RayBackend`
-(the optional `srlab[ray]`).
+(the optional `srlab[ray]`, in `server.backends.ray`).
+
+A backend is imported where it is used: the package itself holds only `BackendError`, so
+that catching it costs a command nothing.
 """
 
-from server.backends.ray import BackendError, RayBackend, check_reachable
+from server.backends.errors import BackendError
 
-__all__ = ["BackendError", "RayBackend", "check_reachable"]
+__all__ = ["BackendError"]

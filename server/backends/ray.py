@@ -20,15 +20,12 @@ from urllib.parse import urlsplit
 
 import core
 from core.experiment import Task, TaskFunction, TaskResult, run_task
+from server.backends.errors import BackendError
 
 RAY_EXTRA = "pip install 'srlab[ray]'"
 CONNECT_TIMEOUT_S = 5.0
 OBJECT_STORE_BYTES = 128 * 1024 * 1024
 """A private local instance's object store: results are small, so keep /dev/shm free."""
-
-
-class BackendError(Exception):
-    """The backend cannot be used (Ray missing, the cluster unreachable)."""
 
 
 def import_ray() -> ModuleType:

@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.progress import (
@@ -24,10 +24,12 @@ from rich.progress import (
 from rich.table import Table
 
 from core.conditions import CONDITIONS
-from core.experiment import Backend, LocalBackend, TaskResult
+from core.params import point_label
 from core.setup import Setup
-from core.sweep import point_label
 from server.reports.base import first_line
+
+if TYPE_CHECKING:
+    from core.experiment import Backend, TaskResult
 
 Handler = Callable[[argparse.Namespace, IO[str], IO[str]], int]
 """What a command runs: its arguments, stdout and stderr in; the exit code out."""
@@ -189,9 +191,11 @@ def open_backend(args: argparse.Namespace, err: Console) -> Iterator[tuple[Backe
     """The backend the arguments choose, connected, and where it runs, for people."""
     check_backend_arguments(args)
     if args.backend == "local":
+        from core.experiment import LocalBackend
+
         yield LocalBackend(args.jobs), f"{args.jobs} local process{'es' * (args.jobs > 1)}"
         return
-    from server.backends import RayBackend
+    from server.backends.ray import RayBackend
 
     backend = RayBackend(args.address, args.jobs, args.ship_code)
     with ExitStack() as stack:

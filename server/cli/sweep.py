@@ -55,7 +55,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab sweep`."""
     from core.experiment import parse_conditions
-    from core.sweep import Sweep, format_value, parse_grid, run_sweep, summarise_sweep
+    from core.params import format_value
+    from core.sweep import Sweep, parse_grid, run_sweep, summarise_sweep
     from server.reports.sweep import write_sweep_report
 
     plan = Sweep(

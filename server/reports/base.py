@@ -10,13 +10,15 @@ import json
 import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from core.experiment import TaskResult
-from core.setup import Setup
+from core.params import point_label
 from core.stats import Estimate
 from core.stats import pct as stats_pct
-from core.sweep import point_label
+
+if TYPE_CHECKING:
+    from core.experiment import TaskResult
+    from core.setup import Setup
 
 
 def fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 
 from core.experiment import TaskResult
-from core.params import Params, ParamValue
-from core.sweep import Sweep, format_value, point_label
+from core.params import Params, ParamValue, format_value, point_label
+from core.sweep import Sweep
 from server.reports.base import diff, failed_lines, fmt, head, row, write_summary
 from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 

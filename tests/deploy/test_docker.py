@@ -11,6 +11,7 @@ a fresh PostgreSQL database, and a run goes through it into PostgreSQL.
 from __future__ import annotations
 
 import fnmatch
+import importlib.util
 import json
 import os
 import re
@@ -399,7 +400,7 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
     env.pop("UV_LINK_MODE")
     env["PATH"] = f"{_uv().parent}:{env.get('PATH', '')}"  # the image pip-installs uv
     for command in build.runs:
-        if command.startswith("uv "):
+        if command.startswith(("uv ", ".venv/bin/python ")):
             _shell(command, env, app)
     places = {"/app": app, "/data": data, "/home/srlab": home}
     final_env = {k: _move(os.path.expandvars(v), places) for k, v in final.env}
@@ -411,13 +412,17 @@ def image(tmp_path_factory: pytest.TempPathFactory) -> Image:
     return Image(app, data, home, final_env)
 
 
-def test_the_image_has_no_dev_tools_and_compiles_its_kernel_at_build_time(image: Image) -> None:
+def test_the_image_has_no_dev_tools_and_compiles_its_code_at_build_time(image: Image) -> None:
     bin_dir = image.app / ".venv" / "bin"
     assert (bin_dir / "srlab").exists()
     for dev_tool in ("pytest", "mypy", "ruff"):
         assert not (bin_dir / dev_tool).exists(), dev_tool
     numba_cache = Path(image.env["NUMBA_CACHE_DIR"])
     assert any(numba_cache.rglob("*.nbi")), "the warm-up step cached the sensing kernel"
+    # The service's user cannot write beside srlab's modules: they are compiled at build.
+    for module in ("core/sim/world.py", "server/serve.py", "server/api/routes/runs.py"):
+        source = image.app / module
+        assert Path(importlib.util.cache_from_source(str(source))).exists(), module
 
 
 def _healthcheck(image: Image, port: int) -> subprocess.CompletedProcess[str]:

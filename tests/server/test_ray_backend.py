@@ -22,7 +22,7 @@ except ImportError:
     )
 
 from core.experiment import Task, TaskResult, run_task, run_tasks
-from server.backends import RayBackend
+from server.backends.ray import RayBackend
 from server.cli import main
 
 SWEEP = [

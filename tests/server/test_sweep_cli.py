@@ -10,7 +10,8 @@ from pathlib import Path
 import matplotlib.image
 import pytest
 
-from server.backends import BackendError, RayBackend, check_reachable
+from server.backends import BackendError
+from server.backends.ray import RayBackend, check_reachable
 from server.cli import main
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
