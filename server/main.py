@@ -24,9 +24,10 @@ from core.errors import (
     UnknownNameError,
     UnknownRunError,
 )
-from server.api import api_router, contract
+from server.api import ROUTERS, contract
 from server.api.contract import operation_id
 from server.api.methods import ApiMethods
+from server.api.routing import add_routes
 from server.api.strictjson import StrictJson
 from server.asgi import cut_off, send_error
 from server.bootstrap import StorageFactory, open_storage, service
@@ -111,7 +112,7 @@ def create_app(settings: Settings | None = None, storage: StorageFactory = open_
         lifespan=lifespan,
         generate_unique_id_function=operation_id,
     )
-    app.include_router(api_router)
+    add_routes(app, ROUTERS)
     contract.install(app, token_needed=settings.writes_need_token)
 
     async def core_error(request: Request, exc: Exception) -> JSONResponse:

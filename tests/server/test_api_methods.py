@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 from apphelpers import client_for, settings_for
+from fastapi.routing import APIRoute
 
+from server.api import ROUTERS
 from server.api.methods import operations, route_operations
 from server.main import create_app
 
@@ -50,3 +52,17 @@ async def test_api_requests_do_not_build_the_openapi_document(tmp_path: Path) ->
         assert app.openapi_schema is None
         assert (await client.get("/openapi.json")).status_code == 200
         assert app.openapi_schema is not None
+
+
+def test_an_app_serves_the_resource_routers_routes_as_they_are(tmp_path: Path) -> None:
+    """Each app holds the routers' own route objects, complete (prefix, errors, operation
+    ids), so no app builds its routes again on its first request (server/api/routing.py)."""
+    first, second = create_app(settings_for(tmp_path)), create_app(settings_for(tmp_path))
+    api = [route for router in ROUTERS for route in router.routes]
+    assert len(api) > 40
+    for app in (first, second):
+        held = [route for route in app.routes if isinstance(route, APIRoute)]
+        assert [id(r) for r in held] == [id(r) for r in api]
+    assert all(route.path.startswith("/api/") for route in api if isinstance(route, APIRoute))
+    ids = {r.unique_id for r in api if isinstance(r, APIRoute)}
+    assert {"injectReward", "createRun", "getRun"} <= ids

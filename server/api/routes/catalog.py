@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter
 from pydantic import JsonValue
 
 from core.brain.catalog import Stimulus, sensor_definitions
 from core.conditions import CONDITIONS
 from core.worlds import default_world, load_world, world_names
 from server.api.deps import StateDep
+from server.api.routing import resource_router
 from server.schemas import (
     BehaviourPublic,
     ConditionPublic,
@@ -20,7 +20,7 @@ from server.schemas import (
     WorldPublic,
 )
 
-router = APIRouter(tags=["catalog"])
+router = resource_router(tag="catalog")
 
 _MEANINGS = {
     "Left": "the robot is left of its lane's centre line (more than 0.2 m)",

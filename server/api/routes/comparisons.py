@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query, status
+from fastapi import HTTPException, Query, status
 from pydantic import Field
 from starlette.concurrency import run_in_threadpool as io
 
@@ -19,9 +19,10 @@ from core.ports import RunStatus, StoredRun
 from core.stats import Estimate, bootstrap_mean, paired_difference
 from server.api.deps import EnginesDep, StoreDep
 from server.api.errors import ErrorPublic
+from server.api.routing import resource_router
 from server.schemas import ComparisonPublic, EstimatePublic
 
-router = APIRouter(prefix="/comparisons", tags=["runs"])
+router = resource_router("/comparisons", tag="runs")
 MAX_SEEDS = 32
 """Runs per side at most: a comparison reads every run's episodes."""
 RunIdItem = Annotated[int, Field(ge=1, le=2**62)]

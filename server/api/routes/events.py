@@ -7,7 +7,7 @@ import json
 from collections.abc import AsyncIterator
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Query, Request, status
+from fastapi import HTTPException, Query, Request, status
 from fastapi.responses import StreamingResponse
 from starlette.concurrency import run_in_threadpool
 
@@ -17,9 +17,10 @@ from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, R
 from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
+from server.api.routing import resource_router
 from server.engines import TooManyStreamsError
 
-router = APIRouter(prefix="/runs/{run_id}/events", tags=["events"])
+router = resource_router("/runs/{run_id}/events", tag="events")
 HEARTBEAT_S = 15.0
 STREAM_RETRY_AFTER_S = 5
 """What a client refused a stream (503) is told to wait."""

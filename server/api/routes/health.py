@@ -4,12 +4,11 @@ from __future__ import annotations
 
 from importlib.metadata import version
 
-from fastapi import APIRouter
-
 from server.api.deps import StateDep
+from server.api.routing import resource_router
 from server.schemas import Health
 
-router = APIRouter(tags=["health"])
+router = resource_router(tag="health")
 
 
 @router.get("/health")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from functools import partial
 
-from fastapi import APIRouter
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
@@ -16,6 +15,7 @@ from core.ports import RunQueries
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
+from server.api.routing import resource_router
 from server.schemas import (
     KpAssociationPublic,
     KpPerceptPublic,
@@ -28,7 +28,7 @@ from server.schemas import (
     RstmRecordPublic,
 )
 
-router = APIRouter(prefix="/runs", tags=["kp"])
+router = resource_router("/runs", tag="kp")
 TRACE_EPISODES = 20
 """A stored run's latest episodes whose traces say where its KP associations ran."""
 

@@ -15,7 +15,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Annotated, Any, cast
 
-from fastapi import APIRouter, Depends, Header, Path, Query, Response, status
+from fastapi import Depends, Header, Path, Query, Response, status
 from fastapi.exceptions import RequestValidationError
 
 from core.brain.catalog import Catalog, Source
@@ -23,6 +23,7 @@ from core.networks import Precondition, ReadOnlyNetworkError, StoredNetwork
 from core.ports import NetworkPair
 from server.api.deps import NetworksDep, StateDep, WriteGuard
 from server.api.errors import ErrorPublic, StalePublic
+from server.api.routing import resource_router
 from server.schemas import (
     NETWORK_FORMAT,
     NETWORK_NAME,
@@ -46,7 +47,7 @@ from server.schemas import (
 )
 from server.services.networks import NetworkService, Written
 
-router = APIRouter(prefix="/networks", tags=["networks"])
+router = resource_router("/networks", tag="networks")
 
 NetworkName = Annotated[str, Path(max_length=100, description="a stored network's name")]
 StimulusName = Annotated[str, Path(max_length=100, description="a stimulus name")]

@@ -5,16 +5,17 @@ from __future__ import annotations
 import math
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query, Request, Response, status
+from fastapi import HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from core.commands import RewardSource
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
 from server.api.routes.runs import RunId
+from server.api.routing import resource_router
 from server.ratelimit import client_key
 from server.schemas import RewardAccepted, RewardCreate, RewardPublic, RewardsPublic
 
-router = APIRouter(prefix="/runs/{run_id}/rewards", tags=["rewards"])
+router = resource_router("/runs/{run_id}/rewards", tag="rewards")
 
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, dependencies=[WriteGuard])

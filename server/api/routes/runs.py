@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query, Request, Response, status
+from fastapi import HTTPException, Path, Query, Request, Response, status
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
@@ -20,6 +20,7 @@ from core.trace import unpack
 from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
+from server.api.routing import resource_router
 from server.engines import Live
 from server.runspec import run_spec
 from server.schemas import (
@@ -40,7 +41,7 @@ from server.schemas import (
     ViewChosen,
 )
 
-router = APIRouter(prefix="/runs", tags=["runs"])
+router = resource_router("/runs", tag="runs")
 RunId = Annotated[int, Path(ge=1, le=2**62, description="a run's id")]
 MAX_PAGE = 1000
 """The longest page a list answers: a read's cost never grows with a run's age."""
