@@ -90,7 +90,11 @@ def main() -> None:
                 )
                 print(f"  {label:22} {what:13} {cells}   ratio {ratio:4.2f}")
         for n in (8, 64):
-            times = {p: statistics.median(batch(p, n) for _ in range(30)) for p in PATHS}
+            batches: dict[str, list[float]] = {p: [] for p in PATHS}
+            for _ in range(30):
+                for path in PATHS:  # alternated too
+                    batches[path].append(batch(path, n))
+            times = {p: statistics.median(batches[p]) for p in PATHS}
             cells = "   ".join(f"{p} {_ms(times[p])}" for p in PATHS)
             print(f"  a batch of {n:2} applied rewards, median of 30:   {cells}   "
                   f"ratio {times['driver'] / times['sessions']:4.2f}")  # fmt: skip
