@@ -25,12 +25,7 @@ from core.experiment import (
     run_tasks,
     summarise,
 )
-from core.params import (
-    ParameterError,
-    ParamValue,
-    applicable,
-    get_parameter,
-)
+from core.params import ParameterError, ParamValue, applicable, get_parameter
 from core.setup import Setup
 from core.stats import paired_difference
 

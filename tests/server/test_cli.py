@@ -266,11 +266,15 @@ def test_setup_names_are_checked_with_a_clear_error(
 def test_the_command_line_loads_no_command_s_machinery_before_it_runs() -> None:
     """`srlab` (and so every `srlab serve`) starts without the experiment code, gymnasium,
     Ray or the report plots: each command imports what it needs when it runs."""
-    heavy = ("core.experiment", "core.qlambda", "gymnasium", "ray", "server.backends.ray")
-    script = (
-        "import sys\nimport server.cli\n"
-        f"print(' '.join(m for m in {heavy!r} + ('matplotlib',) if m in sys.modules))\n"
+    heavy = (
+        "core.experiment",
+        "core.qlambda",
+        "gymnasium",
+        "ray",
+        "server.backends.ray",
+        "matplotlib",
     )
+    script = f"import sys\nimport server.cli\nprint(*(m for m in {heavy!r} if m in sys.modules))\n"
     done = subprocess.run(
         [sys.executable, "-c", script],
         cwd=REPO,
