@@ -31,7 +31,7 @@ from core.ports import Mode, RunSpec, RunStore
 from core.runner import run
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
 from server.persistence.process import StoreProcess
-from server.tuning import configure_process
+from server.tuning import configure_process, freeze_heap
 
 STORES = ("threads", "process", "sessions")
 """Where the store runs: in the engine's process (its worker threads) or in a store process;
@@ -73,6 +73,7 @@ def fast(
     for store in opened.values():
         spec = RunSpec(condition, 0, 3, Mode.FAST)
         asyncio.run(RunEngine.create(spec, store, catalog=catalog).run())
+    freeze_heap()  # as `srlab run` does once it is set up
     plain_rates: list[float] = []
     engine_rates: dict[str, list[float]] = {kind: [] for kind in kinds}
     ticks = 0

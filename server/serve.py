@@ -16,7 +16,7 @@ from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
 from server.timeouts import timed_protocol
-from server.tuning import configure_process
+from server.tuning import configure_process, freeze_heap
 
 log = logging.getLogger("srlab.serve")
 
@@ -39,11 +39,27 @@ class _Server(uvicorn.Server):
         super().__init__(config)
         self._app = app
 
+    async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+        prepare(self._app)
+        await super().startup(sockets)  # the lifespan: storage, the engines, resumed runs
+        freeze_heap()  # the app is up: what it built is never scanned again
+
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
         state = getattr(self._app.state, "srlab", None)  # None: the lifespan never started
         if state is not None:
             state.engines.interrupt_all()
         await super().shutdown(sockets)
+
+
+def prepare(app: FastAPI) -> None:
+    """Work a first request would otherwise do on the event loop, where the runs tick.
+
+    FastAPI builds the OpenAPI document at its first `GET /openapi.json` (or `/docs`):
+    180 ms of CPU, during which every run on the service's loop stood still (32 runs
+    under load each lost a few periods, `bench/service.py --engines loop`). Built here,
+    before the lifespan starts any run, it is served from memory.
+    """
+    app.openapi()
 
 
 def serve(host: str | None = None, port: int | None = None) -> int:

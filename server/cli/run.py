@@ -35,7 +35,7 @@ from server.cli.common import (
 )
 from server.cli.db import open_store, safe_url
 from server.runspec import run_spec
-from server.tuning import configure_process
+from server.tuning import configure_process, freeze_heap
 
 if TYPE_CHECKING:
     from core.engine import RunEngine
@@ -115,6 +115,7 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 sensors=getattr(args, "sensors", None),
             )
             engine = RunEngine.create(spec, store)
+        freeze_heap()  # set up: what it built is never scanned again
         return asyncio.run(_run(engine, args.quiet, stdout, stderr))
     finally:
         db_engine.dispose()

@@ -36,7 +36,7 @@ from core.errors import StorageError
 from server.persistence.db import DatabaseCheck, make_engine, make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
-from server.tuning import configure_process
+from server.tuning import configure_process, freeze_heap
 
 # --------------------------------------------------------------------------- in the child
 
@@ -55,6 +55,7 @@ def _open(url: str) -> None:
     _stores["runs"] = SqlAlchemyRunStore(sessions)
     _stores["networks"] = SqlAlchemyNetworkRepository(sessions)
     _stores["database"] = DatabaseCheck(engine)
+    freeze_heap()
     parent = multiprocessing.parent_process()
     if parent is not None:
         threading.Thread(target=_exit_with, args=(parent,), daemon=True).start()
