@@ -775,7 +775,6 @@ class RunEngine:
         sim = self.sim
         self._episodes_done += 1
         self._successes += ended.outcome is Outcome.SUCCESS
-        trace = self._trace.pack() if self._trace is not None else b""
         record = EpisodeRecord(
             episode=ended.episode,
             outcome=ended.outcome.value,
@@ -783,7 +782,7 @@ class RunEngine:
             ticks=ended.ticks,
             start_tick=self._episode_start_tick,
             rewards=self._episode_rewards,
-            trace=trace,
+            trace=b"",  # compressed by the writer (`EpisodeJob.stored`)
         )
         state = export_state(sim)
         self._writer.episodes.put(
@@ -795,6 +794,7 @@ class RunEngine:
                 self.totals,
                 self._last_reward_job,
                 self._last_external_job,
+                self._trace.take() if self._trace is not None else None,
             )
         )
         self._need_reset = True

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import asyncio
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Final, Generic, TypeVar
 
 from core.commands import EditAssociation, InjectReward
 from core.ports import EpisodeRecord, LearningUpdate, RewardCommit, RunTotals
+from core.trace import TraceArray, compress
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,6 +76,15 @@ class EpisodeJob:
     external: RewardJob | None
     """The last trainer's reward applied before the checkpoint: once `after` is committed
     it is in the log, and its id tells a replay which logged rewards the state holds."""
+    trace: TraceArray | None = None
+    """The episode's trace rows, compressed into the record by `stored` on the writer's
+    thread (zlib runs there without the GIL, beside the ticks); None: `record` has it."""
+
+    def stored(self) -> EpisodeRecord:
+        """The record as stored, its trace compressed."""
+        if self.trace is None:
+            return self.record
+        return replace(self.record, trace=compress(self.trace))
 
 
 @dataclass(frozen=True, slots=True)

@@ -33,7 +33,7 @@ from core.engine.jobs import (
 )
 from core.engine.stats import EngineStats
 from core.errors import StorageError
-from core.ports import Checkpoint, CommandRecord, EpisodeRecord, RewardRecord, RunStatus, RunStore
+from core.ports import Checkpoint, CommandRecord, RewardRecord, RunStatus, RunStore
 
 EPISODE_BATCH_S = 0.05
 """How long the episode writer gathers episodes before it commits them together."""
@@ -201,10 +201,12 @@ class RunWriter:
             last.state["last_external_reward_id"] = (
                 self._last_external_id if external is None else external.logged_id
             )
-            await asyncio.to_thread(self._end_episodes, tuple(j.record for j in batch), last)
+            await asyncio.to_thread(self._end_episodes, batch)
 
-    def _end_episodes(self, records: tuple[EpisodeRecord, ...], last: EpisodeJob) -> None:
+    def _end_episodes(self, batch: list[EpisodeJob]) -> None:
         """Store episodes with the checkpoint after the last (on a worker thread)."""
+        last = batch[-1]
+        records = tuple(j.stored() for j in batch)
         checkpoint = Checkpoint(last.next_episode, last.tick, encode(last.state))
         self.store.end_episodes(self.run_id, records, checkpoint, last.totals)
 

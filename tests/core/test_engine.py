@@ -41,7 +41,8 @@ from core.ports import (
     StoredReward,
 )
 from core.runner import run as headless_run
-from core.simulation import Simulation, TickInputs
+from core.simulation import Simulation, Snapshot, TickInputs
+from core.trace import unpack
 
 LtmByName = dict[tuple[str, str], float]
 
@@ -89,6 +90,29 @@ def test_fast_mode_gives_the_same_ltm_as_the_headless_loop(condition: str) -> No
     assert stored == expected
     assert len(store.episodes(engine.run_id)) == 12
     assert all(r.applied for r in store.rewards(engine.run_id))
+
+
+def test_each_stored_episode_traces_exactly_its_ticks_as_the_headless_loop_ran_them() -> None:
+    # The engine hands each episode's rows to its writer, which compresses them off the
+    # tick task: what is stored must still be that episode's ticks, in order.
+    ticks: list[Snapshot] = []
+    plain = headless_run(get_condition("kp"), 5, 4, catalog=CATALOG, on_tick=ticks.append)
+    store = InMemoryRunStore(CATALOG)
+    engine = RunEngine.create(fast("kp", 5, 4), store, catalog=CATALOG)
+    assert asyncio.run(engine.run()) is RunStatus.FINISHED
+    stored = store.episodes(engine.run_id)
+    assert [e.ticks for e in stored] == [e.ticks for e in plain.episodes]
+    for record in stored:
+        rows = unpack(record.trace)
+        expected = [s for s in ticks if s.episode == record.episode and s.episode_tick > 0]
+        assert len(rows) == record.ticks == len(expected)
+        assert [(r.tick, r.behaviour, r.how, r.origin) for r in rows] == [
+            (s.tick, s.behaviour, str(s.how), s.origin) for s in expected
+        ]
+        # float32 in the trace: positions to well under a millimetre.
+        assert (
+            max(abs(r.x - s.x) + abs(r.y - s.y) for r, s in zip(rows, expected, strict=True)) < 1e-4
+        )
 
 
 def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
