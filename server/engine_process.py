@@ -29,7 +29,9 @@ stdout carry length-prefixed pickles, in order, each way.
 The child ignores Ctrl-C (the service stops it: `shutdown`, then end of input) and stops
 its runs as interrupted, resumable, when its input ends, so a killed service leaves no
 engines ticking. If the child dies, every run here fails with an error that says so, every
-call gets `EngineProcessError` (503), and the service stays up to say it.
+call gets `EngineProcessError` (503) meanwhile, and the service stays up to say it and
+starts a new child (after `RESPAWN_FIRST_S`, then twice as long, at least a second, after
+each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and runs can be started again.
 """
 
 from __future__ import annotations
@@ -69,6 +71,10 @@ EVENTS_HIGH_WATER = 1 << 20
 """Bytes waiting in the child's pipe above which its subscriptions wait (and drop)."""
 STOP_S = 15.0
 """How long `close` waits for the child to exit after its input ends, before killing it."""
+RESPAWN_FIRST_S = 1.0
+"""How long after the child died a new one is started."""
+RESPAWN_MAX_S = 60.0
+"""The longest wait between two starts of a child that keeps failing to start."""
 
 
 class EngineProcessError(StorageError):
@@ -221,11 +227,17 @@ class ProcessEngines:
         self._new: dict[int, RemoteRun] = {}
         """Runs the child has just started, until `start` takes them (they may have ended
         and been let go by then)."""
+        self._config: dict[str, Any] = {}
+        self._respawner: asyncio.Task[None] | None = None
 
     # --- the child ------------------------------------------------------------------
 
     async def start_process(self, config: dict[str, Any]) -> None:
         """Start the engines' process with `config` (`_ChildConfig`'s fields)."""
+        self._config = dict(config)
+        await self._start_child()
+
+    async def _start_child(self) -> None:
         # What this process can import, the child can: readers and actions travel by name.
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         proc = await asyncio.create_subprocess_exec(
@@ -240,10 +252,14 @@ class ProcessEngines:
         )
         assert proc.stdin is not None and proc.stdout is not None
         self._proc, self._writer = proc, proc.stdin
-        self._writer.write(_frame(config))
-        ready = await _read(proc.stdout)
+        self._writer.write(_frame(self._config))
+        try:
+            ready = await _read(proc.stdout)
+        except (asyncio.IncompleteReadError, ConnectionError, EOFError):
+            ready = f"it exited (code {await proc.wait()})"
         if ready != "ready":
             raise EngineProcessError(f"the engines' process did not start: {ready}")
+        self._gone = None
         self._pump = asyncio.create_task(self._receive(proc.stdout), name="engines' process")
 
     @property
@@ -284,6 +300,24 @@ class ProcessEngines:
         self._lost()
         for run_id in await asyncio.to_thread(self._store_failed, tuple(self._runs.values())):
             self._runs.pop(run_id, None)  # read from storage from now on
+        if not self._closing:
+            self._respawner = asyncio.create_task(self._respawn(), name="engines' respawn")
+
+    async def _respawn(self) -> None:
+        """Start a new child in place of the one that died, until one starts."""
+        wait_s = RESPAWN_FIRST_S
+        while True:
+            await asyncio.sleep(wait_s)
+            if self._closing:
+                return
+            try:
+                await self._start_child()
+            except Exception as e:
+                wait_s = min(RESPAWN_MAX_S, max(1.0, 2 * wait_s))
+                log.error("%s; trying again in %.0f s", e, wait_s)
+                continue
+            log.warning("the engines' process was started again (pid %s)", self.pid)
+            return
 
     def _handle(self, message: tuple[Any, ...]) -> None:
         """Take one message from the child (in the order it sent them)."""
@@ -321,8 +355,8 @@ class ProcessEngines:
         if not self._closing:
             log.error("the engines' process has exited (code %s): no run can tick", code)
         self._gone = EngineProcessError(
-            f"the engines' process is gone (exit code {code}): no run can tick "
-            "(see the service's log, then restart the service)"
+            f"the engines' process is gone (exit code {code}): no run can tick until the "
+            "service has started a new one (see the service's log)"
         )
         for fut in self._calls.values():
             if not fut.done():
@@ -333,6 +367,10 @@ class ProcessEngines:
             run.done.set()
         for sub in self._subs.values():
             sub.close()
+        self._calls.clear()
+        self._subs.clear()
+        self._sub_ids.clear()
+        self._new.clear()
 
     def _store_failed(self, runs: tuple[RemoteRun, ...]) -> list[int]:
         """Store how the child's runs ended (it could not: it is gone); the ids stored.
@@ -352,10 +390,13 @@ class ProcessEngines:
 
     async def close(self) -> None:
         """End the engines' process (after `shutdown`): its input ends, it exits."""
+        self._closing = True
+        if self._respawner is not None:
+            self._respawner.cancel()
+            await asyncio.gather(self._respawner, return_exceptions=True)
         proc, writer = self._proc, self._writer
         if proc is None or writer is None:
             return
-        self._closing = True
         with contextlib.suppress(Exception):
             writer.close()
         try:

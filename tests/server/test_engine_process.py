@@ -5,13 +5,15 @@ rewards in the engines' process, not the service's; every control and read of th
 works as with the engines on the service's loop; the event stream carries the run's
 events across and ends with it; the service's loop blocked solid does not stop a run from
 ticking; if the engines' process dies, its runs read as failed with an error that says so,
-calls on them answer 503 and the service stays up; and the service stops with the
-engines' process gone and its runs resumable.
+calls on them answer 503 and the service stays up, then starts a new one where runs tick
+and the failed ones resume; and the service stops with the engines' process gone and its
+runs resumable.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import os
 import signal
 import time
@@ -19,12 +21,14 @@ from pathlib import Path
 
 import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
+from fakes import InMemoryRunStore
 
 from bench.liveserver import live_server
 from core.engine import RunView, StatusChanged
+from server import engine_process
 from server.bootstrap import Storage, open_storage
 from server.config import Settings
-from server.engine_process import ProcessEngines
+from server.engine_process import EngineProcessError, ProcessEngines
 
 pytestmark = pytest.mark.anyio
 
@@ -117,8 +121,9 @@ async def test_a_blocked_service_loop_does_not_stop_the_ticks(tmp_path: Path) ->
 
 
 async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_process_dies(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 3600.0)  # gone for the test
     async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
@@ -141,6 +146,57 @@ async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_proce
         assert started.status_code == 503, started.text
         assert "engines' process is gone" in started.json()["detail"]
         assert (await client.get("/api/health")).status_code in (200, 503)
+
+
+async def test_a_new_engines_process_is_started_and_a_failed_run_resumes_there(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 0.0)
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        engines = _engines(app)
+        run_id = await started_realtime(client)
+        await until(client, run_id, "running")
+        dead = engines.pid
+        assert dead is not None
+        os.kill(dead, signal.SIGKILL)
+        async with asyncio.timeout(60):  # a hang guard: stored as failed, then resumed
+            while (await client.get(f"/api/runs/{run_id}")).json().get("status") != "failed":
+                await asyncio.sleep(0.05)
+            # 503 until the new process is up; then the run resumes from its checkpoint.
+            while (started := await client.post(f"/api/runs/{run_id}/start")).status_code == 503:
+                await asyncio.sleep(0.05)
+        assert started.status_code == 200, started.text
+        assert engines.pid not in (None, dead)
+        live = engines.get(run_id)
+        assert live is not None
+        assert await live.read(_pid) == engines.pid
+        await until(client, run_id, "running")
+        other = await started_realtime(client)
+        assert (await client.post(f"/api/runs/{other}/stop")).json()["status"] == "stopped"
+        assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
+
+
+async def test_a_child_that_fails_to_start_is_started_again_until_one_does(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 0.0)
+    monkeypatch.setattr(engine_process, "RESPAWN_MAX_S", 0.0)  # no waiting in a test
+    engines = ProcessEngines(InMemoryRunStore())
+    starts: list[int] = []
+
+    async def start_child() -> None:
+        starts.append(len(starts))
+        if len(starts) < 3:
+            raise EngineProcessError(f"the engines' process did not start: try {len(starts)}")
+
+    monkeypatch.setattr(engines, "_start_child", start_child)
+    with caplog.at_level(logging.ERROR, logger="srlab.engines"):
+        await engines._respawn()
+    assert len(starts) == 3
+    assert [r.getMessage() for r in caplog.records if r.levelno == logging.ERROR] == [
+        "the engines' process did not start: try 1; trying again in 0 s",
+        "the engines' process did not start: try 2; trying again in 0 s",
+    ]
 
 
 async def test_the_service_stops_with_the_engines_process_gone_and_its_run_resumable(
