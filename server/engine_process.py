@@ -52,11 +52,12 @@ from typing import Any, TypeVar
 from core.brain.catalog import Catalog
 from core.commands import EditAssociation, RewardSource
 from core.engine import RewardAck, RunEngine, RunView, Subscription, SubscriptionClosed
-from core.errors import RunStateError, StorageError
+from core.errors import StorageError
 from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore, RunTotals
 from server.engine_loop import LiveRun
 from server.engines import (
     EngineManager,
+    RunLetGo,
     StreamBook,
     create_run,
 )
@@ -382,8 +383,8 @@ class ProcessEngines:
             try:
                 if self.store.load_run(run.run_id).status in ACTIVE:
                     self.store.set_status(run.run_id, run.status, run.error)
-            except StorageError:
-                log.exception("run %s: its failure could not be stored", run.run_id)
+            except StorageError as e:  # says what failed; storage's own log has the rest
+                log.error("run %s: its failure could not be stored: %s", run.run_id, e)
                 continue
             stored.append(run.run_id)
         return stored
@@ -626,7 +627,7 @@ class _Host:
     def _live(self, run_id: int) -> LiveRun:
         live = self.manager.get(run_id)
         if live is None:  # it ended, and the service has not heard yet
-            raise RunStateError(f"run {run_id} is not running here")
+            raise RunLetGo(f"run {run_id} is not running here")
         return live
 
     async def op_start(self, run_id: int) -> None:

@@ -36,6 +36,15 @@ class TooManyStreamsError(RunStateError):
     """The service (or the run) has as many live event streams open as it may."""
 
 
+class RunLetGo(RunStateError):
+    """The run ended and its engine was let go (its end stored) before a call reached it.
+
+    With the engines in a process of their own, a call can leave the service while the
+    run is ending there and arrive after: a read then finds the run in storage instead
+    (`read_live`), anything else is refused as for any run not running (409).
+    """
+
+
 class Live(Protocol):
     """One run ticking (or paused, or ended but not yet let go), as the service reaches it.
 
@@ -163,6 +172,24 @@ class Engines(Protocol):
     async def shutdown(self, grace_s: float = 5.0) -> None:
         """Interrupt every run and wait for them (runs stay resumable)."""
         ...
+
+
+class _Finds(Protocol):
+    def get(self, run_id: int) -> Live | None: ...
+
+
+async def read_live(engines: _Finds, run_id: int, reader: Callable[[RunView], T]) -> T | None:
+    """`reader` run on the live run; None when it is not running here (read storage then).
+
+    None too when it ended and was let go while the read was on its way (`RunLetGo`).
+    """
+    live = engines.get(run_id)
+    if live is None:
+        return None
+    try:
+        return await live.read(reader)
+    except RunLetGo:
+        return None
 
 
 def create_run(store: RunStore, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:

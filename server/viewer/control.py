@@ -25,7 +25,7 @@ from core.events import EpisodeEnded
 from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
-from server.engines import Engines, Live
+from server.engines import Engines, Live, RunLetGo
 from server.ratelimit import RateLimiter
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
 from server.viewer.replay import ReplayClock, load_replay
@@ -420,8 +420,11 @@ class Controller:
             self._publish(live=self._live_info(run_id))
 
     async def _show_now(self, live: Live) -> None:
-        """Push the run's latest tick (none before its first episode)."""
-        now = await live.read(_latest)
+        """Push the run's latest tick (none before its first episode, or once it ended)."""
+        try:
+            now = await live.read(_latest)
+        except RunLetGo:  # ended there while the read was on its way
+            return
         if now is not None:
             self.inbox.push(tick_view(live, *now))
 

@@ -28,7 +28,8 @@ from core.engine import RunView, StatusChanged
 from server import engine_process
 from server.bootstrap import Storage, open_storage
 from server.config import Settings
-from server.engine_process import EngineProcessError, ProcessEngines
+from server.engine_process import EngineProcessError, ProcessEngines, RemoteRun
+from server.engines import RunLetGo, read_live
 
 pytestmark = pytest.mark.anyio
 
@@ -81,6 +82,30 @@ async def test_a_run_ticks_reads_and_takes_rewards_in_the_engines_process(
         again = await client.post(f"/api/runs/{run_id}/start")
         assert again.status_code == 200, again.text
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
+
+
+async def test_a_read_reaching_the_engines_process_after_the_run_was_let_go_reads_storage(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+        engines = _engines(app)
+        run_id = await started_realtime(client)
+        late = engines.get(run_id)  # what the service held when a read left for it
+        assert late is not None
+        assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
+        with pytest.raises(RunLetGo):  # the child let it go: its end is stored
+            await late.read(_tick)
+
+        class Books:
+            """The service's books as they were when that read left."""
+
+            def get(self, _: int) -> RemoteRun:
+                assert late is not None
+                return late
+
+        assert await read_live(Books(), run_id, _tick) is None  # callers read storage
+        run = await client.get(f"/api/runs/{run_id}")
+        assert run.status_code == 200 and run.json()["status"] == "stopped"
 
 
 async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(

@@ -16,6 +16,7 @@ from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
+from server.engines import read_live
 from server.schemas import (
     KpAssociationPublic,
     KpPerceptPublic,
@@ -199,9 +200,9 @@ async def get_run_kp(
     in the running engine only); a run whose condition does not propagate answers
     `kp: false` with a `reason`. 404 for an unknown run.
     """
-    live = engines.get(run_id)
-    if live is not None:
-        return await live.read(partial(_of_view, run_id))
+    view = await read_live(engines, run_id, partial(_of_view, run_id))
+    if view is not None:
+        return view
     run = await io(store.run_summary, run_id)
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:

@@ -21,7 +21,7 @@ from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
-from server.engines import Live
+from server.engines import Live, read_live
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
@@ -113,9 +113,9 @@ def _of_stored(run: StoredRun) -> RunPublic:
 
 
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
-    live = engines.get(run_id)
-    if live is not None:
-        return await live.read(_of_view)
+    view = await read_live(engines, run_id, _of_view)
+    if view is not None:
+        return view
     # Database work runs in a thread: the event loop also paces realtime ticks.
     return _of_stored(await io(store.run_summary, run_id))
 
@@ -168,8 +168,8 @@ async def list_runs(
     page, total = await io(store.run_summaries, offset, limit)
     data = []
     for r in page:
-        live = engines.get(r.id)
-        data.append(await live.read(_of_view) if live is not None else _of_stored(r))
+        view = await read_live(engines, r.id, _of_view)
+        data.append(view if view is not None else _of_stored(r))
     return RunsPublic(data=data, count=total)
 
 
