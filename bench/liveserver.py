@@ -170,7 +170,9 @@ def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60
     deadline = time.monotonic() + timeout
     run: dict[str, Any] = {}
     while time.monotonic() < deadline:
-        run = api.get(f"/api/runs/{run_id}").json()
+        r = api.get(f"/api/runs/{run_id}")
+        assert r.status_code == 200, f"GET run {run_id}: {r.status_code} {r.text}"
+        run = r.json()
         if run["status"] == status:
             return run
         time.sleep(0.05)

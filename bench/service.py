@@ -38,8 +38,8 @@ of their own (``SRLAB_ENGINE_PROCESS``, `server/engine_process.py`), a fresh ser
 each, alternated ``--rounds`` times, and prints them side by side (medians over the
 rounds). ``--part costs`` measures what a request of each kind in D4's mix costs the
 server in CPU, one at a time, and what the mix at ``--rate`` would cost it in cores.
-``--engines`` picks the placement of every other part's servers (default: the
-service's loop, as ``srlab serve``).
+``--engines`` picks the placement of every other part's servers (default: the engines'
+process, as ``srlab serve``).
 
 Open loop: every request has a scheduled send time on a fixed-rate grid, whether earlier
 ones were answered or not, and its latency counts from that time; a slow answer cannot hide
@@ -555,7 +555,7 @@ class Server:
     proc: subprocess.Popen[bytes] | None = None
     env: dict[str, str] = field(default_factory=lambda: {"SRLAB_VISER_PORT": str(free_port())})
     """More SRLAB_* settings (by default the 3D view on a free port, not on 8080)."""
-    placement: ClassVar[str] = "loop"
+    placement: ClassVar[str] = "process"
     """Where servers tick their runs unless `env` says (``--engines``)."""
 
     @property
@@ -1550,10 +1550,10 @@ def main() -> None:
     parser.add_argument(
         "--engines",
         choices=list(PLACEMENTS),
-        default="loop",
-        help="where the servers tick their runs: the service's loop (default, as srlab "
-        "serve), a thread (SRLAB_ENGINE_THREAD) or a process (SRLAB_ENGINE_PROCESS) of "
-        "their own; --part engines runs all three",
+        default="process",
+        help="where the servers tick their runs: the service's loop, a thread "
+        "(SRLAB_ENGINE_THREAD) or a process (SRLAB_ENGINE_PROCESS, the default, as srlab "
+        "serve) of their own; --part engines runs all three",
     )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")

@@ -23,7 +23,7 @@ import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
 from fakes import InMemoryRunStore
 
-from bench.liveserver import live_server
+from bench.liveserver import live_server, wait_status
 from core.engine import RunView, StatusChanged
 from server import engine_process
 from server.bootstrap import Storage, open_storage
@@ -304,3 +304,19 @@ def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
         assert engines_stores, "the engines' own store process"
         for store in engines_stores:
             assert _nices(store) == {base}
+
+
+@pytest.mark.parametrize(
+    ("env", "in_process"),
+    [({}, True), ({"SRLAB_ENGINE_THREAD": "true"}, False)],
+    ids=["default", "engines-thread"],
+)
+def test_srlab_serve_ticks_runs_in_the_engines_process_unless_told_otherwise(
+    tmp_path: Path, env: dict[str, str], in_process: bool
+) -> None:
+    with live_server(tmp_path / "placement.db", env={"SRLAB_VISER": "false", **env}) as server:
+        children = _children(server.process.pid).values()
+        assert any("server.engine_process" in cmd for cmd in children) is in_process, children
+        run = server.client.post("/api/runs", json={"condition": "rp", "episodes": 1}).json()
+        assert server.client.post(f"/api/runs/{run['id']}/start").status_code == 200
+        assert wait_status(server.client, run["id"], "finished")["episodes_done"] == 1
