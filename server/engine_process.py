@@ -57,6 +57,7 @@ from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore, RunTot
 from server.engine_loop import LiveRun
 from server.engines import (
     EngineManager,
+    Live,
     RunLetGo,
     StreamBook,
     create_run,
@@ -333,6 +334,7 @@ class ProcessEngines:
             case ("run", run_id, spec, state):
                 started = RemoteRun(self, run_id, spec, state)
                 self._runs[run_id] = self._new[run_id] = started
+                self._streams.started(run_id, started)
             case ("state", run_id, state):
                 if (run := self._runs.get(run_id)) is not None:
                     run.update(state)
@@ -456,6 +458,10 @@ class ProcessEngines:
     def streams(self, run_id: int | None = None) -> int:
         """How many subscriptions `subscribe` gave are open (to one run, or to all)."""
         return self._streams.count(run_id)
+
+    def followed(self, run_id: int) -> Live | None:
+        """The run a stream to `run_id` follows (`Engines.followed`)."""
+        return self.get(run_id) or self._streams.followed(run_id)
 
     def subscribe(self, run_id: int, maxsize: int, tick_hz: float) -> Subscription:
         """A run's events, now or from its next start (`EngineManager.subscribe`'s caps)."""

@@ -161,6 +161,14 @@ class Engines(Protocol):
         """A subscription to a run's events, now or from its next start (capped)."""
         ...
 
+    def followed(self, run_id: int) -> Live | None:
+        """The run a stream to `run_id` follows, for the names its events use.
+
+        `get`'s; or, after it was let go, the last one started while a stream to it was
+        open (until the last of those closes).
+        """
+        ...
+
     def unsubscribe(self, run_id: int, sub: Subscription) -> None:
         """Stop feeding a subscription `subscribe` gave."""
         ...
@@ -221,6 +229,9 @@ class StreamBook:
         self.total = total
         self.per_run = per_run
         self._open: dict[int, set[Subscription]] = {}
+        self._followed: dict[int, Live] = {}
+        """The run each open stream follows, from its start on: kept until the last stream
+        to it closes, so its last events are read with its names after it was let go."""
 
     def count(self, run_id: int | None = None) -> int:
         """How many are open (to one run, or to all)."""
@@ -251,6 +262,16 @@ class StreamBook:
             open_.discard(sub)
             if not open_:
                 del self._open[run_id]
+                self._followed.pop(run_id, None)
+
+    def started(self, run_id: int, live: Live) -> None:
+        """`run_id` started as `live`: the streams open to it follow it."""
+        if run_id in self._open:
+            self._followed[run_id] = live
+
+    def followed(self, run_id: int) -> Live | None:
+        """The run the streams open to `run_id` follow (None: none has started)."""
+        return self._followed.get(run_id)
 
 
 class EngineManager:
@@ -300,6 +321,10 @@ class EngineManager:
         """The run ticking or paused here (or one whose end is not stored)."""
         return self._engines.get(run_id)
 
+    def followed(self, run_id: int) -> Live | None:
+        """The run a stream to `run_id` follows (`Engines.followed`)."""
+        return self.get(run_id) or self._streams.followed(run_id)
+
     def engines(self) -> Iterable[LiveRun]:
         """Every run this process has an engine for (a copy: safe to await over)."""
         return tuple(self._engines.values())
@@ -338,6 +363,7 @@ class EngineManager:
             self._starting.discard(run_id)
         live = LiveRun(engine, self.loop)
         self._engines[run_id] = live
+        self._streams.started(run_id, live)
         waiting = self._waiting.pop(run_id, [])
         task = asyncio.wrap_future(self.loop.submit(self._run(engine, waiting)))
         task.add_done_callback(lambda _: self._forget(live))

@@ -108,6 +108,29 @@ async def test_a_read_reaching_the_engines_process_after_the_run_was_let_go_read
         assert run.status_code == 200 and run.json()["status"] == "stopped"
 
 
+@pytest.mark.parametrize("in_process", [True, False], ids=["process", "loop"])
+async def test_a_stream_opened_before_the_start_keeps_the_runs_names_after_it_was_let_go(
+    tmp_path: Path, in_process: bool
+) -> None:
+    # A stream follows a run from its next start; the run may end and be let go (its end
+    # stored) before the stream reads its last events, which name things by its catalogue.
+    async with client_for(settings_for(tmp_path, engine_process=in_process)) as (client, app):
+        engines = app.state.srlab.engines
+        run_id = int((await create(client, condition="expert", seed=2, episodes=1))["id"])
+        sub = engines.subscribe(run_id, maxsize=512, tick_hz=0.0)
+        assert engines.followed(run_id) is None  # not started yet
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        await until(client, run_id, "finished")
+        async with asyncio.timeout(30):  # a hang guard: let go once its end is stored
+            while engines.get(run_id) is not None:
+                await asyncio.sleep(0.01)
+        followed = engines.followed(run_id)
+        assert followed is not None and followed.run_id == run_id
+        assert followed.catalog.behaviours  # the names its events use
+        engines.unsubscribe(run_id, sub)
+        assert engines.followed(run_id) is None  # nobody follows it any more
+
+
 async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
     tmp_path: Path,
 ) -> None:

@@ -165,7 +165,9 @@ async def stream_events(
                         break
                     yield b": heartbeat\n\n"
                     continue
-                live = live or engines.get(run_id)  # fed from the run's start on
+                # Fed from the run's start on; the run may be let go (its end stored)
+                # before its last events are read here: they keep its names.
+                live = live or engines.followed(run_id)
                 if live is None:
                     continue
                 # The brain's catalogue of now: it grows when KP synthesises a behaviour
