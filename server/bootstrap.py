@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import gc
 import os
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -34,7 +33,7 @@ from server.persistence.db import DatabaseCheck
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.process import StoreProcess
 from server.ratelimit import RateLimiter
-from server.tuning import step_back
+from server.tuning import freeze_heap, step_back
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
 """Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
@@ -172,5 +171,4 @@ async def warm_up() -> None:
     from core.sim.world import PymunkWorld
 
     await asyncio.to_thread(lambda: PymunkWorld().reset(0, 0))
-    gc.collect()
-    gc.freeze()
+    freeze_heap()

@@ -696,7 +696,7 @@ async def _child(read_fd: int, write_fd: int) -> None:
     from server.bootstrap import open_storage, warm_up
     from server.config import Settings
     from server.engine_loop import EngineLoop
-    from server.tuning import configure_process, freeze_heap
+    from server.tuning import configure_process
 
     configure_process()
     loop = asyncio.get_running_loop()
@@ -729,7 +729,6 @@ async def _child(read_fd: int, write_fd: int) -> None:
             max_streams_per_run=1 << 30,
         )
         await warm_up()
-        freeze_heap()
         host = _Host(manager, writer)
         host.send("ready")
         try:

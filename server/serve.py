@@ -16,7 +16,7 @@ from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
 from server.timeouts import timed_protocol
-from server.tuning import configure_process, freeze_heap
+from server.tuning import configure_process
 
 log = logging.getLogger("srlab.serve")
 
@@ -42,7 +42,6 @@ class _Server(uvicorn.Server):
     async def startup(self, sockets: list[socket.socket] | None = None) -> None:
         prepare(self._app)
         await super().startup(sockets)  # the lifespan: storage, the engines, resumed runs
-        freeze_heap()  # the app is up: what it built is never scanned again
 
     async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
         state = getattr(self._app.state, "srlab", None)  # None: the lifespan never started

@@ -29,12 +29,13 @@ def freeze_heap() -> None:
 
     Modules, classes, the catalogue, the app and its routes live as long as the process,
     yet each of CPython's full collections scans them all again: 80-110 ms in the service
-    (about 170,000 objects), 10-70 ms in the engines' and the store's processes, and the
-    event loop, with every run it ticks, stands still meanwhile (a 20 Hz run's period is
-    50 ms). `gc.freeze` moves every object alive now to a generation no collection
-    scans, so a later one looks only at what came after (docs/benchmarks.md, eleventh
-    session). Called once a process has started; what it freezes is never freed, so the
-    garbage goes first.
+    (about 170,000 objects), 10-70 ms in the engines' and the store's processes, and
+    the event loop, with every run it ticks, stands still meanwhile (a 20 Hz run's period
+    is 50 ms). `gc.freeze` moves every object alive now to a generation no collection
+    scans, so a later one looks only at what came after. Called once a process is set up:
+    the service and the engines' process at their warm-up (`server.bootstrap.warm_up`),
+    the store process, `srlab run`. What it freezes is never freed, so the garbage goes
+    first.
     """
     gc.collect()
     gc.freeze()

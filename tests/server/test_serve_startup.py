@@ -32,7 +32,7 @@ def unfrozen() -> Iterator[None]:
     gc.unfreeze()
 
 
-async def test_the_server_builds_the_api_document_before_the_lifespan_and_then_freezes_the_heap(
+async def test_the_server_builds_the_api_document_before_the_lifespan_which_freezes_the_heap(
     tmp_path: Path, unfrozen: None
 ) -> None:
     url = f"sqlite:///{tmp_path / 'serve.db'}"
@@ -58,7 +58,7 @@ async def test_the_server_builds_the_api_document_before_the_lifespan_and_then_f
             await asyncio.sleep(0.01)
         # Built before the lifespan started any run: its first GET is served from memory.
         assert document_built_at_lifespan == [True]
-        # What the start built is out of every later collection.
+        # What the start built is out of every later collection (the lifespan's warm-up).
         assert gc.get_freeze_count() > frozen_before
         port = server.servers[0].sockets[0].getsockname()[1]
         async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}") as client:
