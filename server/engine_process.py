@@ -31,7 +31,9 @@ its runs as interrupted, resumable, when its input ends, so a killed service lea
 engines ticking. If the child dies, every run here fails with an error that says so, every
 call gets `EngineProcessError` (503) meanwhile, and the service stays up to say it and
 starts a new child (after `RESPAWN_FIRST_S`, then twice as long, at least a second, after
-each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and runs can be started again.
+each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and the failed ones
+can be started again from their checkpoints. The new child is started by the service's
+process, so it shares the service's lowered priority (`server.tuning.step_back`).
 """
 
 from __future__ import annotations
