@@ -59,7 +59,10 @@ class TraceRow:
 
 
 class TraceRecorder:
-    """Collects an episode's snapshots cheaply and packs them at the end."""
+    """Collects an episode's snapshots cheaply and gives them as rows at the end.
+
+    `compress` packs the rows `take` gives (the engine's writer does, off the tick task).
+    """
 
     def __init__(self) -> None:
         self._rows: list[Snapshot] = []
@@ -70,10 +73,6 @@ class TraceRecorder:
 
     def __len__(self) -> int:
         return len(self._rows)
-
-    def pack(self) -> bytes:
-        """The trace as compressed bytes; the recorder is emptied."""
-        return compress(self.take())
 
     def take(self) -> TraceArray:
         """The trace's rows as one array, uncompressed (`compress` packs it); emptied."""
