@@ -13,14 +13,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from dataclasses import dataclass
-from typing import Protocol
 
 import anyio.to_thread
 
-from core.ports import NetworkRepository, RunQueries
 from core.setup import Setup
 from server.api.deps import AppState
 from server.config import Settings
@@ -28,53 +25,12 @@ from server.engine_loop import EngineLoop
 from server.engine_process import ProcessEngines
 from server.engines import EngineManager, Engines
 from server.guard import SitePolicy
-from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
-from server.persistence.db import DatabaseCheck
-from server.persistence.networks import SqlAlchemyNetworkRepository
-from server.persistence.process import StoreProcess
+from server.persistence.storage import StorageFactory, open_storage
 from server.ratelimit import RateLimiter
-from server.tuning import freeze_heap, step_back
+from server.tuning import step_back, warm_up
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
 """Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
-
-
-class DatabaseProbe(Protocol):
-    """What /api/health asks of storage."""
-
-    def check(self) -> str:
-        """Read from the database (a `StorageError` if it cannot); the dialect's name."""
-        ...
-
-
-@dataclass(frozen=True)
-class Storage:
-    """Where the service keeps runs and networks, and how it lets them go."""
-
-    runs: RunQueries
-    networks: NetworkRepository
-    database: DatabaseProbe
-    close: Callable[[], None]
-    """Blocking: called once, after the last write."""
-
-
-StorageFactory = Callable[[Settings], Storage]
-"""Blocking: opens the storage `settings` name (called in a thread)."""
-
-
-def open_storage(settings: Settings) -> Storage:
-    """SQLAlchemy on `settings.database_url`, in a store process if `store_process`."""
-    if settings.store_process:
-        process = StoreProcess(settings.database_url)
-        return Storage(process.runs, process.networks, process.database, process.stop)
-    engine = make_engine(settings.database_url)
-    sessions = make_sessionmaker(engine)
-    return Storage(
-        SqlAlchemyRunStore(sessions),
-        SqlAlchemyNetworkRepository(sessions),
-        DatabaseCheck(engine),
-        engine.dispose,
-    )
 
 
 @asynccontextmanager
@@ -120,7 +76,8 @@ async def service(
                 max_streams_per_run=settings.max_streams_per_run,
             )
         stack.push_async_callback(manager.shutdown)
-        await warm_up()
+        # The kernel only where the runs tick.
+        await warm_up(kernel=not settings.engine_process)
         # Routes run their blocking work in threads, which take the GIL from the event loop
         # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
         # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps
@@ -160,15 +117,3 @@ async def service(
             rewards_limiter=limiter,
             viewer=viewer,
         )
-
-
-async def warm_up() -> None:
-    """Load the sensing kernel's machine code now, not in the first run's first tick.
-
-    Then keep everything loaded so far (it lives as long as the process) out of the cyclic
-    collector's way, so a full collection does not stall realtime ticks.
-    """
-    from core.sim.world import PymunkWorld
-
-    await asyncio.to_thread(lambda: PymunkWorld().reset(0, 0))
-    freeze_heap()

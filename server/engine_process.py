@@ -695,10 +695,10 @@ def _configure_child() -> tuple[int, int]:
 
 async def _child(read_fd: int, write_fd: int) -> None:
     from core.setup import Setup
-    from server.bootstrap import open_storage, warm_up
     from server.config import Settings
     from server.engine_loop import EngineLoop
-    from server.tuning import configure_process
+    from server.persistence.storage import open_storage
+    from server.tuning import configure_process, warm_up
 
     configure_process()
     loop = asyncio.get_running_loop()

@@ -30,11 +30,12 @@ from server.api.methods import ApiMethods
 from server.api.routing import add_routes
 from server.api.strictjson import StrictJson
 from server.asgi import cut_off, send_error
-from server.bootstrap import StorageFactory, open_storage, service
+from server.bootstrap import service
 from server.config import Settings
 from server.engines import TooManyRunsError
 from server.guard import CrossSiteGuard, SitePolicy
 from server.persistence.networks import StaleVersionError
+from server.persistence.storage import StorageFactory, open_storage
 from server.timeouts import BodyTimeout
 
 log = logging.getLogger("srlab.server")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import gc
 import multiprocessing
@@ -33,7 +34,7 @@ def freeze_heap() -> None:
     the event loop, with every run it ticks, stands still meanwhile (a 20 Hz run's period
     is 50 ms). `gc.freeze` moves every object alive now to a generation no collection
     scans, so a later one looks only at what came after. Called once a process is set up:
-    the service and the engines' process at their warm-up (`server.bootstrap.warm_up`),
+    the service and the engines' process at their warm-up (`warm_up`),
     the store process, `srlab run`. What it freezes is never freed, so the garbage goes
     first.
     """
@@ -74,3 +75,18 @@ def step_back(increment: int) -> None:
         if child.pid is not None:
             for tid in _threads(child.pid) or [child.pid]:
                 _lower(tid, increment)
+
+
+async def warm_up(kernel: bool = True) -> None:
+    """Load the sensing kernel's machine code now (`kernel`), not in the first run's tick.
+
+    Then keep everything loaded so far (it lives as long as the process) out of the cyclic
+    collector's way (`freeze_heap`), so a full collection does not stall realtime ticks.
+    A process whose runs tick elsewhere (the service beside an engines' process) skips
+    the kernel: it never simulates, and numba stays unloaded there.
+    """
+    if kernel:
+        from core.sim.world import PymunkWorld
+
+        await asyncio.to_thread(lambda: PymunkWorld().reset(0, 0))
+    freeze_heap()

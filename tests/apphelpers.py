@@ -16,10 +16,10 @@ import httpx
 from asgi_lifespan import LifespanManager
 from fastapi import FastAPI
 
-from server.bootstrap import StorageFactory, open_storage
 from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
+from server.persistence.storage import StorageFactory, open_storage
 
 
 @functools.cache

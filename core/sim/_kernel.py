@@ -11,30 +11,31 @@ from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
-import numpy as np
 
-INF = 1.0e9
-UNSEEN = 99.0
+from core.sim.sensing import (
+    G_CAMERA_OFFSET,
+    G_CAMERA_RANGE,
+    G_CORNER_TRIGGER,
+    G_CORRIDOR,
+    G_FOV_HALF,
+    G_HALF_LENGTH,
+    G_INNER,
+    G_LAMP_X,
+    G_LAMP_Y,
+    G_OBSTACLE_ECHO,
+    G_OUTER,
+    G_SIGNAL_LEG,
+    G_SONAR_MOUNT,
+    G_SONAR_RANGE,
+    G_STOPLINE_X,
+    G_STOPLINE_Y,
+    G_TRACK_HOLD,
+    INF,
+    UNSEEN,
+    empty_channels,
+)
 
-# Layout of the geometry vector `g` the kernel reads (built by PymunkWorld).
-G_OUTER = 0  # 4: x0 y0 x1 y1
-G_INNER = 4  # 4
-G_SONAR_RANGE = 8
-G_SONAR_MOUNT = 9
-G_FOV_HALF = 10
-G_CAMERA_RANGE = 11
-G_CAMERA_OFFSET = 12
-G_LAMP_X = 13
-G_LAMP_Y = 14
-G_SIGNAL_LEG = 15
-G_STOPLINE_X = 16
-G_STOPLINE_Y = 17
-G_CORNER_TRIGGER = 18
-G_HALF_LENGTH = 19
-G_CORRIDOR = 20
-G_TRACK_HOLD = 21
-G_OBSTACLE_ECHO = 22
-G_SIZE = 23
+__all__ = ["empty_channels", "ray_entry", "ray_exit", "sense"]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -245,8 +246,3 @@ def sense(
         out[28] = UNSEEN
     out[25] = bumper
     out[30] = th
-
-
-def empty_channels() -> np.ndarray[Any, np.dtype[np.float64]]:
-    """A channel vector to fill."""
-    return np.zeros(32, dtype=np.float64)

@@ -9,7 +9,7 @@ from typing import Any, cast
 import numpy as np
 import pymunk
 
-from core.sim import _kernel as k
+from core.sim import sensing
 from core.sim.track import TrackGeometry
 from core.sim.types import (
     CollisionKind,
@@ -158,28 +158,28 @@ class PymunkWorld:
         self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
         self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
 
-        g = np.zeros(k.G_SIZE)
-        g[k.G_OUTER : k.G_OUTER + 4] = geo.outer_box
-        g[k.G_INNER : k.G_INNER + 4] = geo.inner_box
-        g[k.G_SONAR_RANGE] = robot.sonar_range_m
-        g[k.G_SONAR_MOUNT] = robot.sonar_mount_m
-        g[k.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
-        g[k.G_CAMERA_RANGE] = robot.camera_range_m
-        g[k.G_CAMERA_OFFSET] = robot.camera_offset_m
-        g[k.G_LAMP_X], g[k.G_LAMP_Y] = geo.lamp_point
-        g[k.G_SIGNAL_LEG] = self.config.track.signal.leg
-        g[k.G_STOPLINE_X], g[k.G_STOPLINE_Y] = geo.stopline_point
-        g[k.G_CORNER_TRIGGER] = 0.1
-        g[k.G_HALF_LENGTH] = robot.length_m / 2
-        g[k.G_CORRIDOR] = self.config.track.corridor_width_m
-        g[k.G_TRACK_HOLD] = robot.camera_track_ticks
-        g[k.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
+        g = np.zeros(sensing.G_SIZE)
+        g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
+        g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
+        g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
+        g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
+        g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
+        g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
+        g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
+        g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
+        g[sensing.G_SIGNAL_LEG] = self.config.track.signal.leg
+        g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
+        g[sensing.G_CORNER_TRIGGER] = 0.1
+        g[sensing.G_HALF_LENGTH] = robot.length_m / 2
+        g[sensing.G_CORRIDOR] = self.config.track.corridor_width_m
+        g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
+        g[sensing.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
         self._track = np.zeros(4)
         self._g = g
         self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
         self._obstacle_box = np.zeros(4)
         self._has_obstacle = False
-        self._channels = k.empty_channels()
+        self._channels = sensing.empty_channels()
         self._noise = np.zeros((0, 8))
         self._noise_at = 0
         self._rng = np.random.default_rng(0)
@@ -190,7 +190,8 @@ class PymunkWorld:
         self._phase_left = 0
         self._lamp = LampColor.RED
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
-        self._front_to_line = k.UNSEEN
+        self._front_to_line = sensing.UNSEEN
+        self._kernel_sense: Callable[..., None] | None = None
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps
         self._w_max = robot.max_turn_rad_s
@@ -296,7 +297,7 @@ class PymunkWorld:
             self._lamp, self._phase_left = phases[self._phase_index]
         frame = self._sense(violation=False)
         front = float(frame.channels[28])
-        crossed = self._front_to_line > 0.0 >= front and self._front_to_line < k.UNSEEN
+        crossed = self._front_to_line > 0.0 >= front and self._front_to_line < sensing.UNSEEN
         self._front_to_line = front
         if crossed and self._lamp == LampColor.RED:
             return SensorFrame(
@@ -315,6 +316,17 @@ class PymunkWorld:
         self._noise = self._rng.normal(0.0, self.config.robot.sonar_noise_m, (256, 8))
         self._noise_at = 0
 
+    def _load_kernel(self) -> Callable[..., None]:
+        """The sensing kernel, loaded with the first reading, not with this module.
+
+        Loading it loads numba (0.3-0.4 s of CPU): a process that builds worlds without
+        ticking them (the service creating runs for an engines' process) does without.
+        """
+        from core.sim._kernel import sense
+
+        self._kernel_sense = sense
+        return sense
+
     def _sense(self, violation: bool) -> SensorFrame:
         if self._noise_at >= len(self._noise):
             self._refill_noise()
@@ -325,7 +337,8 @@ class PymunkWorld:
         th = _get_angle(body)
         geo = self.geometry
         out = self._channels
-        k.sense(
+        kernel_sense = self._kernel_sense or self._load_kernel()
+        kernel_sense(
             pos.x,
             pos.y,
             th,

@@ -21,7 +21,7 @@ from server.engines import Engines
 from server.ratelimit import RateLimiter
 
 if TYPE_CHECKING:
-    from server.bootstrap import DatabaseProbe
+    from server.persistence.storage import DatabaseProbe
     from server.viewer import Viewer
 
 

@@ -8,8 +8,8 @@ from fakes import InMemoryNetworkRepository, InMemoryRunStore
 
 from core.ports import RunStatus
 from core.setup import Setup
-from server.bootstrap import Storage
 from server.config import Settings
+from server.persistence.storage import Storage
 
 pytestmark = pytest.mark.anyio
 

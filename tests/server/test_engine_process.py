@@ -26,10 +26,10 @@ from fakes import InMemoryRunStore
 from bench.liveserver import live_server, wait_status
 from core.engine import RunView, StatusChanged
 from server import engine_process
-from server.bootstrap import Storage, open_storage
 from server.config import Settings
 from server.engine_process import EngineProcessError, ProcessEngines, RemoteRun
 from server.engines import RunLetGo, read_live
+from server.persistence.storage import Storage, open_storage
 
 pytestmark = pytest.mark.anyio
 
@@ -287,6 +287,11 @@ def _nices(pid: int) -> set[int]:
     return {os.getpriority(os.PRIO_PROCESS, int(t)) for t in os.listdir(f"/proc/{pid}/task")}
 
 
+def _loads_numba(pid: int) -> bool:
+    """Whether process `pid` has numba's machine code mapped (Linux)."""
+    return "/numba/" in Path(f"/proc/{pid}/maps").read_text()
+
+
 def _children(pid: int) -> dict[int, str]:
     """The processes whose parent is `pid`, with their command lines."""
     found = {}
@@ -343,3 +348,7 @@ def test_srlab_serve_ticks_runs_in_the_engines_process_unless_told_otherwise(
         run = server.client.post("/api/runs", json={"condition": "rp", "episodes": 1}).json()
         assert server.client.post(f"/api/runs/{run['id']}/start").status_code == 200
         assert wait_status(server.client, run["id"], "finished")["episodes_done"] == 1
+        # Numba (the sensing kernel) is loaded where runs tick, and only there.
+        assert _loads_numba(server.process.pid) is not in_process
+        engines = [p for p, cmd in _children(server.process.pid).items() if "engine_process" in cmd]
+        assert [_loads_numba(p) for p in engines] == ([True] if in_process else [])
