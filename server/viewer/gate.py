@@ -20,12 +20,22 @@ request head is read
 (later keep-alive requests are relayed raw); that is enough, since the page needs nothing
 but index.html, viser's server answers one plain HTTP request per connection and closes
 it, and the websocket is a connection of its own.
+
+The gate answers a websocket handshake itself (`handshake_answer`: the 101 viser would
+send, which depends on the request alone), then hands the request to viser and drops
+viser's own 101. viser's client retries a lost connection every second and closes the
+attempt still under way each time; viser answers on the service's process, which steps
+back for the runs, and on a machine busy with other work that took longer than a second
+after a restart, so the page never reconnected. The gate's answer takes a few hundred
+microseconds of its own thread.
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
+import hashlib
 import json
 import logging
 import re
@@ -89,6 +99,40 @@ def refusal(headers: dict[str, str], policy: SitePolicy) -> tuple[HTTPStatus, st
         if problem is not None:
             return HTTPStatus.FORBIDDEN, problem
     return None
+
+
+WEBSOCKET_GUID = "258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
+"""RFC 6455's constant for the handshake's `Sec-WebSocket-Accept`."""
+
+
+def handshake_answer(headers: dict[str, str]) -> bytes | None:
+    """The 101 viser would answer this websocket handshake with, or None if it is not one.
+
+    viser's server (1.1) negotiates no extension (`compression=None`) and picks the first
+    subprotocol offered that starts with `viser-v` (its client's version, checked after the
+    handshake); so the answer depends on the request's headers alone. A request without
+    a well-formed key or version 13 gets None: viser answers it (with its error).
+    """
+    key = headers.get("sec-websocket-key", "")
+    if headers.get("sec-websocket-version") != "13":
+        return None
+    try:
+        if len(base64.b64decode(key, validate=True)) != 16:
+            return None
+    except ValueError:
+        return None
+    accept = base64.b64encode(hashlib.sha1((key + WEBSOCKET_GUID).encode()).digest()).decode()
+    lines = [
+        "HTTP/1.1 101 Switching Protocols",
+        "Upgrade: websocket",
+        "Connection: Upgrade",
+        f"Sec-WebSocket-Accept: {accept}",
+    ]
+    offered = [p.strip() for p in headers.get("sec-websocket-protocol", "").split(",")]
+    chosen = next((p for p in offered if p.startswith("viser-v")), None)
+    if chosen is not None:
+        lines.append(f"Sec-WebSocket-Protocol: {chosen}")
+    return ("\r\n".join(lines) + "\r\n\r\n").encode()
 
 
 def _response(status: HTTPStatus, detail: str) -> bytes:
@@ -210,13 +254,31 @@ class Gate:
             await writer.drain()
             return
         head, run_id = run_path(head)
+        upgrade = headers.get("upgrade", "").lower() == "websocket"
+        answer = handshake_answer(headers) if upgrade else None
+        if answer is not None:
+            # The page's socket opens now, not when viser (on the service's process, which
+            # steps back for the runs) gets to it: viser's client retries every second and
+            # closes a handshake still under way, so a busy machine kept a page from ever
+            # reconnecting (tests/web/test_viewer.py beside busy processes).
+            writer.write(answer)
         up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
         try:
             # Past the guard (a foreign page chooses nothing) and before viser sees the
             # handshake, so the choice is there when viser opens the session.
-            if run_id is not None and headers.get("upgrade", "").lower() == "websocket":
+            if run_id is not None and upgrade:
                 self._chose(run_id, up_writer.get_extra_info("sockname"))
             up_writer.write(head)
+            if answer is not None:
+                # viser's own 101 (the same one) was answered already; anything else ends
+                # the socket, as viser would have.
+                reply = await up_reader.readuntil(b"\r\n\r\n")
+                if reply.split(b" ", 2)[1:2] != [b"101"]:
+                    log.warning(
+                        "the 3D view's server refused a websocket: %s",
+                        reply.split(b"\r\n", 1)[0].decode("latin-1"),
+                    )
+                    return
             await asyncio.gather(
                 _pipe(reader, up_writer), _pipe(up_reader, writer), return_exceptions=True
             )

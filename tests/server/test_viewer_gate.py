@@ -22,13 +22,14 @@ from apphelpers import client_for, settings_for
 from fastapi import FastAPI
 from viserpage import camera_message
 from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
 from websockets.typing import Subprotocol
 
 from bench.liveserver import free_port
 from server.guard import SitePolicy
 from server.viewer import Viewer
 from server.viewer.app import Session
-from server.viewer.gate import Gate, Peer, run_path
+from server.viewer.gate import Gate, Peer, handshake_answer, run_path
 
 pytestmark = pytest.mark.anyio
 WAIT_S = 60.0
@@ -178,6 +179,84 @@ async def test_a_failing_choice_still_opens_the_view() -> None:
     async with gate_on_a_fake_viser(fail) as (gate, heads):
         assert b" 200 " in await send(gate.port, handshake("/run/3"))
         assert heads[-1][0].startswith(b"GET / HTTP/1.1\r\n")
+
+
+def test_the_gate_answers_a_handshake_as_viser_would() -> None:
+    # RFC 6455's own example key and answer.
+    headers = {
+        "upgrade": "websocket",
+        "sec-websocket-key": "dGhlIHNhbXBsZSBub25jZQ==",
+        "sec-websocket-version": "13",
+        "sec-websocket-protocol": "chat, viser-v1.1.1, viser-v0",
+    }
+    answer = handshake_answer(headers)
+    assert answer is not None
+    assert answer.startswith(b"HTTP/1.1 101 Switching Protocols\r\n")
+    assert b"\r\nSec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n" in answer
+    # viser's choice: the first `viser-v` offered; none offered, none chosen.
+    assert b"\r\nSec-WebSocket-Protocol: viser-v1.1.1\r\n" in answer
+    plain = handshake_answer({**headers, "sec-websocket-protocol": "chat"})
+    assert plain is not None and b"Sec-WebSocket-Protocol" not in plain
+    # Not a handshake the gate can answer: viser answers it (with its error).
+    for broken in (
+        {"sec-websocket-version": "8"},
+        {"sec-websocket-key": "not base64!"},
+        {"sec-websocket-key": base64.b64encode(b"short").decode()},
+    ):
+        assert handshake_answer({**headers, **broken}) is None
+
+
+@asynccontextmanager
+async def gate_on_a_slow_viser(
+    status: bytes,
+) -> AsyncIterator[tuple[Gate, asyncio.Event]]:
+    """A gate in front of a server that answers a handshake only once the event is set:
+    `status` then one text frame ("hello")."""
+    answer_now = asyncio.Event()
+
+    async def upstream(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await reader.readuntil(b"\r\n\r\n")
+        await answer_now.wait()
+        # The gate answered the page already: what it reads here is dropped on a 101.
+        writer.write(b"HTTP/1.1 " + status + b"\r\nUpgrade: websocket\r\n\r\n")
+        writer.write(b"\x81\x05hello")  # a final, unmasked text frame
+        await writer.drain()
+        await reader.read()  # until the gate lets go
+        writer.close()
+
+    fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
+    policy = SitePolicy.of(["127.0.0.1"], [])
+    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy)
+    await asyncio.to_thread(gate.start)
+    try:
+        yield gate, answer_now
+    finally:
+        answer_now.set()
+        await asyncio.to_thread(gate.stop)
+        fake.close()
+
+
+async def test_a_page_socket_opens_before_viser_answers_then_carries_visers_frames() -> None:
+    # viser's client gives a handshake one second before it closes it and tries again: the
+    # gate answers at once, whenever viser (on a busy service) gets to its own answer.
+    async with gate_on_a_slow_viser(b"101 Switching Protocols") as (gate, answer_now):
+        url = f"ws://127.0.0.1:{gate.port}/run/4"
+        async with asyncio.timeout(WAIT_S):
+            async with connect(url, subprotocols=[Subprotocol("viser-v1.1.1")]) as socket:
+                assert socket.subprotocol == "viser-v1.1.1"
+                assert not answer_now.is_set()  # open, and viser has not answered yet
+                answer_now.set()
+                assert await socket.recv() == "hello"
+
+
+async def test_a_socket_viser_refuses_is_closed() -> None:
+    async with gate_on_a_slow_viser(b"503 Service Unavailable") as (gate, answer_now):
+        url = f"ws://127.0.0.1:{gate.port}/"
+        async with asyncio.timeout(WAIT_S):
+            async with connect(url, subprotocols=[Subprotocol("viser-v1.1.1")]) as socket:
+                answer_now.set()
+                with pytest.raises(ConnectionClosed):
+                    await socket.recv()
 
 
 # --- the real view: a socket on /run/<id> gets a session on that run ----------------------
