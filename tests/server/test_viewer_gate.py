@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import os
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
@@ -221,11 +222,12 @@ async def gate_on_a_slow_viser(
         writer.write(b"HTTP/1.1 " + status + b"\r\nUpgrade: websocket\r\n\r\n")
         writer.write(b"\x81\x05hello")  # a final, unmasked text frame
         await writer.drain()
-        # The page's close frame (or the gate's end): answered with one, as viser would,
-        # so the page does not wait out its close timeout.
+        # The page's close frame (or the gate's end, for a refusal): answered with one, as
+        # viser would, so the page does not wait out its close timeout.
         await reader.read(1)
-        writer.write(b"\x88\x02\x03\xe8")  # close, 1000
-        await writer.drain()
+        with contextlib.suppress(ConnectionError):
+            writer.write(b"\x88\x02\x03\xe8")  # close, 1000
+            await writer.drain()
         writer.close()
 
     fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
