@@ -52,6 +52,9 @@ HEAD_LIMIT = 16 * 1024
 HEAD_TIMEOUT_S = 10.0
 """A client that has not sent its request head by then is dropped (slow clients)."""
 CHUNK = 64 * 1024
+VISER_ANSWER_S = 30.0
+"""How long the gate waits for viser's own answer to a handshake it answered already; then
+it closes the page's socket, and the page tries again."""
 Peer = tuple[str, int]
 """A TCP address as viser sees a connection's far end: (host, port)."""
 RUN_PATH = re.compile(r"/run/([0-9]{1,18})/?")
@@ -272,7 +275,8 @@ class Gate:
             if answer is not None:
                 # viser's own 101 (the same one) was answered already; anything else ends
                 # the socket, as viser would have.
-                reply = await up_reader.readuntil(b"\r\n\r\n")
+                async with asyncio.timeout(VISER_ANSWER_S):
+                    reply = await up_reader.readuntil(b"\r\n\r\n")
                 if reply.split(b" ", 2)[1:2] != [b"101"]:
                     log.warning(
                         "the 3D view's server refused a websocket: %s",

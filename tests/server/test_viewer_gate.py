@@ -29,6 +29,7 @@ from websockets.typing import Subprotocol
 from bench.liveserver import free_port
 from server.guard import SitePolicy
 from server.viewer import Viewer
+from server.viewer import gate as gate_module
 from server.viewer.app import Session
 from server.viewer.gate import Gate, Peer, handshake_answer, run_path
 
@@ -218,14 +219,15 @@ async def gate_on_a_slow_viser(
     async def upstream(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         await reader.readuntil(b"\r\n\r\n")
         await answer_now.wait()
-        # The gate answered the page already: what it reads here is dropped on a 101.
-        writer.write(b"HTTP/1.1 " + status + b"\r\nUpgrade: websocket\r\n\r\n")
-        writer.write(b"\x81\x05hello")  # a final, unmasked text frame
-        await writer.drain()
-        # The page's close frame (or the gate's end, for a refusal): answered with one, as
-        # viser would, so the page does not wait out its close timeout.
-        await reader.read(1)
+        # The gate may have let go meanwhile (a refusal, no answer in time).
         with contextlib.suppress(ConnectionError):
+            # The gate answered the page already: what it reads here is dropped on a 101.
+            writer.write(b"HTTP/1.1 " + status + b"\r\nUpgrade: websocket\r\n\r\n")
+            writer.write(b"\x81\x05hello")  # a final, unmasked text frame
+            await writer.drain()
+            # The page's close frame (or the gate's end): answered with one, as viser
+            # would, so the page does not wait out its close timeout.
+            await reader.read(1)
             writer.write(b"\x88\x02\x03\xe8")  # close, 1000
             await writer.drain()
         writer.close()
@@ -253,6 +255,19 @@ async def test_a_page_socket_opens_before_viser_answers_then_carries_visers_fram
                 assert not answer_now.is_set()  # open, and viser has not answered yet
                 answer_now.set()
                 assert await socket.recv() == "hello"
+
+
+async def test_a_socket_viser_never_answers_is_closed(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The page's socket opened on the gate's answer; a viser that never gives its own must
+    # not leave the page on a silent socket (it would never try again).
+    monkeypatch.setattr(gate_module, "VISER_ANSWER_S", 0.2)
+    async with gate_on_a_slow_viser(b"101 Switching Protocols") as (gate, answer_now):
+        url = f"ws://127.0.0.1:{gate.port}/"
+        async with asyncio.timeout(WAIT_S):
+            async with connect(url, subprotocols=[Subprotocol("viser-v1.1.1")]) as socket:
+                with pytest.raises(ConnectionClosed):
+                    await socket.recv()
+                assert not answer_now.is_set()
 
 
 async def test_a_socket_viser_refuses_is_closed() -> None:
