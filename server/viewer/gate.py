@@ -26,8 +26,9 @@ send, which depends on the request alone), then hands the request to viser and d
 viser's own 101. viser's client retries a lost connection every second and closes the
 attempt still under way each time; viser answers on the service's process, which steps
 back for the runs, and on a machine busy with other work that took longer than a second
-after a restart, so the page never reconnected. The gate's answer takes a few hundred
-microseconds of its own thread.
+after a restart, so the page never reconnected. The gate's answer is a header check and a
+SHA-1 on its own thread. viser's own answer is awaited at most `VISER_ANSWER_S`: the page
+must not sit on an open, silent socket it would never retry.
 """
 
 from __future__ import annotations
