@@ -27,7 +27,7 @@ viser's own 101. viser's client retries a lost connection every second and close
 attempt still under way each time; viser answers on the service's process, which steps
 back for the runs, and on a machine busy with other work that took longer than a second
 after a restart, so the page never reconnected. The gate's answer is a header check and a
-SHA-1 on its own thread. viser's own answer is awaited at most `VISER_ANSWER_S`: the page
+hash on its own thread. viser's own answer is awaited at most `VISER_ANSWER_S`: the page
 must not sit on an open, silent socket it would never retry.
 """
 
@@ -36,13 +36,14 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
-import hashlib
 import json
 import logging
 import re
 import threading
 from collections.abc import Callable
 from http import HTTPStatus
+
+from websockets.utils import accept_key
 
 from server.guard import SitePolicy
 
@@ -105,10 +106,6 @@ def refusal(headers: dict[str, str], policy: SitePolicy) -> tuple[HTTPStatus, st
     return None
 
 
-WEBSOCKET_GUID = "258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
-"""RFC 6455's constant for the handshake's `Sec-WebSocket-Accept`."""
-
-
 def handshake_answer(headers: dict[str, str]) -> bytes | None:
     """The 101 viser would answer this websocket handshake with, or None if it is not one.
 
@@ -125,12 +122,11 @@ def handshake_answer(headers: dict[str, str]) -> bytes | None:
             return None
     except ValueError:
         return None
-    accept = base64.b64encode(hashlib.sha1((key + WEBSOCKET_GUID).encode()).digest()).decode()
     lines = [
         "HTTP/1.1 101 Switching Protocols",
         "Upgrade: websocket",
         "Connection: Upgrade",
-        f"Sec-WebSocket-Accept: {accept}",
+        f"Sec-WebSocket-Accept: {accept_key(key)}",
     ]
     offered = [p.strip() for p in headers.get("sec-websocket-protocol", "").split(",")]
     chosen = next((p for p in offered if p.startswith("viser-v")), None)

@@ -12,7 +12,7 @@ import asyncio
 import base64
 import contextlib
 import os
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
 
@@ -113,6 +113,23 @@ def handshake(target: str, origin: str | None = None) -> bytes:
 
 
 @asynccontextmanager
+async def gate_before(
+    upstream: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]],
+    on_run: Callable[[int, Peer], None] | None = None,
+) -> AsyncIterator[Gate]:
+    """A gate on loopback in front of a server that handles each connection with `upstream`."""
+    fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
+    policy = SitePolicy.of(["127.0.0.1"], [])
+    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy, on_run=on_run)
+    await asyncio.to_thread(gate.start)
+    try:
+        yield gate
+    finally:
+        await asyncio.to_thread(gate.stop)
+        fake.close()
+
+
+@asynccontextmanager
 async def gate_on_a_fake_viser(
     on_run: Callable[[int, Peer], None],
 ) -> AsyncIterator[tuple[Gate, list[tuple[bytes, Peer]]]]:
@@ -126,15 +143,8 @@ async def gate_on_a_fake_viser(
         await writer.drain()
         writer.close()
 
-    fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
-    policy = SitePolicy.of(["127.0.0.1"], [])
-    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy, on_run=on_run)
-    await asyncio.to_thread(gate.start)
-    try:
+    async with gate_before(upstream, on_run) as gate:
         yield gate, heads
-    finally:
-        await asyncio.to_thread(gate.stop)
-        fake.close()
 
 
 async def send(port: int, raw: bytes) -> bytes:
@@ -232,16 +242,11 @@ async def gate_on_a_slow_viser(
             await writer.drain()
         writer.close()
 
-    fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
-    policy = SitePolicy.of(["127.0.0.1"], [])
-    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy)
-    await asyncio.to_thread(gate.start)
-    try:
-        yield gate, answer_now
-    finally:
-        answer_now.set()
-        await asyncio.to_thread(gate.stop)
-        fake.close()
+    async with gate_before(upstream) as gate:
+        try:
+            yield gate, answer_now
+        finally:
+            answer_now.set()
 
 
 async def test_a_page_socket_opens_before_viser_answers_then_carries_visers_frames() -> None:
