@@ -4,14 +4,38 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ctypes
 import gc
 import multiprocessing
 import os
+import platform
 import sys
 from pathlib import Path
 
 SWITCH_INTERVAL_S = 0.0005
 """How long a thread may hold the GIL while another waits for it."""
+
+SHORT_SLICE_NS = 100_000
+"""The scheduler slice srlab's threads ask Linux for: 0.1 ms, the shortest it grants."""
+
+_SCHED_SETATTR = {"x86_64": 314, "aarch64": 274, "arm64": 274, "riscv64": 274}
+"""`sched_setattr`'s system call number by machine (`sched_getattr` is the next one)."""
+_SCHED_OTHER = 0
+
+
+class _SchedAttr(ctypes.Structure):
+    """Linux's `struct sched_attr` up to `sched_period` (its first version, 48 bytes)."""
+
+    _fields_ = [
+        ("size", ctypes.c_uint32),
+        ("sched_policy", ctypes.c_uint32),
+        ("sched_flags", ctypes.c_uint64),
+        ("sched_nice", ctypes.c_int32),
+        ("sched_priority", ctypes.c_uint32),
+        ("sched_runtime", ctypes.c_uint64),
+        ("sched_deadline", ctypes.c_uint64),
+        ("sched_period", ctypes.c_uint64),
+    ]
 
 
 def configure_process() -> None:
@@ -20,9 +44,69 @@ def configure_process() -> None:
     The engine commits through worker threads. With CPython's default switch interval
     (5 ms) a worker that finished its I/O waits up to 5 ms for the tick loop to hand over
     the GIL, and a busy worker can delay a realtime tick as long; a short interval keeps
-    both under a millisecond (bench/engine.py measures the effect).
+    both under a millisecond (bench/engine.py measures the effect). Every thread asks
+    Linux for short scheduler slices (`ask_short_slices`), so the ticks and the storage
+    threads wake on time beside busy processes.
     """
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    ask_short_slices()
+
+
+def _sched_attr(tid: int) -> _SchedAttr | None:
+    """Thread `tid`'s scheduling attributes (0: the calling thread); None where unknown."""
+    number = _SCHED_SETATTR.get(platform.machine())
+    if number is None or not sys.platform.startswith("linux"):
+        return None
+    attr = _SchedAttr()
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.syscall(number + 1, tid, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
+        return None
+    return attr
+
+
+def slice_ns(tid: int = 0) -> int | None:
+    """Thread `tid`'s scheduler slice in ns, as Linux reports it; None where it does not.
+
+    0: the calling thread. Linux 6.12 and later report the default slice unless a thread
+    asked for another; older kernels report 0.
+    """
+    attr = _sched_attr(tid)
+    return None if attr is None else int(attr.sched_runtime)
+
+
+def _ask_slice(tid: int, ns: int) -> bool:
+    attr = _sched_attr(tid)
+    if attr is None or attr.sched_policy != _SCHED_OTHER:
+        return False  # not Linux, or a policy someone chose (batch, idle, realtime): kept
+    attr.size = ctypes.sizeof(attr)
+    attr.sched_flags = 0
+    attr.sched_runtime = ns  # the nice value read above is written back as is
+    libc = ctypes.CDLL(None, use_errno=True)
+    number = _SCHED_SETATTR[platform.machine()]
+    if libc.syscall(number, tid, ctypes.byref(attr), 0) != 0:
+        return False
+    return ns == 0 or slice_ns(tid) == ns  # older kernels take the call and ignore it
+
+
+def ask_short_slices(ns: int = SHORT_SLICE_NS) -> bool:
+    """Ask Linux to run every thread of this process in short slices (`SHORT_SLICE_NS`).
+
+    A realtime run wakes a few times per tick: the tick task at its deadline, a storage
+    thread for each write, the event loop again when the write is done. Beside busy
+    processes (an experiment on every core) a thread that wakes after a millisecond of
+    work is often not let in before the busy process's slice ends, up to a scheduler tick
+    later (4 ms at the usual 250 Hz): 28 % of such wake-ups were 1 ms or more late on this
+    machine, 0.3 % with a 0.1 ms slice (docs/benchmarks.md, "thirteenth session"). Linux's
+    EEVDF scheduler (6.12 and later) lets a thread ask for a shorter slice without
+    privileges: it gets no larger share of the CPU, only its turns sooner and shorter.
+
+    Threads and processes started later inherit the slice. Where the kernel has no such
+    request (older Linux, other systems), or a thread runs under a policy someone chose,
+    nothing changes. Returns whether every thread now asks for it. `ns` 0 asks for the
+    kernel's default slice again.
+    """
+    asked = [_ask_slice(tid, ns) for tid in _threads("self") or [0]]
+    return all(asked)
 
 
 def freeze_heap() -> None:

@@ -30,6 +30,7 @@ from server.config import Settings
 from server.engine_process import EngineProcessError, ProcessEngines, RemoteRun
 from server.engines import RunLetGo, read_live
 from server.persistence.storage import Storage, open_storage
+from server.tuning import SHORT_SLICE_NS, slice_ns
 
 pytestmark = pytest.mark.anyio
 
@@ -287,6 +288,11 @@ def _nices(pid: int) -> set[int]:
     return {os.getpriority(os.PRIO_PROCESS, int(t)) for t in os.listdir(f"/proc/{pid}/task")}
 
 
+def _slices(pid: int) -> set[int | None]:
+    """The scheduler slices of process `pid`'s threads, in ns."""
+    return {slice_ns(int(t)) for t in os.listdir(f"/proc/{pid}/task")}
+
+
 def _loads_numba(pid: int) -> bool:
     """Whether process `pid` has numba's machine code mapped (Linux)."""
     return "/numba/" in Path(f"/proc/{pid}/maps").read_text()
@@ -332,6 +338,26 @@ def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
         assert engines_stores, "the engines' own store process"
         for store in engines_stores:
             assert _nices(store) == {base}
+
+
+@pytest.mark.skipif(not slice_ns(), reason="the kernel reports no slices (Linux 6.12+ does)")
+def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path: Path) -> None:
+    """Each thread of the service, the engines' process and their store processes.
+
+    So that beside busy processes a tick's or a storage thread's wake-up is let in at once
+    rather than at the end of another process's slice (`server.tuning.ask_short_slices`).
+    """
+    env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
+    with live_server(tmp_path / "slices.db", env=env) as server:
+        service = server.process.pid
+        children = _children(service)
+        (engines,) = [pid for pid, cmd in children.items() if "server.engine_process" in cmd]
+        stores = [
+            pid for pid, cmd in {**children, **_children(engines)}.items() if "spawn_main" in cmd
+        ]
+        assert len(stores) == 2, f"the service's and the engines' store processes: {children}"
+        for pid in (service, engines, *stores):
+            assert _slices(pid) == {SHORT_SLICE_NS}, f"process {pid}"
 
 
 @pytest.mark.parametrize(

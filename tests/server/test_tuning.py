@@ -1,0 +1,93 @@
+"""Process tuning (`server.tuning`): short scheduler slices asked for, and nothing else moved.
+
+Each case runs in a fresh interpreter, so the test process keeps its own slices (and a
+slice it may have asked for, which children inherit, is first set back to the default). The cases
+need Linux 6.12 or later (EEVDF's slice requests) and skip elsewhere; whether the kernel
+reports slices is read with the system call itself, not with the code under test.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from server.tuning import SHORT_SLICE_NS, slice_ns
+
+reported = slice_ns()
+pytestmark = pytest.mark.skipif(
+    not reported, reason="the kernel reports no scheduler slice (Linux 6.12 or later does)"
+)
+
+
+def _in_fresh_interpreter(code: str) -> dict[str, object]:
+    """Run `code` in a new interpreter; it prints one JSON object, returned here."""
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+        cwd=Path(__file__).resolve().parents[2],  # the repository, where `server` is
+    )
+    result = json.loads(done.stdout)
+    assert isinstance(result, dict)
+    return result
+
+
+def test_every_thread_and_every_later_one_asks_for_short_slices_at_its_own_nice() -> None:
+    result = _in_fresh_interpreter(
+        """
+import json, os, threading
+from server.tuning import ask_short_slices, slice_ns
+ask_short_slices(0)  # the kernel's default slice again
+os.nice(5)
+before = slice_ns()
+ready, leave = threading.Event(), threading.Event()
+early = {}
+def wait():
+    early["tid"] = threading.get_native_id()
+    ready.set()
+    leave.wait()
+t = threading.Thread(target=wait)
+t.start()
+ready.wait()
+asked = ask_short_slices()
+early_slice = slice_ns(early["tid"])
+leave.set()
+t.join()
+later = []
+t = threading.Thread(target=lambda: later.append(slice_ns()))
+t.start()
+t.join()
+print(json.dumps({"before": before, "asked": asked, "main": slice_ns(),
+    "early": early_slice, "later": later[0], "nice": os.getpriority(os.PRIO_PROCESS, 0)}))
+"""
+    )
+    assert result["before"] != SHORT_SLICE_NS, "the kernel's default slice before"
+    assert result["asked"] is True
+    assert result["main"] == SHORT_SLICE_NS
+    assert result["early"] == SHORT_SLICE_NS, "a thread that ran before the call"
+    assert result["later"] == SHORT_SLICE_NS, "a thread made after inherits it"
+    assert result["nice"] == 5, "the nice value stays what it was"
+
+
+def test_a_policy_someone_chose_is_kept() -> None:
+    result = _in_fresh_interpreter(
+        """
+import json, os
+from server.tuning import ask_short_slices, slice_ns
+os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+before = slice_ns()
+asked = ask_short_slices()
+print(json.dumps({"asked": asked, "before": before, "after": slice_ns(),
+    "batch": os.sched_getscheduler(0) == os.SCHED_BATCH}))
+"""
+    )
+    assert result["asked"] is False
+    assert result["after"] == result["before"]
+    assert result["batch"] is True
+
