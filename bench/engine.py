@@ -11,8 +11,10 @@ Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one ru
    once with each store: tick lateness p99 and max, overruns, and per-reward commit p99
    (goals: p99 <= 5 ms, max <= 25 ms, 0 overruns; commit p99 <= 5 ms).
 
-``--stores threads,sessions`` measures the store's writes on SQLite's driver (as it runs)
-against the same writes through SQLAlchemy sessions, side by side.
+``--busy N`` runs it all beside N spinning processes (`bench.busy`): a machine with more
+runnable work than cores. ``--stores threads,sessions`` measures the store's writes on
+SQLite's driver (as it runs) against the same writes through SQLAlchemy sessions, side by
+side.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench.busy import busy
 from core.brain.catalog import load_catalog
 from core.conditions import get_condition
 from core.engine import EngineStats, RunEngine
@@ -144,6 +147,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--condition", default="kp")
+    parser.add_argument("--busy", type=int, default=0, help="spinning processes beside")
     parser.add_argument(
         "--stores",
         default="threads,process",
@@ -155,7 +159,9 @@ def main() -> None:
     if unknown or not kinds:
         parser.error(f"--stores: unknown {', '.join(unknown) or 'nothing'}; of {STORES}")
     configure_process()  # as `srlab run` and `srlab serve` do
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, busy(args.busy):
+        if args.busy:
+            print(f"beside {args.busy} busy processes")
         stores = Stores(Path(tmp))
         try:
             plain, engine, ticks = fast(stores, kinds, args.condition, args.episodes, args.repeats)

@@ -91,3 +91,14 @@ print(json.dumps({"asked": asked, "before": before, "after": slice_ns(),
     assert result["after"] == result["before"]
     assert result["batch"] is True
 
+
+def test_the_slice_bench_measures_each_side_in_a_process_of_its_own() -> None:
+    """`bench.slices` runs its two sides in fresh processes beside its spinners."""
+    from bench.busy import busy
+    from bench.slices import _measured
+
+    with busy(1):
+        default = _measured(False, 5, 0.0001, 0.001)
+        short = _measured(True, 5, 0.0001, 0.001)
+    assert len(default) == len(short) == 5
+    assert min(default + short) >= 0.0, "a sleep never ends before it is due"
