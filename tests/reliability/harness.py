@@ -5,7 +5,7 @@ from __future__ import annotations
 import random
 import sqlite3
 import threading
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -158,13 +158,20 @@ def integrity(path: Path) -> str:
 def replay_ltm(
     rewards: list[StoredReward], condition: str = "rp", seed: int = 11
 ) -> dict[tuple[str, str], float]:
-    """LTM after replaying the log headless up to the last applied reward.
+    """LTM after replaying the log headless, in the order the rewards apply, up to the
+    last applied one.
 
     Trainers' rewards are applied at the boundaries they were stamped with; the run's own
-    are produced again by the replayed ticks. As in the engine, a boundary applies the
-    run's own rewards first, then the trainers'; an episode's own rewards apply before it
-    ends and trainers' stamped after its last tick after the reset. Equal to the stored
-    LTM only if every reward was applied exactly once, in that order.
+    are produced again by the replayed ticks and matched with their log entries. As in the
+    engine, a boundary applies the run's own rewards first, then the trainers'; an
+    episode's own rewards apply before it ends and trainers' stamped after its last tick
+    after the reset. Learning is committed in the order it happened, so the applied
+    rewards come first in that order (not always in the log's: a trainer's reward gets
+    its id when it arrives, the run's own when its learning is committed, so one that
+    arrived between an own reward's application and its commit has the smaller id and is
+    applied after it; a crash between the two commits leaves it unapplied behind an
+    applied one). Equal to the stored LTM only if every reward was applied exactly once,
+    in that order.
 
     The simulation defers its rewards, as the engine's does, so that the replay can stop
     right after the last applied reward: a run stopped between a boundary and its tick has
@@ -173,45 +180,68 @@ def replay_ltm(
     last ones in the same `tick()` call, which the run never did.
     """
     catalog = load_catalog()
-    applied = [r.applied for r in rewards]
-    last = max((i for i, a in enumerate(applied) if a), default=-1)
-    # Rewards are applied in log order, so the applied ones are a prefix of the log.
-    assert all(applied[: last + 1]), "an unapplied reward precedes an applied one"
-    target = last + 1
-    external = [r for r in rewards if r.record.source not in INTERNAL]
+    applied_total = sum(r.applied for r in rewards)
+    trainers: dict[int, list[StoredReward]] = {}
+    own_logged: dict[tuple[int, str, float], deque[StoredReward]] = {}
+    for r in rewards:
+        if r.record.source in INTERNAL:
+            key = (r.record.tick, r.record.source, r.record.value)
+            own_logged.setdefault(key, deque()).append(r)
+        else:
+            trainers.setdefault(r.record.tick, []).append(r)
     sim = Simulation(get_condition(condition), seed, catalog=catalog, defer_rewards=True)
     count = 0
+    stopped = False  # at the first reward, in the order they apply, that was not applied
 
-    def apply(due: list[RewardDue]) -> None:
-        nonlocal count
-        for e in due:
-            if count == target:
+    def apply(due: list[tuple[RewardDue, StoredReward | None]]) -> None:
+        nonlocal count, stopped
+        for e, stored in due:
+            if stopped or count == applied_total:
+                return
+            if stored is None or not stored.applied:
+                stopped = True
                 return
             reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
             sim.apply_reward(reward, e.tick, e.episode)
             count += 1
 
+    def logged(own: list[RewardDue]) -> list[tuple[RewardDue, StoredReward | None]]:
+        """The run's own rewards with their log entries (None: never committed)."""
+        matched: list[tuple[RewardDue, StoredReward | None]] = []
+        for e in own:
+            entries = own_logged.get((e.tick, str(e.source), e.value))
+            matched.append((e, entries.popleft() if entries else None))
+        return matched
+
     own: list[RewardDue] = []
     sim.reset()
-    while count < target:
+    while not stopped and count < applied_total:
         boundary = sim.tick_count + 1
-        apply(own)
+        apply(logged(own))
         apply(
             [
-                RewardDue(boundary, sim.episode, r.record.value, r.record.source, r.record.note)
-                for r in external
-                if r.record.tick == boundary
+                (
+                    RewardDue(
+                        boundary, sim.episode, r.record.value, r.record.source, r.record.note
+                    ),
+                    r,
+                )
+                for r in trainers.get(boundary, [])
             ]
         )
-        if count == target:
+        if stopped or count == applied_total:
             break
         result = sim.tick()
         own = [e for e in result.events if isinstance(e, RewardDue)]
         if result.snapshot.done:
-            apply(own)
+            apply(logged(own))
             own = []
-            if count < target:
+            if not stopped and count < applied_total:
                 sim.reset()
+    assert count == applied_total, (
+        f"an unapplied reward precedes an applied one in the order they apply "
+        f"({count} applied before it, {applied_total} applied in all)"
+    )
     return {
         (catalog.stimuli[s].name, catalog.behaviours[b].name): v
         for (s, b), v in sim.brain.ltm.items()
