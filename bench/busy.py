@@ -8,12 +8,17 @@ figure "beside two busy processes" is one command anyone can rerun.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
-from server.tuning import ask_short_slices
+ROOT = Path(__file__).resolve().parents[1]
+
+SPIN = "from server.tuning import ask_short_slices\nask_short_slices(0)\nwhile True: pass"
+"""A spinner's code: the kernel's default slice (not an inherited one), then work."""
 
 
 @contextmanager
@@ -23,13 +28,9 @@ def busy(count: int) -> Iterator[None]:
     They run at the default priority and the kernel's default slice, whatever the
     benchmark asked for itself (children inherit a slice: `server.tuning`).
     """
-    spinners = [
-        subprocess.Popen(
-            [sys.executable, "-c", "while True: pass"],
-            preexec_fn=lambda: ask_short_slices(0),  # one thread, so safe after fork
-        )
-        for _ in range(count)
-    ]
+    path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
+    env = {**os.environ, "PYTHONPATH": path}  # `server` importable from any directory
+    spinners = [subprocess.Popen([sys.executable, "-c", SPIN], env=env) for _ in range(count)]
     try:
         yield
     finally:

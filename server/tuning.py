@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ctypes
+import functools
 import gc
 import multiprocessing
 import os
@@ -52,14 +53,18 @@ def configure_process() -> None:
     ask_short_slices()
 
 
+@functools.cache
+def _libc() -> ctypes.CDLL:
+    return ctypes.CDLL(None, use_errno=True)
+
+
 def _sched_attr(tid: int) -> _SchedAttr | None:
     """Thread `tid`'s scheduling attributes (0: the calling thread); None where unknown."""
     number = _SCHED_SETATTR.get(platform.machine())
     if number is None or not sys.platform.startswith("linux"):
         return None
     attr = _SchedAttr()
-    libc = ctypes.CDLL(None, use_errno=True)
-    if libc.syscall(number + 1, tid, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
+    if _libc().syscall(number + 1, tid, ctypes.byref(attr), ctypes.sizeof(attr), 0) != 0:
         return None
     return attr
 
@@ -81,9 +86,8 @@ def _ask_slice(tid: int, ns: int) -> bool:
     attr.size = ctypes.sizeof(attr)
     attr.sched_flags = 0
     attr.sched_runtime = ns  # the nice value read above is written back as is
-    libc = ctypes.CDLL(None, use_errno=True)
     number = _SCHED_SETATTR[platform.machine()]
-    if libc.syscall(number, tid, ctypes.byref(attr), 0) != 0:
+    if _libc().syscall(number, tid, ctypes.byref(attr), 0) != 0:
         return False
     return ns == 0 or slice_ns(tid) == ns  # older kernels take the call and ignore it
 
@@ -95,8 +99,9 @@ def ask_short_slices(ns: int = SHORT_SLICE_NS) -> bool:
     thread for each write, the event loop again when the write is done. Beside busy
     processes (an experiment on every core) a thread that wakes after a millisecond of
     work is often not let in before the busy process's slice ends, up to a scheduler tick
-    later (4 ms at the usual 250 Hz): 28 % of such wake-ups were 1 ms or more late on this
-    machine, 0.3 % with a 0.1 ms slice (docs/benchmarks.md, "thirteenth session"). Linux's
+    later (4 ms at the usual 250 Hz): beside two busy processes 27 % of such wake-ups were
+    more than 1 ms late on this machine, 0.6 % with a 0.1 ms slice (`bench.slices`;
+    docs/benchmarks.md, "thirteenth session"). Linux's
     EEVDF scheduler (6.12 and later) lets a thread ask for a shorter slice without
     privileges: it gets no larger share of the CPU, only its turns sooner and shorter.
 
