@@ -79,6 +79,8 @@ from pathlib import Path
 from typing import Any, ClassVar, Protocol
 from urllib.parse import quote
 
+from bench.figures import percentile
+
 ROOT = Path(__file__).resolve().parents[1]
 HOST = "127.0.0.1"
 REWARD_LIMIT = 100_000
@@ -812,14 +814,6 @@ def run_wrk(port: int, path: str, seconds: float, connections: int, server_pid: 
 
 
 # --------------------------------------------------------------------------- figures
-
-
-def percentile(values: list[float], q: float) -> float:
-    """The q-th percentile (nearest rank, as the engine's), nan if none."""
-    if not values:
-        return math.nan
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, max(0, math.ceil(q / 100 * len(ordered)) - 1))]
 
 
 def ms(x: float | None, width: int = 8) -> str:

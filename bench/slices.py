@@ -18,6 +18,7 @@ import sys
 import time
 
 from bench.busy import busy
+from bench.figures import percentile
 from server.tuning import SHORT_SLICE_NS, ask_short_slices, slice_ns
 
 LATE_S = 0.001
@@ -76,13 +77,13 @@ def main() -> None:
         f"beside {args.busy} busy processes, {args.rounds} x {args.count} each:"
     )
     for short in (False, True):
-        samples = sorted(late[short])
-        n = len(samples)
-        share = sum(s > LATE_S for s in samples) / n
+        samples = late[short]
+        share = sum(s > LATE_S for s in samples) / len(samples)
         name = f"short slice ({SHORT_SLICE_NS / 1e6:g} ms)" if short else "default slice"
+        p50, p99 = percentile(samples, 50) * 1e3, percentile(samples, 99) * 1e3
         print(
-            f"  {name:24} late > 1 ms {share:6.1%}   p50 {samples[n // 2] * 1e3:5.2f} ms   "
-            f"p99 {samples[int(n * 0.99)] * 1e3:5.2f} ms   max {samples[-1] * 1e3:5.2f} ms"
+            f"  {name:24} late > 1 ms {share:6.1%}   p50 {p50:5.2f} ms   "
+            f"p99 {p99:5.2f} ms   max {max(samples) * 1e3:5.2f} ms"
         )
 
 

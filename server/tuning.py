@@ -110,7 +110,7 @@ def ask_short_slices(ns: int = SHORT_SLICE_NS) -> bool:
     nothing changes. Returns whether every thread now asks for it. `ns` 0 asks for the
     kernel's default slice again.
     """
-    asked = [_ask_slice(tid, ns) for tid in _threads("self") or [0]]
+    asked = [_ask_slice(tid, ns) for tid in threads("self") or [0]]
     return all(asked)
 
 
@@ -131,7 +131,7 @@ def freeze_heap() -> None:
     gc.freeze()
 
 
-def _threads(pid: int | str) -> list[int]:
+def threads(pid: int | str) -> list[int]:
     """The thread ids of process `pid` (Linux); [] where /proc does not tell."""
     try:
         return [int(tid) for tid in os.listdir(Path("/proc") / str(pid) / "task")]
@@ -158,11 +158,11 @@ def step_back(increment: int) -> None:
     """
     if increment <= 0:
         return
-    for tid in _threads("self") or [0]:
+    for tid in threads("self") or [0]:
         _lower(tid, increment)
     for child in multiprocessing.active_children():
         if child.pid is not None:
-            for tid in _threads(child.pid) or [child.pid]:
+            for tid in threads(child.pid) or [child.pid]:
                 _lower(tid, increment)
 
 

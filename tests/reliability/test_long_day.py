@@ -31,8 +31,9 @@ import httpx
 from harness import RewardTraffic, rss_kib
 from reliability_report import count, record
 
+from bench.figures import percentile
 from bench.liveserver import live_server, start_server, wait_status
-from bench.service import percentile, store_episodes
+from bench.service import store_episodes
 
 EPISODES = int(os.environ.get("SRLAB_DAY_EPISODES", "300"))
 RUNS = int(os.environ.get("SRLAB_DAY_RUNS", "40"))

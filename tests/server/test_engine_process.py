@@ -30,7 +30,7 @@ from server.config import Settings
 from server.engine_process import EngineProcessError, ProcessEngines, RemoteRun
 from server.engines import RunLetGo, read_live
 from server.persistence.storage import Storage, open_storage
-from server.tuning import SHORT_SLICE_NS, slice_ns
+from server.tuning import SHORT_SLICE_NS, slice_ns, threads
 
 pytestmark = pytest.mark.anyio
 
@@ -285,12 +285,12 @@ async def test_the_engines_process_refuses_storage_it_could_not_open_itself(
 
 def _nices(pid: int) -> set[int]:
     """The nice values of process `pid`'s threads (Linux gives each thread its own)."""
-    return {os.getpriority(os.PRIO_PROCESS, int(t)) for t in os.listdir(f"/proc/{pid}/task")}
+    return {os.getpriority(os.PRIO_PROCESS, tid) for tid in threads(pid)}
 
 
 def _slices(pid: int) -> set[int | None]:
     """The scheduler slices of process `pid`'s threads, in ns."""
-    return {slice_ns(int(t)) for t in os.listdir(f"/proc/{pid}/task")}
+    return {slice_ns(tid) for tid in threads(pid)}
 
 
 def _loads_numba(pid: int) -> bool:
