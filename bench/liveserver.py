@@ -9,7 +9,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,16 +72,87 @@ STARTUP_S = 240.0
 start took 47 s on a 2-core machine at load 6; CI's may be slower)."""
 
 
-def _wait_healthy(client: httpx.Client, process: subprocess.Popen[bytes]) -> None:
+TCP_TABLES = (Path("/proc/net/tcp"), Path("/proc/net/tcp6"))
+LISTEN = "0A"
+
+
+def _listening_sockets(port: int) -> set[str]:
+    """The inodes of the sockets listening on `port`, from the kernel's TCP tables."""
+    inodes: set[str] = set()
+    for table in TCP_TABLES:
+        try:
+            lines = table.read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if fields[3] == LISTEN and int(fields[1].rsplit(":", 1)[1], 16) == port:
+                inodes.add(fields[9])
+    return inodes
+
+
+def _family(pid: int) -> set[int]:
+    """`pid` and its descendants (a wrapper command may start the server as a child)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        ppid = int(text.rsplit(")", 1)[1].split()[1])
+        children.setdefault(ppid, []).append(int(stat.parent.name))
+    family, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        family.add(p)
+        todo.extend(children.get(p, ()))
+    return family
+
+
+def listens_on(pid: int, port: int) -> bool:
+    """Whether process `pid` (or a descendant) holds the socket listening on `port`.
+
+    True where the kernel's tables cannot be read (not Linux): the check is then skipped.
+    """
+    if not TCP_TABLES[0].exists():
+        return True
+    wanted = {f"socket:[{inode}]" for inode in _listening_sockets(port)}
+    for p in _family(pid):
+        for fd in Path(f"/proc/{p}/fd").glob("*") if Path(f"/proc/{p}").exists() else ():
+            try:
+                if os.readlink(fd) in wanted:
+                    return True
+            except OSError:
+                continue
+    return False
+
+
+class PortTakenError(AssertionError):
+    """Another process listens on the port the server was to take."""
+
+
+def _wait_healthy(client: httpx.Client, process: subprocess.Popen[bytes], port: int) -> None:
+    """Wait until `process` answers on `port`: the answer must come from it.
+
+    A port found free may be taken by another process (another pytest-xdist worker's
+    server) before this one binds it; that one's `/api/health` answers first, with its
+    own database. So a 200 counts only once `process` holds the listening socket.
+    """
     deadline = time.monotonic() + STARTUP_S
     while time.monotonic() < deadline:
         if process.poll() is not None:
+            if _listening_sockets(port):
+                raise PortTakenError(f"another process listens on port {port}")
             raise AssertionError(f"srlab serve exited with {process.returncode}")
         try:
-            if client.get("/api/health").status_code == 200:
-                return
+            answered = client.get("/api/health").status_code == 200
         except httpx.HTTPError:
-            pass
+            answered = False
+        if answered:
+            if listens_on(process.pid, port):
+                return
+            if _listening_sockets(port):
+                raise PortTakenError(f"another process listens on port {port}")
         time.sleep(0.2)
     raise AssertionError(f"srlab serve did not come up within {STARTUP_S:g} s")
 
@@ -103,7 +174,28 @@ def start_server(
     repository as working directory, `log` the stderr pipe with a file; `headers` go with
     every request of the server's client (e.g. the bearer token).
     """
-    port = port or free_port()
+    for attempt in range(PORT_ATTEMPTS):
+        try:
+            return _start(database, port or free_port(), env, command, cwd, log, headers)
+        except PortTakenError:
+            if port is not None or attempt == PORT_ATTEMPTS - 1:
+                raise
+    raise AssertionError("unreachable")
+
+
+PORT_ATTEMPTS = 5
+"""How many free ports `start_server` tries when another process takes the one it chose."""
+
+
+def _start(
+    database: Path | str,
+    port: int,
+    env: dict[str, str] | None,
+    command: Sequence[str] | None,
+    cwd: Path | None,
+    log: Path | None,
+    headers: dict[str, str] | None,
+) -> LiveServer:
     environment = {
         **os.environ,
         "SRLAB_VISER_PORT": str(free_port()),
@@ -123,12 +215,12 @@ def start_server(
     url = f"http://127.0.0.1:{port}"
     client = httpx.Client(base_url=url, timeout=10, headers=headers)
     try:
-        _wait_healthy(client, process)
+        _wait_healthy(client, process, port)
     except BaseException as e:
         process.kill()
         _, err = process.communicate()
         client.close()
-        if not isinstance(e, AssertionError):
+        if not isinstance(e, AssertionError) or isinstance(e, PortTakenError):
             raise
         said = log.read_text(errors="replace") if log is not None else err.decode(errors="replace")
         raise AssertionError(f"{e}; its stderr ends with:\n{said[-3000:]}") from None
@@ -163,6 +255,35 @@ def live_server(database: Path | str, env: dict[str, str] | None = None) -> Iter
         yield server
     finally:
         stop_server(server)
+
+
+def kill_server(server: LiveServer) -> None:
+    """SIGKILL the server if it still runs, and close its client: no check, no leak."""
+    server.client.close()
+    if server.process.poll() is None:
+        server.process.kill()
+    server.process.communicate()
+
+
+@contextmanager
+def servers() -> Iterator[Callable[..., LiveServer]]:
+    """`start_server`, with every server it started killed on the way out if still running.
+
+    For a test that starts several in turn: one a failed assertion leaves running is not
+    left to the garbage collector, whose warnings would fail whichever test runs next.
+    """
+    started: list[LiveServer] = []
+
+    def start(*args: Any, **kwargs: Any) -> LiveServer:
+        server = start_server(*args, **kwargs)
+        started.append(server)
+        return server
+
+    try:
+        yield start
+    finally:
+        for server in started:
+            kill_server(server)
 
 
 def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60) -> dict[str, Any]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -21,7 +21,7 @@ from xdist.remote import Producer
 from xdist.scheduler import LoadScopeScheduling
 from xdist.scheduler.protocol import Scheduling
 
-from bench.liveserver import LiveServer, live_server
+from bench.liveserver import LiveServer, live_server, servers
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
@@ -219,6 +219,14 @@ def browser() -> Iterator[Browser]:
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     with live_server(tmp_path_factory.mktemp("web") / "web.db") as s:
         yield s
+
+
+@pytest.fixture
+def start_server() -> Iterator[Callable[..., LiveServer]]:
+    """`bench.liveserver.start_server` for a test that starts and stops servers itself:
+    one it leaves running (a failed assertion) is killed when the test ends."""
+    with servers() as start:
+        yield start
 
 
 BROWSER_WAIT_MS = 90_000

@@ -18,6 +18,7 @@ import os
 import random
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -25,7 +26,7 @@ import pytest
 from harness import RewardTraffic, check_log, integrity, replay_ltm
 from reliability_report import count, record
 
-from bench.liveserver import LiveServer, start_server, stop_server, wait_status
+from bench.liveserver import LiveServer, stop_server, wait_status
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 KILLS = {
@@ -53,7 +54,10 @@ def _resume(server: LiveServer, run_id: int, traffic: list[RewardTraffic], n: in
 
 @pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
 def test_kill_9_of_the_service_loses_no_acknowledged_reward(
-    backend: str, request: pytest.FixtureRequest, tmp_path: Path
+    backend: str,
+    request: pytest.FixtureRequest,
+    tmp_path: Path,
+    start_server: Callable[..., LiveServer],
 ) -> None:
     kills = KILLS[backend]
     if kills == 0:

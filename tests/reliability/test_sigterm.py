@@ -16,13 +16,14 @@ import os
 import random
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
 from harness import RewardTraffic, check_log, replay_ltm
 from reliability_report import count, record
 
-from bench.liveserver import LiveServer, start_server, wait_status
+from bench.liveserver import LiveServer, wait_status
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 SIGTERMS = int(os.environ.get("SRLAB_SIGTERMS", "2"))
@@ -75,7 +76,7 @@ def _start_all(server: LiveServer, run_ids: list[int]) -> None:
 
 
 def test_sigterm_with_runs_going_exits_within_5_s_and_the_runs_resume(
-    postgres_database: str, tmp_path: Path
+    postgres_database: str, tmp_path: Path, start_server: Callable[..., LiveServer]
 ) -> None:
     database = postgres_database
     log = tmp_path / "serve.log"
