@@ -8,6 +8,7 @@ before, read with those unknown (origin "", stimulus -1).
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -66,35 +67,38 @@ class TraceRecorder:
 
     def __init__(self) -> None:
         self._rows: list[Snapshot] = []
-
-    def add(self, snapshot: Snapshot) -> None:
-        """Record one tick (snapshots are immutable, so keeping them is enough)."""
-        self._rows.append(snapshot)
+        self.add: Callable[[Snapshot], None] = self._rows.append
+        """Record one tick (snapshots are immutable, so keeping them is enough): the list's
+        own `append`, so a tick pays no Python call for it."""
 
     def __len__(self) -> int:
         return len(self._rows)
 
     def take(self) -> TraceArray:
         """The trace's rows as one array, uncompressed (`compress` packs it); emptied."""
-        rows, self._rows = self._rows, []
-        arr: TraceArray = np.empty(len(rows), dtype=_DTYPE)
+        rows = self._rows.copy()
+        self._rows.clear()  # the same list: `add` appends to it
+        n = len(rows)
+        arr: TraceArray = np.empty(n, dtype=_DTYPE)
         if rows:
-            # Column by column: numpy fills a structured array from a list per field several
-            # times faster than from a tuple per row (this ran on the tick task, ~5% of a
-            # fast run's time).
+            # Column by column, each converted straight to its type (`np.fromiter`): numpy
+            # fills a structured array from a list per field several times faster than
+            # from a tuple per row, and faster still without guessing each column's type.
+            # This runs on the tick task: a few per cent of a fast run's time.
             _, tick, _, x, y, heading, stimuli, behaviour, how, lamp, *_, origin, by = zip(
                 *rows, strict=True
             )
-            arr["tick"] = tick
-            arr["x"] = x
-            arr["y"] = y
-            arr["heading"] = heading
-            arr["behaviour"] = behaviour
-            arr["how"] = list(map(_HOW_INDEX.__getitem__, how))
-            arr["lamp"] = lamp
-            arr["stimuli"] = list(map(_mask, stimuli))
-            arr["origin"] = list(map(_ORIGIN_INDEX.__getitem__, origin))
-            arr["released_by"] = by
+            arr["tick"] = np.fromiter(tick, np.int32, n)
+            arr["x"] = np.fromiter(x, np.float32, n)
+            arr["y"] = np.fromiter(y, np.float32, n)
+            arr["heading"] = np.fromiter(heading, np.float32, n)
+            arr["behaviour"] = np.fromiter(behaviour, np.int16, n)
+            arr["how"] = np.fromiter(map(_HOW_INDEX.__getitem__, how), np.int8, n)
+            arr["lamp"] = np.fromiter(lamp, np.int8, n)
+            masks = list(map(_MASKS.get, stimuli))  # a run meets few sets: nearly all known
+            arr["stimuli"] = masks if None not in masks else list(map(_mask, stimuli))
+            arr["origin"] = np.fromiter(map(_ORIGIN_INDEX.__getitem__, origin), np.int8, n)
+            arr["released_by"] = np.fromiter(by, np.int8, n)
         return arr
 
 

@@ -106,12 +106,27 @@ def test_each_stored_episode_traces_exactly_its_ticks_as_the_headless_loop_ran_t
         rows = unpack(record.trace)
         expected = [s for s in ticks if s.episode == record.episode and s.episode_tick > 0]
         assert len(rows) == record.ticks == len(expected)
-        assert [(r.tick, r.behaviour, r.how, r.origin) for r in rows] == [
-            (s.tick, s.behaviour, str(s.how), s.origin) for s in expected
+        assert [
+            (r.tick, r.behaviour, r.how, r.lamp, r.stimuli, r.origin, r.released_by) for r in rows
+        ] == [
+            (
+                s.tick,
+                s.behaviour,
+                str(s.how),
+                int(s.lamp),
+                tuple(sorted(s.stimuli)),
+                s.origin,
+                s.released_by,
+            )
+            for s in expected
         ]
-        # float32 in the trace: positions to well under a millimetre.
+        # float32 in the trace: positions and headings to well under a millimetre (radian).
         assert (
-            max(abs(r.x - s.x) + abs(r.y - s.y) for r, s in zip(rows, expected, strict=True)) < 1e-4
+            max(
+                abs(r.x - s.x) + abs(r.y - s.y) + abs(r.heading_rad - s.heading_rad)
+                for r, s in zip(rows, expected, strict=True)
+            )
+            < 1e-4
         )
 
 
