@@ -5,7 +5,8 @@ Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one ru
 1. ticks/s of the plain headless loop (`core.runner.run`) against the engine in fast mode
    committing everything to SQLite, with the store in the engine's process (worker
    threads) and in a store process as `srlab serve` has it
-   (`server.persistence.process`), alternated seed by seed (goal: at least 0.8);
+   (`server.persistence.process`), seed by seed in alternating order: each seed's ratio,
+   their mean with a 95% bootstrap interval (goal: at least 0.8);
 2. a realtime run at 20 Hz for ``--seconds`` (default 60) with storage writes going on (the
    reinforcement program's rewards, trainer rewards injected 5 times a second, episodes),
    once with each store: tick lateness p99 and max, overruns, and per-reward commit p99
@@ -24,6 +25,7 @@ import asyncio
 import statistics
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from bench.busy import busy
@@ -32,6 +34,7 @@ from core.conditions import get_condition
 from core.engine import EngineStats, RunEngine
 from core.ports import Mode, RunSpec, RunStore
 from core.runner import run
+from core.stats import Estimate, bootstrap_mean
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
 from server.persistence.process import StoreProcess
 from server.tuning import configure_process, freeze_heap
@@ -66,10 +69,27 @@ class Stores:
             process.stop()
 
 
-def fast(
-    stores: Stores, kinds: list[str], condition: str, episodes: int, repeats: int
-) -> tuple[float, dict[str, float], int]:
-    """Median ticks/s of the plain loop and of the engine with each store, alternated."""
+@dataclass(frozen=True, slots=True)
+class Fast:
+    """Fast mode's figures: median rates, and each store's ratio over seeds with its CI."""
+
+    plain: float
+    """Median ticks/s of the plain loop."""
+    engine: dict[str, float]
+    """Median ticks/s of the engine, by store."""
+    ratios: dict[str, Estimate]
+    """The engine's rate over the plain loop's, seed by seed: mean and 95% bootstrap CI."""
+    ticks: int
+
+
+def fast(stores: Stores, kinds: list[str], condition: str, episodes: int, repeats: int) -> Fast:
+    """The plain loop and the engine with each store, seed by seed, the order alternated.
+
+    The same work runs at rates up to a third apart from one second to the next on a shared
+    machine, so one pair of runs says little: each seed's runs go back to back (plain
+    first on odd seeds, last on even ones, so a drift in the machine's speed favours
+    neither) and the ratio is each seed's, averaged with a bootstrap interval.
+    """
     catalog = load_catalog()
     opened = {kind: stores.open(kind, "fast.db") for kind in kinds}
     run(get_condition(condition), 0, 3, catalog=catalog)  # warm-up of every path
@@ -79,22 +99,33 @@ def fast(
     freeze_heap()  # as `srlab run` does once it is set up
     plain_rates: list[float] = []
     engine_rates: dict[str, list[float]] = {kind: [] for kind in kinds}
-    ticks = 0
+    total = 0
     for seed in range(1, repeats + 1):
-        started = time.perf_counter()
-        plain = run(get_condition(condition), seed, episodes, catalog=catalog)
-        plain_rates.append(plain.ticks / (time.perf_counter() - started))
-        for kind, store in opened.items():
-            engine = RunEngine.create(
-                RunSpec(condition, seed, episodes, Mode.FAST), store, catalog=catalog
-            )
+        order: list[str | None] = [None, *kinds]  # None: the plain loop
+        ticks: dict[str | None, int] = {}
+        for kind in order if seed % 2 else order[::-1]:
+            spec = RunSpec(condition, seed, episodes, Mode.FAST)
+            if kind is None:
+                started = time.perf_counter()
+                ticks[kind] = run(get_condition(condition), seed, episodes, catalog=catalog).ticks
+                plain_rates.append(ticks[kind] / (time.perf_counter() - started))
+                continue
+            engine = RunEngine.create(spec, opened[kind], catalog=catalog)
             started = time.perf_counter()
             asyncio.run(engine.run())
-            engine_rates[kind].append(engine.totals.ticks / (time.perf_counter() - started))
-            assert engine.totals.ticks == plain.ticks, "the engine ran what the plain loop ran"
-        ticks += plain.ticks
-    medians = {kind: statistics.median(rates) for kind, rates in engine_rates.items()}
-    return statistics.median(plain_rates), medians, ticks
+            ticks[kind] = engine.totals.ticks
+            engine_rates[kind].append(ticks[kind] / (time.perf_counter() - started))
+        assert len(set(ticks.values())) == 1, "the engine ran what the plain loop ran"
+        total += ticks[None]
+    return Fast(
+        statistics.median(plain_rates),
+        {kind: statistics.median(r) for kind, r in engine_rates.items()},
+        {
+            kind: bootstrap_mean([e / p for e, p in zip(r, plain_rates, strict=True)])
+            for kind, r in engine_rates.items()
+        },
+        total,
+    )
 
 
 def realtime(store: RunStore, seconds: float, hz: float) -> tuple[EngineStats, list[float]]:
@@ -145,7 +176,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--hz", type=float, default=20.0)
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=9, help="seeds, each a pair")
     parser.add_argument("--condition", default="kp")
     parser.add_argument("--busy", type=int, default=0, help="spinning processes beside")
     parser.add_argument(
@@ -164,17 +195,18 @@ def main() -> None:
             print(f"beside {args.busy} busy processes")
         stores = Stores(Path(tmp))
         try:
-            plain, engine, ticks = fast(stores, kinds, args.condition, args.episodes, args.repeats)
+            figures = fast(stores, kinds, args.condition, args.episodes, args.repeats)
             print(
-                f"fast mode, {args.condition}, {args.repeats} x {args.episodes} episodes "
-                f"({ticks:,} ticks each way), medians:"
+                f"fast mode, {args.condition}, {args.repeats} seeds x {args.episodes} episodes "
+                f"({figures.ticks:,} ticks each way), the order alternated seed by seed:"
             )
-            print(f"  plain headless loop          {plain:10,.0f} ticks/s")
+            print(f"  plain headless loop, median {figures.plain:10,.0f} ticks/s")
             for kind in kinds:
-                print(f"  engine + SQLite, {kind:9}   {engine[kind]:10,.0f} ticks/s")
+                print(f"  engine + SQLite, {kind:9}   {figures.engine[kind]:10,.0f} ticks/s")
             for kind in kinds:
-                ratio = engine[kind] / plain
-                print(f"  ratio, {kind:9}             {ratio:10.2f}   (goal: >= 0.8)")
+                r = figures.ratios[kind]
+                ci = f"[{r.low:.2f}, {r.high:.2f}]" if r.n > 1 else "(one seed: no interval)"
+                print(f"  ratio, {kind:9}             {r.mean:10.2f}   {ci}   (goal: >= 0.8)")
             for kind in kinds:
                 stats, hops = realtime(stores.open(kind, "realtime.db"), args.seconds, args.hz)
                 print_realtime(kind, stats, hops, args.hz, args.seconds)
