@@ -40,6 +40,8 @@ from server.persistence.process import StoreProcess
 from server.tuning import configure_process, freeze_heap
 
 STORES = ("threads", "process", "sessions")
+UNTRACED = ", no trace"
+"""Marks the engine run without recording episodes' traces (`--untraced`)."""
 """Where the store runs: in the engine's process (its worker threads) or in a store process;
 ``sessions`` is ``threads`` with every write through a SQLAlchemy session instead of SQLite's
 driver (`server.persistence.driver`), for comparison."""
@@ -82,13 +84,23 @@ class Fast:
     ticks: int
 
 
-def fast(stores: Stores, kinds: list[str], condition: str, episodes: int, repeats: int) -> Fast:
+def fast(
+    stores: Stores,
+    kinds: list[str],
+    condition: str,
+    episodes: int,
+    repeats: int,
+    *,
+    untraced: bool = False,
+) -> Fast:
     """The plain loop and the engine with each store, seed by seed, the order alternated.
 
     The same work runs at rates up to a third apart from one second to the next on a shared
     machine, so one pair of runs says little: each seed's runs go back to back (plain
     first on odd seeds, last on even ones, so a drift in the machine's speed favours
     neither) and the ratio is each seed's, averaged with a bootstrap interval.
+    `untraced` adds each store's engine without the episodes' traces (`UNTRACED`), to
+    show what recording them costs.
     """
     catalog = load_catalog()
     opened = {kind: stores.open(kind, "fast.db") for kind in kinds}
@@ -98,10 +110,11 @@ def fast(stores: Stores, kinds: list[str], condition: str, episodes: int, repeat
         asyncio.run(RunEngine.create(spec, store, catalog=catalog).run())
     freeze_heap()  # as `srlab run` does once it is set up
     plain_rates: list[float] = []
-    engine_rates: dict[str, list[float]] = {kind: [] for kind in kinds}
+    labels = [*kinds, *(f"{kind}{UNTRACED}" for kind in kinds if untraced)]
+    engine_rates: dict[str, list[float]] = {label: [] for label in labels}
     total = 0
     for seed in range(1, repeats + 1):
-        order: list[str | None] = [None, *kinds]  # None: the plain loop
+        order: list[str | None] = [None, *labels]  # None: the plain loop
         ticks: dict[str | None, int] = {}
         for kind in order if seed % 2 else order[::-1]:
             spec = RunSpec(condition, seed, episodes, Mode.FAST)
@@ -110,7 +123,10 @@ def fast(stores: Stores, kinds: list[str], condition: str, episodes: int, repeat
                 ticks[kind] = run(get_condition(condition), seed, episodes, catalog=catalog).ticks
                 plain_rates.append(ticks[kind] / (time.perf_counter() - started))
                 continue
-            engine = RunEngine.create(spec, opened[kind], catalog=catalog)
+            store = opened[kind.removesuffix(UNTRACED)]
+            engine = RunEngine.create(
+                spec, store, catalog=catalog, trace=not kind.endswith(UNTRACED)
+            )
             started = time.perf_counter()
             asyncio.run(engine.run())
             ticks[kind] = engine.totals.ticks
@@ -184,6 +200,11 @@ def main() -> None:
         default="threads,process",
         help=f"comma-separated, of {', '.join(STORES)} (default: threads,process)",
     )
+    parser.add_argument(
+        "--untraced",
+        action="store_true",
+        help="also run each store's engine without recording episodes' traces (fast mode)",
+    )
     args = parser.parse_args()
     kinds = [k.strip() for k in args.stores.split(",") if k.strip()]
     unknown = sorted(set(kinds) - set(STORES))
@@ -195,18 +216,25 @@ def main() -> None:
             print(f"beside {args.busy} busy processes")
         stores = Stores(Path(tmp))
         try:
-            figures = fast(stores, kinds, args.condition, args.episodes, args.repeats)
+            figures = fast(
+                stores,
+                kinds,
+                args.condition,
+                args.episodes,
+                args.repeats,
+                untraced=args.untraced,
+            )
             print(
                 f"fast mode, {args.condition}, {args.repeats} seeds x {args.episodes} episodes "
                 f"({figures.ticks:,} ticks each way), the order alternated seed by seed:"
             )
-            print(f"  plain headless loop, median {figures.plain:10,.0f} ticks/s")
-            for kind in kinds:
-                print(f"  engine + SQLite, {kind:9}   {figures.engine[kind]:10,.0f} ticks/s")
-            for kind in kinds:
-                r = figures.ratios[kind]
+            print(f"  {'plain headless loop, median':36} {figures.plain:10,.0f} ticks/s")
+            for label, rate in figures.engine.items():
+                print(f"  {'engine + SQLite, ' + label:36} {rate:10,.0f} ticks/s")
+            for label, r in figures.ratios.items():
                 ci = f"[{r.low:.2f}, {r.high:.2f}]" if r.n > 1 else "(one seed: no interval)"
-                print(f"  ratio, {kind:9}             {r.mean:10.2f}   {ci}   (goal: >= 0.8)")
+                goal = "" if label.endswith(UNTRACED) else "   (goal: >= 0.8)"
+                print(f"  {'ratio, ' + label:36} {r.mean:10.2f}   {ci}{goal}")
             for kind in kinds:
                 stats, hops = realtime(stores.open(kind, "realtime.db"), args.seconds, args.hz)
                 print_realtime(kind, stats, hops, args.hz, args.seconds)

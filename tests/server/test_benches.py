@@ -38,11 +38,13 @@ def test_the_store_bench_compares_the_driver_with_sessions() -> None:
 def test_the_engine_bench_reports_fast_mode_and_realtime_with_its_floor() -> None:
     done = bench(
         "bench.engine",
-        *("--seconds", "1", "--repeats", "1", "--episodes", "2", "--stores", "threads,sessions"),
+        *("--seconds", "1", "--repeats", "2", "--episodes", "2", "--stores", "threads,sessions"),
+        "--untraced",
     )
     assert done.returncode == 0, done.stderr
     out = done.stdout
-    for line in ("ratio, threads", "ratio, sessions", "reward commit p99"):
+    ratios = ("ratio, threads", "ratio, sessions", "ratio, threads, no trace")
+    for line in (*ratios, "reward commit p99"):
         assert line in out
     assert out.count("empty thread hand-off p99") == 2  # one per store
 
