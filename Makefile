@@ -90,6 +90,7 @@ bench: install
 	$(BIN)/python -m bench.experiment
 	$(BIN)/python -m bench.sweep
 	$(BIN)/python -m bench.engine
+	$(BIN)/python -m bench.instructions
 	$(BIN)/python -m bench.slices
 	$(BIN)/python -m bench.store
 	$(BIN)/python -m bench.service

@@ -64,3 +64,20 @@ def test_the_service_bench_prices_each_request_kind() -> None:
         assert kind in out
     assert "the mix at 200 requests/s" in out
     assert "5xx responses                       0" in out
+
+
+def test_the_instruction_bench_runs_the_same_work_in_each_variant() -> None:
+    # What each callgrind run executes (the counting itself needs valgrind and minutes).
+    ticks = set()
+    for variant in ("plain", "engine", "engine-untraced"):
+        done = bench("bench.instructions", "--child", variant, "--episodes", "2", "--seed", "3")
+        assert done.returncode == 0, done.stderr
+        ticks.add(int(done.stdout.split()[-1]))
+    assert len(ticks) == 1 and ticks.pop() > 0
+
+
+def test_the_instruction_bench_refuses_no_episodes_without_a_traceback() -> None:
+    done = bench("bench.instructions", "--episodes", "0")
+    assert done.returncode == 2
+    assert "--episodes must be at least 1" in done.stderr
+    assert "Traceback" not in done.stderr
