@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import signal
@@ -117,14 +118,17 @@ def listens_on(pid: int, port: int) -> bool:
     if not TCP_TABLES[0].exists():
         return True
     wanted = {f"socket:[{inode}]" for inode in _listening_sockets(port)}
-    for p in _family(pid):
-        for fd in Path(f"/proc/{p}/fd").glob("*") if Path(f"/proc/{p}").exists() else ():
-            try:
-                if os.readlink(fd) in wanted:
-                    return True
-            except OSError:
-                continue
-    return False
+    return any(_links(Path(f"/proc/{p}/fd")) & wanted for p in _family(pid))
+
+
+def _links(folder: Path) -> set[str]:
+    """What the links in `folder` point to (a process's open files); none if it is gone."""
+    links = set()
+    with contextlib.suppress(OSError):
+        for fd in folder.iterdir():
+            with contextlib.suppress(OSError):  # closed meanwhile
+                links.add(os.readlink(fd))
+    return links
 
 
 class PortTakenError(AssertionError):
@@ -174,13 +178,10 @@ def start_server(
     repository as working directory, `log` the stderr pipe with a file; `headers` go with
     every request of the server's client (e.g. the bearer token).
     """
-    for attempt in range(PORT_ATTEMPTS):
-        try:
-            return _start(database, port or free_port(), env, command, cwd, log, headers)
-        except PortTakenError:
-            if port is not None or attempt == PORT_ATTEMPTS - 1:
-                raise
-    raise AssertionError("unreachable")
+    for _ in range(PORT_ATTEMPTS - 1 if port is None else 0):
+        with contextlib.suppress(PortTakenError):  # try another
+            return _start(database, free_port(), env, command, cwd, log, headers)
+    return _start(database, port or free_port(), env, command, cwd, log, headers)
 
 
 PORT_ATTEMPTS = 5
