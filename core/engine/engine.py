@@ -618,24 +618,43 @@ class RunEngine:
         return not self._stop and (not self._need_reset or self._episodes_left())
 
     async def _fast(self) -> None:
-        n = 0
         while self._more():
-            n += 1
-            if n % FAST_YIELD_TICKS == 0 or self._boundary.due or self._commands:
-                await asyncio.sleep(0)
-                if self._paused:
-                    await self._resumed.wait()
-                    continue
-                await self._step()
+            await asyncio.sleep(0)  # edits, trainers' rewards, pauses and the writers get in
+            if self._paused:
+                await self._resumed.wait()
                 continue
-            # The common case needs no await: a plain call is the fast path.
-            if self._need_reset:
-                self._start_episode()
-            ended = self._tick()
+            await self._step()
+            ended = self._burst(FAST_YIELD_TICKS - 1)
             if ended is not None:
-                if self._boundary.due:
-                    await self._settle(self.sim.tick_count + 1, internal_only=True)
+                await self._settle(self.sim.tick_count + 1, internal_only=True)
                 self._end_episode(ended)
+
+    def _burst(self, ticks: int) -> EpisodeEnded | None:
+        """Up to `ticks` ticks with no await between them: fast mode's common path.
+
+        Nothing else runs meanwhile, so no edit, pause or stop can arrive; it returns
+        early when a tick needs the event loop (a reward due at the next boundary, or an
+        episode that ended with its own rewards to apply first: returned, for the caller
+        to settle and end) or the episodes are done.
+        """
+        if self._commands:
+            return None
+        if self._until_tick is not None:
+            ticks = min(ticks, self._until_tick - self.sim.tick_count)
+        due, tick = self._boundary.due, self._tick
+        for _ in range(ticks):
+            if due:
+                return None
+            if self._need_reset:
+                if not self._episodes_left():
+                    return None
+                self._start_episode()
+            ended = tick()
+            if ended is not None:
+                if due:
+                    return ended
+                self._end_episode(ended)
+        return None
 
     async def _nap(self, seconds: float) -> None:
         await self._pacer.sleep(seconds, self._wake)
