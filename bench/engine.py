@@ -40,11 +40,11 @@ from server.persistence.process import StoreProcess
 from server.tuning import configure_process, freeze_heap
 
 STORES = ("threads", "process", "sessions")
-UNTRACED = ", no trace"
-"""Marks the engine run without recording episodes' traces (`--untraced`)."""
 """Where the store runs: in the engine's process (its worker threads) or in a store process;
 ``sessions`` is ``threads`` with every write through a SQLAlchemy session instead of SQLite's
 driver (`server.persistence.driver`), for comparison."""
+UNTRACED = ", no trace"
+"""Marks the engine run without recording episodes' traces (`--untraced`)."""
 
 
 class Stores:
@@ -117,13 +117,13 @@ def fast(
         order: list[str | None] = [None, *labels]  # None: the plain loop
         ticks: dict[str | None, int] = {}
         for kind in order if seed % 2 else order[::-1]:
-            spec = RunSpec(condition, seed, episodes, Mode.FAST)
             if kind is None:
                 started = time.perf_counter()
                 ticks[kind] = run(get_condition(condition), seed, episodes, catalog=catalog).ticks
                 plain_rates.append(ticks[kind] / (time.perf_counter() - started))
                 continue
             store = opened[kind.removesuffix(UNTRACED)]
+            spec = RunSpec(condition, seed, episodes, Mode.FAST)
             engine = RunEngine.create(
                 spec, store, catalog=catalog, trace=not kind.endswith(UNTRACED)
             )
