@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bench.busy import busy
+from bench.figures import percentile
 from core.brain.catalog import load_catalog
 from core.conditions import get_condition
 from core.engine import EngineStats, RunEngine
@@ -255,8 +256,7 @@ def print_realtime(
     commit_p99 = ms(stats.reward_commit_s.percentile(99))
     print(f"  reward commit p99          {commit_p99}   (goal: <= 5 ms)")
     print(f"  reward acknowledgement p99 {ms(stats.reward_ack_s.percentile(99))}")
-    ordered = sorted(hops)
-    hop_p99 = ordered[min(len(ordered) - 1, int(len(ordered) * 0.99))] if ordered else 0.0
+    hop_p99 = percentile(hops, 99)
     print(f"  empty thread hand-off p99  {ms(hop_p99)}   (the floor of every storage call)")
 
 

@@ -144,19 +144,17 @@ def _wait_healthy(client: httpx.Client, process: subprocess.Popen[bytes], port: 
     """
     deadline = time.monotonic() + STARTUP_S
     while time.monotonic() < deadline:
-        if process.poll() is not None:
-            if _listening_sockets(port):
-                raise PortTakenError(f"another process listens on port {port}")
-            raise AssertionError(f"srlab serve exited with {process.returncode}")
+        exited = process.poll() is not None
         try:
-            answered = client.get("/api/health").status_code == 200
+            answered = not exited and client.get("/api/health").status_code == 200
         except httpx.HTTPError:
             answered = False
-        if answered:
-            if listens_on(process.pid, port):
-                return
-            if _listening_sockets(port):
-                raise PortTakenError(f"another process listens on port {port}")
+        if answered and listens_on(process.pid, port):
+            return
+        if (exited or answered) and _listening_sockets(port):
+            raise PortTakenError(f"another process listens on port {port}")
+        if exited:
+            raise AssertionError(f"srlab serve exited with {process.returncode}")
         time.sleep(0.2)
     raise AssertionError(f"srlab serve did not come up within {STARTUP_S:g} s")
 

@@ -16,6 +16,7 @@ import statistics
 import tempfile
 import time
 
+from bench.figures import percentile
 from core.brain.catalog import load_catalog
 from core.ports import LearningUpdate, Mode, RewardCommit, RewardRecord, RunSpec
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
@@ -82,8 +83,8 @@ def main() -> None:
                     commits[path].append(commit_s)
             for what, samples in (("log a reward", logs), ("commit it", commits)):
                 cells = "   ".join(
-                    f"{path} {_ms(statistics.median(samples[path]))} / {_ms(_p99(samples[path]))}"
-                    for path in PATHS
+                    f"{p} {_ms(statistics.median(samples[p]))} / {_ms(percentile(samples[p], 99))}"
+                    for p in PATHS
                 )
                 ratio = statistics.median(samples["driver"]) / statistics.median(
                     samples["sessions"]
@@ -98,11 +99,6 @@ def main() -> None:
             cells = "   ".join(f"{p} {_ms(times[p])}" for p in PATHS)
             print(f"  a batch of {n:2} applied rewards, median of 30:   {cells}   "
                   f"ratio {times['driver'] / times['sessions']:4.2f}")  # fmt: skip
-
-
-def _p99(samples: list[float]) -> float:
-    ordered = sorted(samples)
-    return ordered[min(len(ordered) - 1, int(len(ordered) * 0.99))]
 
 
 def _ms(seconds: float) -> str:

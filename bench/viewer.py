@@ -57,6 +57,7 @@ from pathlib import Path
 from typing import Any
 
 from bench.browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
+from bench.figures import percentile
 from bench.service import (
     HOST,
     RawClient,
@@ -241,9 +242,7 @@ def spread(values: list[float]) -> str:
     """p50, p99 and max of page timings in ms."""
     if not values:
         return "-"
-    xs = sorted(values)
-    p99 = xs[min(len(xs) - 1, round(0.99 * (len(xs) - 1)))]
-    return f"{statistics.median(xs):.2f} / {p99:.2f} / {xs[-1]:.2f}"
+    return f"{statistics.median(values):.2f} / {percentile(values, 99):.2f} / {max(values):.2f}"
 
 
 def chromium_command(folder: Path, nice: int, cpu: int | None) -> Path:
