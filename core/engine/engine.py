@@ -58,7 +58,7 @@ from core.engine.stats import EngineStats
 from core.engine.view import RunView
 from core.engine.writer import RunWriter, reward_record
 from core.errors import CatalogError, RunStateError, StorageError
-from core.events import EpisodeEnded, Outcome, RewardDue
+from core.events import EpisodeEnded, Event, Outcome, RewardDue
 from core.params import applicable, configure
 from core.ports import (
     ACTIVE,
@@ -632,29 +632,48 @@ class RunEngine:
     def _burst(self, ticks: int) -> EpisodeEnded | None:
         """Up to `ticks` ticks with no await between them: fast mode's common path.
 
-        Nothing else runs meanwhile, so no edit, pause or stop can arrive; it returns
-        early when a tick needs the event loop (a reward due at the next boundary, or an
-        episode that ended with its own rewards to apply first: returned, for the caller
-        to settle and end) or the episodes are done.
+        Nothing else runs meanwhile, so no edit, pause, stop, trainer's reward or
+        subscriber can arrive; it returns early when a tick needs the event loop (a reward
+        due at the next boundary, or an episode that ended with its own rewards to apply
+        first: returned, for the caller to settle and end) or the episodes are done.
+        Unwatched and with no reward held, which is how fast runs go, a tick is just the
+        simulation's tick, its trace row and its events: what `_tick` checks each tick
+        cannot change, and the tick count and last snapshot are kept once, at the end.
         """
         if self._commands:
             return None
         if self._until_tick is not None:
             ticks = min(ticks, self._until_tick - self.sim.tick_count)
-        due, tick = self._boundary.due, self._tick
-        for _ in range(ticks):
-            if due:
-                return None
-            if self._need_reset:
-                if not self._episodes_left():
-                    return None
-                self._start_episode()
-            ended = tick()
-            if ended is not None:
+        watched = bool(self.bus.tick_subscribers or self._boundary.held)
+        sim = self.sim
+        due, step, sim_tick, hand_on = self._boundary.due, self._tick, sim.tick, self._hand_on
+        add = self._trace.add if self._trace is not None else None
+        first, result = sim.tick_count, None
+        try:
+            for _ in range(ticks):
                 if due:
-                    return ended
-                self._end_episode(ended)
-        return None
+                    return None
+                if self._need_reset:
+                    if not self._episodes_left():
+                        return None
+                    self._start_episode()
+                if watched:
+                    ended = step()
+                else:
+                    result = sim_tick()
+                    if add is not None:
+                        add(result.snapshot)
+                    ended = hand_on(result.events) if result.events else None
+                if ended is not None:
+                    if due:
+                        return ended
+                    self._end_episode(ended)
+            return None
+        finally:
+            if not watched:  # `_tick` kept these
+                self.stats.ticks += sim.tick_count - first
+                if result is not None:
+                    self._last_snap = result.snapshot
 
     async def _nap(self, seconds: float) -> None:
         await self._pacer.sleep(seconds, self._wake)
@@ -729,17 +748,21 @@ class RunEngine:
         if self.bus.tick_subscribers:
             # A single step of a paused run is always shown: no later tick would replace it.
             self._publish_tick(snap, force=self._paused)
-        ended: EpisodeEnded | None = None
-        if result.events:
-            for e in result.events:
-                if isinstance(e, RewardDue):
-                    self._enqueue_internal(e)
-                elif isinstance(e, EpisodeEnded):
-                    ended = e
-                else:
-                    self._publish(e)
+        ended = self._hand_on(result.events) if result.events else None
         if self._boundary.held:
             self._boundary.release_held()
+        return ended
+
+    def _hand_on(self, events: tuple[Event, ...]) -> EpisodeEnded | None:
+        """A tick's events to the reward task and the subscribers; its episode's end."""
+        ended: EpisodeEnded | None = None
+        for e in events:
+            if isinstance(e, RewardDue):
+                self._enqueue_internal(e)
+            elif isinstance(e, EpisodeEnded):
+                ended = e
+            else:
+                self._publish(e)
         return ended
 
     def _start_episode(self) -> None:

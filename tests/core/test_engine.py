@@ -130,6 +130,28 @@ def test_each_stored_episode_traces_exactly_its_ticks_as_the_headless_loop_ran_t
         )
 
 
+def test_a_watched_fast_run_ticks_as_an_unwatched_one() -> None:
+    # Unwatched, fast mode ticks in a loop that checks subscribers and held rewards once
+    # per burst (`RunEngine._ticks`); watched, every tick goes through `_tick`. Both must
+    # store the same run and count every tick.
+    plain = headless_run(get_condition("kp"), 6, 5, catalog=CATALOG)
+    runs = []
+    for watched in (False, True):
+        store = InMemoryRunStore(CATALOG)
+        engine = RunEngine.create(fast("kp", 6, 5), store, catalog=CATALOG)
+        sub = engine.subscribe(maxsize=100_000, tick_hz=1e6) if watched else None
+        assert asyncio.run(engine.run()) is RunStatus.FINISHED
+        assert engine.stats.ticks == engine.totals.ticks == plain.ticks
+        assert engine.sim.brain.ltm.as_dict() == plain.ltm
+        if sub is not None:
+            assert any(isinstance(ev, TickPublished) for ev in sub.drain())
+        runs.append(
+            [(e.episode, e.ticks, e.outcome, e.trace) for e in store.episodes(engine.run_id)]
+        )
+    assert runs[0] == runs[1]
+    assert len(runs[0]) == 5
+
+
 def test_a_reward_mid_episode_credits_exactly_the_records_before_it() -> None:
     store = InMemoryRunStore(CATALOG)
     engine = RunEngine.create(realtime("kp", 1, hz=500.0), store, catalog=CATALOG)
