@@ -55,7 +55,10 @@ def export_state(sim: Simulation) -> dict[str, Any]:
             for x in cat.behaviours
             if x.synthesized
         ],
-        "stm": [[t, s[i], b[j]] for t, i, j in brain.stm],
+        # Taken between episodes: an STM the next episode starts by clearing is dead.
+        "stm": []
+        if brain.config.learning.clear_stm_each_episode
+        else [[t, s[i], b[j]] for t, i, j in brain.stm],
         "rng": brain.rng.bit_generator.state,
         "ticks_by_origin": dict(sim.ticks_by_origin),
     }
