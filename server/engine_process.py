@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib
 import itertools
 import logging
 import os
@@ -71,6 +72,10 @@ T = TypeVar("T")
 _HEADER = struct.Struct("!I")
 PIPE_LIMIT = 1 << 26
 """The largest message either side reads (64 MiB: a long run's read fits many times)."""
+PRELOADED = ("server.live_reads",)
+"""Modules whose functions the service sends (`LiveRun.read`, `LiveRun.control`), loaded
+at the process's start: unpickling a function imports its module, which on a run's first
+read would otherwise happen on the engines' loop while runs tick."""
 EVENTS_HIGH_WATER = 1 << 20
 """Bytes waiting in the child's pipe above which its subscriptions wait (and drop)."""
 STOP_S = 15.0
@@ -693,6 +698,12 @@ def _configure_child() -> tuple[int, int]:
     return read_fd, write_fd
 
 
+def preload() -> None:
+    """Import `PRELOADED` (before any run ticks here)."""
+    for name in PRELOADED:
+        importlib.import_module(name)
+
+
 async def _child(read_fd: int, write_fd: int) -> None:
     from core.setup import Setup
     from server.config import Settings
@@ -701,6 +712,7 @@ async def _child(read_fd: int, write_fd: int) -> None:
     from server.tuning import configure_process, warm_up
 
     configure_process()
+    preload()
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader(limit=PIPE_LIMIT)
     await loop.connect_read_pipe(

@@ -19,13 +19,14 @@ from operator import methodcaller
 
 from core.brain.catalog import Catalog
 from core.commands import RewardSource
-from core.engine import RunView, StatusChanged, SubscriptionClosed, TickPublished, check_hz
-from core.errors import CoreError, SimulationStateError
+from core.engine import StatusChanged, SubscriptionClosed, TickPublished, check_hz
+from core.errors import CoreError
 from core.events import EpisodeEnded
 from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
 from server.engines import Engines, Live, RunLetGo
+from server.live_reads import latest
 from server.ratelimit import RateLimiter
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
 from server.viewer.replay import ReplayClock, load_replay
@@ -88,15 +89,6 @@ def tick_view(live: Live, snap: Snapshot, totals: RunTotals, kp: bool) -> TickVi
             cat.stimuli[snap.released_by].name if 0 <= snap.released_by < len(cat.stimuli) else None
         ),
     )
-
-
-def _latest(view: RunView) -> tuple[Snapshot, RunTotals, bool] | None:
-    """The run's latest tick, its totals and its KP flag (None: no episode yet)."""
-    try:
-        snap = view.snapshot
-    except SimulationStateError:  # not reset yet
-        return None
-    return snap, view.totals, view.released_by_kp(snap)
 
 
 class Controller:
@@ -422,7 +414,7 @@ class Controller:
     async def _show_now(self, live: Live) -> None:
         """Push the run's latest tick (none before its first episode, or once it ended)."""
         try:
-            now = await live.read(_latest)
+            now = await live.read(latest)
         except RunLetGo:  # ended there while the read was on its way
             return
         if now is not None:

@@ -2,161 +2,28 @@
 
 from __future__ import annotations
 
-import math
 from functools import partial
 
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
-from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
-from core.engine import RunView
 from core.ports import RunQueries
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
 from server.engines import read_live
+from server.live_reads import kp_of_view, not_kp
 from server.schemas import (
     KpAssociationPublic,
-    KpPerceptPublic,
-    KpProvenancePublic,
     KpPublic,
     KpRunSpanPublic,
-    KpSourcePublic,
-    RltmPointPublic,
-    RstmPublic,
-    RstmRecordPublic,
 )
 
 router = resource_router("/runs", tag="kp")
 TRACE_EPISODES = 20
 """A stored run's latest episodes whose traces say where its KP associations ran."""
-
-
-def _not_kp(run_id: int, condition: str, live: bool) -> KpPublic:
-    """The answer for a run whose condition does not propagate."""
-    kp = ", ".join(n for n, c in CONDITIONS.items() if c.kp)
-    return KpPublic(
-        run=run_id,
-        condition=condition,
-        kp=False,
-        live=live,
-        reason=(
-            f"condition {condition!r} does not run knowledge propagation: no RSTM, no RLTM "
-            f"(conditions that do: {kp})"
-        ),
-    )
-
-
-def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpProvenancePublic:
-    s = [x.name for x in kp.catalog.stimuli]
-    b = kp.catalog.behaviours
-    return KpProvenancePublic(
-        after_tick=p.after_tick,
-        sources=[
-            KpSourcePublic(
-                tick=r.tick,
-                sonar_stimulus=s[r.low],
-                behaviour=b[r.behaviour].name,
-                heading_deg=math.degrees(steer_angle(b[r.behaviour], dt_s)),
-            )
-            for r in p.sources
-        ],
-        sum_x=p.sum_x,
-        sum_y=p.sum_y,
-        heading_deg=math.degrees(p.angle_rad),
-        speed_mps=p.speed_mps,
-        nearest=b[p.nearest].name,
-        nearest_heading_deg=math.degrees(p.nearest_angle_rad),
-        behaviour=b[p.behaviour].name,
-        resolution=p.resolution,
-    )
-
-
-def _of_view(run_id: int, view: RunView) -> KpPublic:
-    """A live run's answer, read on the engines' loop (`LiveRun.read`)."""
-    kp = view.kp
-    if kp is None:
-        return _not_kp(run_id, view.spec.condition, live=True)
-    return _live(run_id, view, kp)
-
-
-def _live(run_id: int, view: RunView, kp: KnowledgePropagation) -> KpPublic:
-    """Read on the engines' loop, between ticks (`LiveRun.read`): it changes only there."""
-    dt_s = kp.dt_s
-    cat = kp.catalog
-    s = [x.name for x in cat.stimuli]
-    b = [x.name for x in cat.behaviours]
-    tick = view.tick
-    window = kp.config.window_ticks
-    rstm = [
-        RstmPublic(
-            sensor=sensor,
-            records=[
-                RstmRecordPublic(
-                    tick=r.tick,
-                    camera_stimulus=s[r.high],
-                    sonar_stimulus=s[r.low],
-                    behaviour=b[r.behaviour],
-                )
-                for r in records
-            ],
-        )
-        for sensor, records in sorted(kp.rstm.items())
-    ]
-    percepts = [
-        KpPerceptPublic(
-            objective=objective, camera_stimulus=s[high], tick=t, open=kp.now - t <= window
-        )
-        for objective, (high, t) in sorted(kp.perceived().items())
-    ]
-    network = kp.network
-    pairs = dict.fromkeys([*kp.log, *kp.rltm])
-    for a in network:
-        if a.source == "kp":
-            pairs.setdefault((a.stimulus, a.behaviour))
-    associations = []
-    for st, be in pairs:
-        log = kp.log.get((st, be)) or KpLog(0)  # one from an earlier engine: no record
-        assoc = network.get(st, be)
-        associations.append(
-            KpAssociationPublic(
-                stimulus=s[st],
-                behaviour=b[be],
-                reliability=kp.rltm.get((st, be), 0.0),
-                in_network=assoc is not None and assoc.source == "kp",
-                synthesized=cat.behaviours[be].synthesized,
-                provenance=[_provenance(kp, p, dt_s) for p in log.provenances],
-                history=[
-                    RltmPointPublic.model_validate(h, from_attributes=True) for h in log.history
-                ],
-                runs=[KpRunSpanPublic(first_tick=a, last_tick=z) for a, z in log.runs],
-                reasoned=log.reasoned,
-                ran_ticks=log.ran_ticks,
-            )
-        )
-    associations.sort(key=lambda x: (not x.in_network, -x.reliability, x.stimulus, x.behaviour))
-    made_before = [x for x in associations if not x.provenance]
-    reason = None
-    if made_before:
-        reason = (
-            f"{len(made_before)} association(s) predate this engine (the run was resumed): "
-            "their provenance was kept only while the earlier engine ran"
-        )
-    return KpPublic(
-        run=run_id,
-        condition=view.spec.condition,
-        kp=True,
-        live=True,
-        reason=reason,
-        tick=tick,
-        window_ticks=window,
-        rstm=rstm,
-        percepts=percepts,
-        associations=associations,
-        count=len(associations),
-    )
 
 
 def _stored_runs(
@@ -200,13 +67,13 @@ async def get_run_kp(
     in the running engine only); a run whose condition does not propagate answers
     `kp: false` with a `reason`. 404 for an unknown run.
     """
-    view = await read_live(engines, run_id, partial(_of_view, run_id))
+    view = await read_live(engines, run_id, partial(kp_of_view, run_id))
     if view is not None:
         return view
     run = await io(store.run_summary, run_id)
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:
-        return _not_kp(run_id, run.spec.condition, live=False)
+        return not_kp(run_id, run.spec.condition, live=False)
     rltm = await io(store.rltm, run_id)
     network = {
         (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"

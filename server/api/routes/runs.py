@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 from typing import Annotated
 
@@ -12,9 +11,9 @@ from fastapi import HTTPException, Path, Query, Request, Response, status
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import RunEngine, RunView
+from core.engine import RunEngine
 from core.errors import UnknownNameError
-from core.ports import NOT_ENDED, Mode, RunSpec, RunTotals, StoredRun
+from core.ports import StoredRun
 from core.sim.track import TrackGeometry
 from core.trace import unpack
 from core.worlds import load_world
@@ -22,13 +21,13 @@ from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGu
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
 from server.engines import Live, read_live
+from server.live_reads import Guarded, run_of_view, run_public, set_rate
 from server.runspec import run_spec
 from server.schemas import (
     AssociationPublic,
     EpisodeDetail,
     EpisodePublic,
     EpisodesPublic,
-    LiveState,
     MemoryPublic,
     ReliabilityPublic,
     RunCreate,
@@ -49,71 +48,12 @@ Offset = Annotated[int, Query(ge=0, le=2**62, description="items to skip")]
 Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="items to answer at most")]
 
 
-def _ms(x: float) -> float | None:
-    return None if math.isnan(x) else x * 1000
-
-
-def _live_state(view: RunView) -> LiveState:
-    stats = view.stats
-    return LiveState(
-        tick=view.tick,
-        episode=view.episode,
-        hz=view.hz,
-        ticks_run=stats.ticks,
-        lateness_p99_ms=_ms(stats.lateness_s.percentile(99)),
-        lateness_max_ms=_ms(stats.lateness_s.max),
-        overruns=stats.overruns,
-        reward_ack_p99_ms=_ms(stats.reward_ack_s.percentile(99)),
-        ticks_by_origin=dict(view.ticks_by_origin),
-    )
-
-
-def _public(
-    run_id: int,
-    spec: RunSpec,
-    status_value: str,
-    error: str | None,
-    totals: RunTotals,
-    live: LiveState | None,
-) -> RunPublic:
-    params = {k: v for k, v in spec.params.items() if isinstance(v, float | int | bool)}
-    return RunPublic(
-        id=run_id,
-        condition=spec.condition,
-        seed=spec.seed,
-        episodes=spec.episodes,
-        mode=spec.mode.value,
-        hz=spec.hz,
-        network=spec.network,
-        params=params,
-        world=spec.world,
-        sensors=spec.sensors,
-        status=status_value,
-        error=error,
-        episodes_done=totals.episodes,
-        successes=totals.successes,
-        ticks=totals.ticks,
-        live=live,
-    )
-
-
-def _of_view(view: RunView) -> RunPublic:
-    """A live run's state, without touching the database.
-
-    Read on the engines' loop (`LiveRun.read`): one consistent state of the run. A run that
-    has ended has no live figures, whether or not its engine is let go yet: the answer does
-    not depend on when that happens.
-    """
-    live = _live_state(view) if view.status in NOT_ENDED else None
-    return _public(view.run_id, view.spec, view.status.value, view.error, view.totals, live)
-
-
 def _of_stored(run: StoredRun) -> RunPublic:
-    return _public(run.id, run.spec, run.status.value, run.error, run.totals, None)
+    return run_public(run.id, run.spec, run.status.value, run.error, run.totals, None)
 
 
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
-    view = await read_live(engines, run_id, _of_view)
+    view = await read_live(engines, run_id, run_of_view)
     if view is not None:
         return view
     # Database work runs in a thread: the event loop also paces realtime ticks.
@@ -168,7 +108,7 @@ async def list_runs(
     page, total = await io(store.run_summaries, offset, limit)
     data = []
     for r in page:
-        view = await read_live(engines, r.id, _of_view)
+        view = await read_live(engines, r.id, run_of_view)
         data.append(view if view is not None else _of_stored(r))
     return RunsPublic(data=data, count=total)
 
@@ -198,23 +138,6 @@ def _live(engines: EnginesDep, run_id: int) -> Live:
     return live
 
 
-@dataclass(frozen=True, slots=True)
-class _Guarded:
-    """An action taken only if the run's status is one of `allowed`; else why not.
-
-    A class, not a closure: it is pickled when the engines run in a process of their own.
-    """
-
-    run_id: int
-    allowed: tuple[str, ...]
-    action: Callable[[RunEngine], str | None]
-
-    def __call__(self, engine: RunEngine) -> str | None:
-        if engine.status.value not in self.allowed:
-            return f"run {self.run_id} is {engine.status.value}"
-        return self.action(engine)
-
-
 async def _control(
     run_id: int,
     store: StoreDep,
@@ -230,7 +153,7 @@ async def _control(
     await io(store.run_summary, run_id)
     live = _live(engines, run_id)
 
-    refused = await live.control(_Guarded(run_id, allowed, action))
+    refused = await live.control(Guarded(run_id, allowed, action))
     if refused is not None:
         raise HTTPException(status.HTTP_409_CONFLICT, refused)
     return await _run(store, engines, run_id)
@@ -273,15 +196,8 @@ async def set_run_rate(
     run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
 ) -> RunPublic:
     """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
-    rate = partial(_set_rate, body.hz)
+    rate = partial(set_rate, body.hz)
     return await _control(run_id, store, engines, ("running", "paused"), rate)
-
-
-def _set_rate(hz: float, engine: RunEngine) -> str | None:
-    if engine.spec.mode is not Mode.REALTIME:
-        return f"run {engine.run_id} is fast: it has no rate"
-    engine.set_rate(hz)
-    return None
 
 
 def world_public(name: str) -> RunWorldPublic:
