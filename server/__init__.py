@@ -8,7 +8,8 @@ run besides local processes: Ray).
 
 At the top, the service's own wiring: `main.py` (`create_app`), `bootstrap.py` (what the
 service is made of), `config.py` (settings), `schemas.py` (the HTTP models), `asgi.py`,
-`engines.py` (the runs of this process), `serve.py` (uvicorn), the protections of both
+`engines.py` (the runs of this process), `live_reads.py` (what routes and the 3D view read
+from a live run or send it, run where it ticks), `serve.py` (uvicorn), the protections of both
 ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
 and small helpers of the service and the commands: `runspec.py` (a run's spec from a
 request, a command line or a row), `probe_cache.py` (the placement probe's results on
