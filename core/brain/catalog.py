@@ -6,6 +6,7 @@ import math
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
@@ -446,8 +447,23 @@ def parse_knowledge(
 
 
 def sensor_definitions(path: Path | None = None) -> dict[str, str]:
-    """The sensor definitions a data folder offers, default first: name -> description."""
-    raw = _read((path or data_dir()) / "sensors.toml")
+    """The sensor definitions a data folder offers, default first: name -> description.
+
+    Read once per version of the file (its modification time and size): setting up a run
+    asks several times, and parsing the file took a millisecond each time.
+    """
+    file = (path or data_dir()) / "sensors.toml"
+    try:
+        st = file.stat()
+    except OSError as e:
+        raise CatalogError(f"{file}: {e}") from e
+    return dict(_sensor_definitions(file, st.st_mtime_ns, st.st_size))
+
+
+@lru_cache(maxsize=16)
+def _sensor_definitions(file: Path, mtime_ns: int, size: int) -> tuple[tuple[str, str], ...]:
+    """`sensor_definitions` of one version of `file` (the version is the cache's key)."""
+    raw = _read(file)
     out: dict[str, str] = {}
     for s in raw.get("sensor", []):
         for name, v in (s.get("definitions") or {}).items():
@@ -457,7 +473,7 @@ def sensor_definitions(path: Path | None = None) -> dict[str, str]:
         if default not in out:
             raise CatalogError(f"default_definition {default!r} is not a definition")
         out = {default: out[default], **out}
-    return out
+    return tuple(out.items())
 
 
 def load_catalog(path: Path | None = None, sensors: str | None = None) -> Catalog:

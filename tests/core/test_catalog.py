@@ -19,6 +19,7 @@ from core.brain.catalog import (
     parse_behaviours,
     parse_knowledge,
     parse_sensors,
+    sensor_definitions,
 )
 from core.brain.sensors import compile_detector
 from core.conditions import get_condition
@@ -316,3 +317,24 @@ def test_load_catalog_rejects_a_network_file_with_an_unknown_behaviour(tmp_path:
     )
     with pytest.raises(UnknownNameError, match="network 'bad' association #0"):
         load_catalog(root)
+
+
+def test_sensor_definitions_are_read_again_when_the_file_changes_and_answered_as_a_copy(
+    tmp_path: Path,
+) -> None:
+    root = copy_data(tmp_path)
+    answer = sensor_definitions(root)
+    assert list(answer) == ["path", "paper"]
+    answer.clear()  # the caller's own copy: the next answer is whole
+    assert list(sensor_definitions(root)) == ["path", "paper"]
+    file = root / "sensors.toml"
+    file.write_text(
+        file.read_text(encoding="utf-8").replace(
+            'default_definition = "path"', 'default_definition = "paper"'
+        ),
+        encoding="utf-8",
+    )
+    assert list(sensor_definitions(root)) == ["paper", "path"]
+    file.unlink()
+    with pytest.raises(CatalogError, match=r"sensors\.toml"):
+        sensor_definitions(root)
