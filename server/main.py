@@ -24,7 +24,7 @@ from core.errors import (
     UnknownNameError,
     UnknownRunError,
 )
-from server.api import ROUTERS, contract
+from server.api import ROUTERS, contract, docs
 from server.api.contract import operation_id
 from server.api.methods import ApiMethods
 from server.api.routing import add_routes
@@ -112,8 +112,11 @@ def create_app(settings: Settings | None = None, storage: StorageFactory = open_
         version=version("srlab"),
         lifespan=lifespan,
         generate_unique_id_function=operation_id,
+        docs_url=None,  # FastAPI's pages load from a CDN: server.api.docs serves its own
+        redoc_url=None,
     )
     add_routes(app, ROUTERS)
+    docs.install(app)
     contract.install(app, token_needed=settings.writes_need_token)
 
     async def core_error(request: Request, exc: Exception) -> JSONResponse:
