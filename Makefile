@@ -6,18 +6,32 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-baselines run test test-unit test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
 
-# With the optional ray extra (srlab[ray]): the tests run the Ray backend on a local instance.
+# Two sets of packages in the one .venv, each behind a stamp of its own:
+# - `make run`'s (install-run): the project and what the service and the CLI import, with no
+#   dev group (pytest, mypy, Playwright, moviepy's ffmpeg ...) and no extra (Ray). Synced
+#   --inexact: it adds what is missing and removes nothing, so `make run` after `make test`
+#   keeps the test tools (and a baselines install) instead of deleting them.
+# - everything else's (install): the dev group and the ray extra (the tests run the Ray
+#   backend on a local instance), synced exactly as uv.lock says, so the suite runs on
+#   exactly the locked set; `make test` after `make run` adds the rest.
 # Bytecode is compiled once here: every `srlab serve` and CLI the tests start would
 # otherwise compile its imports again where .pyc files are not written (~3 s a process).
-$(BIN)/srlab: pyproject.toml uv.lock | $(UV)
+RUN_SYNCED := $(VENV)/.synced-run
+DEV_SYNCED := $(VENV)/.synced-dev
+
+$(RUN_SYNCED): pyproject.toml uv.lock | $(UV)
+	$(UV) sync --frozen --no-dev --inexact --compile-bytecode --quiet
+	@touch $@
+
+$(DEV_SYNCED): pyproject.toml uv.lock | $(UV)
 	$(UV) sync --frozen --extra ray --compile-bytecode --quiet
 	@touch $@
 
@@ -25,7 +39,10 @@ $(BIN)/srlab: pyproject.toml uv.lock | $(UV)
 # environment may set PYTHONDONTWRITEBYTECODE (this machine's does), and then each
 # `srlab serve`, store or engines process, CLI and test worker compiled core/ and server/
 # again (about 1 s of CPU a process). A stale .pyc is never used: Python checks its source.
-install: $(BIN)/srlab
+install-run: $(RUN_SYNCED)
+	@$(BIN)/python -m compileall -q -j0 core server migrations
+
+install: $(DEV_SYNCED)
 	@$(BIN)/python -m compileall -q -j0 core server bench migrations tests
 
 # The optional srlab[baselines] extra (stable-baselines3, DQN and PPO) on a CPU-only torch,
@@ -37,7 +54,7 @@ install-baselines: install
 	bash scripts/install-baselines.sh $(UV) $(BIN)/python
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
-run: install
+run: install-run
 	@echo "CLI: $(BIN)/srlab (or \`uv run srlab\`, or \`source $(BIN)/activate\` for plain \`srlab\`)"
 	$(BIN)/srlab serve
 
