@@ -48,8 +48,8 @@ install: $(DEV_SYNCED)
 # The optional srlab[baselines] extra (stable-baselines3, DQN and PPO) on a CPU-only torch,
 # into .venv, without CUDA's ~5 GB: torch from a CPU wheel in $$TORCH_WHEELS (default pip's
 # find-links, /opt/wheels) or PyTorch's CPU index, then the extra at uv.lock's versions.
-# `make test` never installs it (its baseline tests skip); a later `make install` that
-# re-syncs removes it again.
+# `make test` never installs it (its baseline tests skip; CI runs `make test-baselines`
+# after it); a later `make install` that re-syncs removes it again, `make run` keeps it.
 install-baselines: install
 	bash scripts/install-baselines.sh $(UV) $(BIN)/python
 
