@@ -55,7 +55,7 @@ install-baselines: install
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install-run
-	@echo "CLI: $(BIN)/srlab (or \`uv run srlab\`, or \`source $(BIN)/activate\` for plain \`srlab\`)"
+	@echo "CLI: $(BIN)/srlab (or \`source $(BIN)/activate\` for plain \`srlab\`, or \`uv run --no-dev srlab\`)"
 	$(BIN)/srlab serve
 
 lint: install
