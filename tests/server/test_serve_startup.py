@@ -75,6 +75,7 @@ async def test_the_server_builds_the_api_document_before_the_lifespan_which_free
         await serving
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("taken", ["SRLAB_PORT", "SRLAB_VISER_PORT"])
 def test_a_taken_port_is_one_line_naming_its_setting(tmp_path: Path, taken: str) -> None:
     env = {k: v for k, v in os.environ.items() if not k.startswith("SRLAB_")}
