@@ -5,6 +5,7 @@ from __future__ import annotations
 import ipaddress
 import json
 from typing import Annotated
+from urllib.parse import urlsplit
 
 from pydantic import Field, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
@@ -19,7 +20,8 @@ class Settings(BaseSettings):
         database_url: SQLAlchemy URL of the database.
         host: address `srlab serve` binds.
         port: port `srlab serve` binds.
-        token: bearer token every write needs when the service listens beyond loopback.
+        token: bearer token every write needs when the service is reachable from beyond
+            this machine (`reachable_through`); it is required then.
         max_runs: runs that may tick at the same time; past it, starting one is refused
             with 429.
         max_streams: live event streams (GET /api/runs/{id}/events) open at once, over
@@ -43,7 +45,8 @@ class Settings(BaseSettings):
         forwarded_allow_ips: reverse proxies (addresses or networks, "*" for any) trusted to
             name the client in X-Forwarded-For and X-Forwarded-Proto; empty (the default)
             ignores those headers. Behind a proxy, this is what keeps each trainer's reward
-            rate limit their own instead of one shared by everybody behind the proxy.
+            rate limit their own instead of one shared by everybody behind the proxy. Set,
+            it makes the token required (`reachable_through`).
         store_process: run the database work in a process of its own
             (`server.persistence.process`), so it takes another core than the event loop
             that paces realtime ticks. `srlab serve` turns it on unless
@@ -164,23 +167,61 @@ class Settings(BaseSettings):
         names = sorted(h for h in self.host_names() if h != "*")
         return [*(f"http://{h}:{self.port}" for h in names), *self.cors_origins]
 
+    def reachable_through(self) -> list[str]:
+        """Why the service is reachable from beyond this machine, one phrase a setting.
+
+        Empty: from this machine only. Listening beyond loopback is one way. Trusting a
+        proxy is another, even a proxy on this machine: it forwards clients from elsewhere
+        (that is why it is trusted to name them). A Host name that is not loopback's is
+        one: requests that name it come through a proxy or DNS from elsewhere. So is a
+        CORS origin on another host: its pages come from elsewhere, and whoever serves
+        them (or injects a script into them) could write here through any browser on this
+        machine that opens one. With the token, such a write needs a secret a person
+        hands over, not just a page from the right place.
+        """
+        why = []
+        if not self.loopback:
+            why.append(f"it listens on {self.host} (SRLAB_HOST)")
+        if self.forwarded_allow_ips:
+            why.append("SRLAB_FORWARDED_ALLOW_IPS trusts a proxy to forward clients")
+        names = [h for h in self.allowed_hosts if not loopback_name(h)]
+        if names:
+            why.append(f"SRLAB_ALLOWED_HOSTS names {', '.join(names)}")
+        origins = [o for o in self.cors_origins if not loopback_name(urlsplit(o).hostname or o)]
+        if origins:
+            why.append(f"SRLAB_CORS_ORIGINS lets pages of {', '.join(origins)} write")
+        return why
+
     @property
     def writes_need_token(self) -> bool:
-        """Writes need the bearer token: the service is reachable beyond this machine."""
-        return not self.loopback or self.token is not None
+        """Writes need the bearer token: reachable from beyond this machine, or a token set."""
+        return bool(self.reachable_through()) or self.token is not None
 
     def check(self) -> None:
-        """Refuse to serve beyond loopback without a token, or two servers on one port."""
+        """Refuse to serve beyond this machine without a token, or two servers on one port."""
         if self.viser and self.viser_port == self.port:
             raise ValueError(
                 f"SRLAB_VISER_PORT and SRLAB_PORT are both {self.port}: the 3D view needs a "
                 "port of its own"
             )
-        if not self.loopback and not self.token:
+        why = self.reachable_through()
+        if why and not self.token:
             raise ValueError(
-                f"srlab listens on {self.host}, beyond loopback: set SRLAB_TOKEN so that "
-                "writes (rewards, edits, run control) need `Authorization: Bearer <token>`"
+                f"srlab is reachable from beyond this machine ({'; '.join(why)}): set "
+                "SRLAB_TOKEN so that writes (rewards, edits, run control) need "
+                "`Authorization: Bearer <token>`"
             )
+
+
+def loopback_name(name: str) -> bool:
+    """Whether a host name or address can only mean this machine (``[::1]`` too)."""
+    bare = name.strip().lower().removeprefix("[").removesuffix("]")
+    if bare == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(bare).is_loopback
+    except ValueError:
+        return False
 
 
 def settings_problems(error: ValidationError) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import faulthandler
 import logging
 import os
@@ -82,6 +83,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         overrides["service_nice"] = SERVICE_NICE
     settings = Settings.load(**overrides)
     settings.check()
+    check_ports(settings)
     upgrade(settings.database_url)
     configure_process()
     # A fault SQLite cannot report (SIGBUS from a truncated WAL index it has mapped, see
@@ -112,3 +114,64 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     # As uvicorn.run: a server that never started (a failed lifespan, a taken port) is an
     # error.
     return 0 if server.started else STARTUP_FAILURE
+
+
+def check_ports(settings: Settings) -> None:
+    """Refuse in one line when a port `srlab serve` needs is taken, before anything starts.
+
+    Found at the bind instead, a taken API port stopped the service after the database,
+    the runs and the 3D view had started, and a taken 3D view's port failed the lifespan
+    with its traceback. A port taken in the moment between this check and the bind still
+    fails there.
+
+    Raises:
+        OSError: which port, and the setting that chooses another.
+    """
+    host = settings.host
+    ports = [
+        (
+            settings.port,
+            "SRLAB_PORT or --port",
+            f"port {settings.port} on {host} is taken (another srlab serve?): set SRLAB_PORT "
+            "or --port to a free one",
+        )
+    ]
+    if settings.viser:
+        ports.append(
+            (
+                settings.viser_port,
+                "SRLAB_VISER_PORT",
+                f"the 3D view's port {settings.viser_port} on {host} is taken: set "
+                "SRLAB_VISER_PORT to a free one, or SRLAB_VISER=false to run without the 3D "
+                "view",
+            )
+        )
+    for port, setting, taken in ports:
+        error = _bind_error(host, port)
+        if error is None:
+            continue
+        if error.errno == errno.EADDRINUSE:
+            raise OSError(taken)
+        raise OSError(
+            f"cannot listen on {host} port {port} (SRLAB_HOST or --host, {setting}): "
+            f"{error.strerror or error}"
+        )
+
+
+def _bind_error(host: str, port: int) -> OSError | None:
+    """What stops a server from listening on `host` and `port` now, if anything.
+
+    Bound as asyncio's servers bind (uvicorn's and the 3D view's): address reuse on, and
+    IPv6 sockets for IPv6 alone; then let go at once.
+    """
+    try:
+        addresses = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+        for family, kind, proto, _, address in addresses:
+            with socket.socket(family, kind, proto) as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                if family == socket.AF_INET6:
+                    probe.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+                probe.bind(address)
+    except OSError as e:
+        return e
+    return None

@@ -19,7 +19,7 @@ from rich.table import Table
 from core.brain.catalog import sensor_definitions
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
-from core.ports import NOT_ENDED, Mode, RunStatus, StoredRun
+from core.ports import NOT_ENDED, Mode, RunQueries, RunStatus, RunTotals, StoredRun
 from core.setup import default_sensors
 from core.worlds import default_world, world_names
 from server.cli.common import (
@@ -48,7 +48,9 @@ def add_run_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
         help="run a condition on the engine, stored in the database",
         description="Run a condition on the asyncio engine (a tick task and a reward "
         "task), storing its LTM, RLTM, network, episodes and rewards. Ctrl-C or SIGTERM "
-        "stops it cleanly (status interrupted); --resume continues it.",
+        "stops it cleanly (status interrupted); --resume continues it. A run is stored at "
+        "each episode's end: stopped in the middle of an episode, it resumes from that "
+        "episode's start and runs it again, to the same end as if it had not stopped.",
     )
     runp.add_argument(
         "--condition",
@@ -116,7 +118,8 @@ def run(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
             )
             engine = RunEngine.create(spec, store)
         freeze_heap()  # set up: what it built is never scanned again
-        return asyncio.run(_run(engine, args.quiet, stdout, stderr))
+        resumed = args.resume is not None
+        return asyncio.run(_run(engine, store, args.quiet, stdout, stderr, resumed=resumed))
     finally:
         db_engine.dispose()
 
@@ -126,7 +129,15 @@ PROGRESS_EVERY_S = 5.0
 realtime mode), so a log or a pipe shows the run is alive."""
 
 
-async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str]) -> int:
+async def _run(
+    engine: RunEngine,
+    store: RunQueries,
+    quiet: bool,
+    stdout: IO[str],
+    stderr: IO[str],
+    *,
+    resumed: bool = False,
+) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, engine.interrupt)
@@ -142,14 +153,17 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
     if spec.mode is Mode.REALTIME:
         what += f" at {spec.hz:g} Hz"
     planned = f"/{spec.episodes}" if spec.episodes else ""
-    successes = engine.totals.successes
-    ended = engine.totals.episodes
+    start = engine.totals
+    successes = start.successes
+    ended = start.episodes
+    if resumed:
+        what += f", resumed from {_episode_end(start)}"
 
     def progress() -> str:
         # The live tick, not the stored totals: those move at episode ends only, which
         # in realtime mode can be minutes apart.
         return (
-            f"episode {ended}{planned} done, {successes} successes, tick "
+            f"{ended}{planned} episodes ended, {successes} successes, tick "
             f"{engine.totals.ticks:,} ({engine.status.value})"
         )
 
@@ -207,13 +221,46 @@ async def _run(engine: RunEngine, quiet: bool, stdout: IO[str], stderr: IO[str])
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
     t = engine.totals
+    if status is RunStatus.INTERRUPTED:
+        # What `srlab runs` shows and --resume goes on from: the run as stored.
+        kept = store.run_summary(engine.run_id).totals
+        for line in interrupted(engine.run_id, t, kept, planned):
+            console.print(line, highlight=False, soft_wrap=True)
+        return 0
     console.print(
         f"run {engine.run_id} {status.value}: {t.episodes} episodes, {t.successes} successes,"
         f" {t.ticks:,} ticks"
     )
-    if status is RunStatus.INTERRUPTED:
-        console.print(f"resume it with: srlab run --resume {engine.run_id}")
     return 0
+
+
+def _episode_end(kept: RunTotals) -> str:
+    """Where a run stored at `kept` goes on from, for people."""
+    if not kept.episodes:
+        return f"its start (tick {kept.ticks:,})"
+    return f"the end of episode {kept.episodes} (tick {kept.ticks:,})"
+
+
+def interrupted(run_id: int, live: RunTotals, kept: RunTotals, planned: str) -> list[str]:
+    """What an interrupted run kept and how it resumes, as lines for people.
+
+    A run is stored at each episode's end (its checkpoint), and resuming replays from
+    there: the ticks of the episode under way run again, to the same end as if it had not
+    stopped (the same seed, and the rewards given in it replayed at their ticks).
+    """
+    episodes = f"{kept.episodes} episode{'s' * (kept.episodes != 1)}"
+    stored = f"{episodes}, {kept.successes} success{'es' * (kept.successes != 1)}"
+    if live.ticks == kept.ticks:
+        lines = [f"run {run_id} interrupted at tick {live.ticks:,}; all of it is stored: {stored}"]
+    else:
+        episode = kept.episodes + 1
+        lines = [
+            f"run {run_id} interrupted at tick {live.ticks:,}, in episode {episode}{planned}; "
+            f"stored: {stored}, to {_episode_end(kept)}",
+            f"--resume runs episode {episode} again from its start "
+            f"({live.ticks - kept.ticks:,} ticks), to the same end as if it had not stopped",
+        ]
+    return [*lines, f"resume it with: srlab run --resume {run_id}"]
 
 
 def add_runs_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -236,7 +283,14 @@ def runs(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     if args.json:
         stdout.write(json.dumps({"runs": [_run_dict(r) for r in stored]}) + "\n")
         return 0
-    print_table(stdout, runs_table(stored, safe_url(args.url or database_url())))
+    console = print_table(stdout, runs_table(stored, safe_url(args.url or database_url())))
+    if any(r.status is RunStatus.INTERRUPTED for r in stored):
+        console.print(
+            "An interrupted run is stored to the end of its last episode (the ticks shown); "
+            "--resume runs the episode it stopped in again from its start.",
+            highlight=False,
+            soft_wrap=True,
+        )
     return 0
 
 

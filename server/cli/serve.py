@@ -12,8 +12,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "serve",
         help="serve the HTTP API and the editor (migrates the database first)",
         description="Serve the HTTP API, the S-R editor and trainer console with uvicorn "
-        "(one worker). Settings come from SRLAB_* environment variables; beyond loopback "
-        "SRLAB_TOKEN is required.",
+        "(one worker). Settings come from SRLAB_* environment variables. SRLAB_TOKEN is "
+        "required when the service is reachable from beyond this machine: a SRLAB_HOST "
+        "beyond loopback, a trusted proxy (SRLAB_FORWARDED_ALLOW_IPS), or host names "
+        "(SRLAB_ALLOWED_HOSTS) or origins (SRLAB_CORS_ORIGINS) other than loopback's.",
     )
     serve.add_argument("--host", help="address to bind (default SRLAB_HOST or 127.0.0.1)")
     serve.add_argument("--port", type=int, help="port (default SRLAB_PORT or 8000)")

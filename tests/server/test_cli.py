@@ -169,6 +169,9 @@ def test_serve_with_an_unreachable_database_exits_2_with_a_message(
 ) -> None:
     url = f"postgresql+psycopg://srlab:secret@127.0.0.1:{free_port()}/srlab"
     monkeypatch.setenv("SRLAB_DATABASE_URL", url)
+    # Free ports: `serve` checks them first, and another server here may hold 8000.
+    monkeypatch.setenv("SRLAB_PORT", str(free_port()))
+    monkeypatch.setenv("SRLAB_VISER_PORT", str(free_port()))
     err = fail(["serve"], capsys)
     assert "srlab:***@127.0.0.1" in err and "Connection refused" in err
     assert "secret" not in err

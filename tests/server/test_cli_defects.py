@@ -47,8 +47,8 @@ def test_run_realtime_prints_progress_as_it_goes(db_url: str) -> None:
     lines = done.stderr.splitlines()
     assert lines[0].startswith("run 1: innate, seed 0,")
     assert "realtime at 1000 Hz (Ctrl-C stops it; srlab run --resume 1 goes on)" in lines[0]
-    assert any(line.startswith("episode 1/2 done, 0 successes, tick ") for line in lines)
-    assert any(line.startswith("episode 2/2 done, 0 successes, tick ") for line in lines)
+    assert any(line.startswith("1/2 episodes ended, 0 successes, tick ") for line in lines)
+    assert any(line.startswith("2/2 episodes ended, 0 successes, tick ") for line in lines)
     assert "Traceback" not in done.stderr
     assert "run 1 finished: 2 episodes" in done.stdout
 

@@ -54,12 +54,13 @@ async def test_a_cross_site_write_is_refused_and_changes_nothing(tmp_path: Path)
 
 
 async def test_an_origin_in_srlab_cors_origins_may_write(tmp_path: Path) -> None:
-    settings = settings_for(tmp_path, cors_origins=["http://lab.example:3000"])
+    # An origin on another host makes the token required (`Settings.reachable_through`).
+    settings = settings_for(tmp_path, cors_origins=["http://lab.example:3000"], token="s3cret")
     async with client_for(settings) as (client, _):
         r = await client.post(
             "/api/runs",
             json={"condition": "delayed"},
-            headers={"Origin": "http://lab.example:3000"},
+            headers={"Origin": "http://lab.example:3000", "Authorization": "Bearer s3cret"},
         )
         assert r.status_code == 201, r.text
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import re
 import signal
 import sqlite3
 import subprocess
@@ -18,6 +20,7 @@ from core.setup import default_sensors
 from core.worlds import default_world, world_names
 from server.cli import build_parser, main
 from server.cli import run as run_cli
+from server.cli.db import open_store
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -182,3 +185,89 @@ def test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes(
     out, err = again.communicate(timeout=30)
     assert again.returncode == 0, err
     assert "run 1 interrupted" in out
+
+
+PROGRESS = re.compile(r"^(\d+)/(\d+) episodes ended, (\d+) successes, tick ([\d,]+) \((\w+)\)$")
+INTERRUPTED = re.compile(
+    r"^run 1 interrupted at tick ([\d,]+), in episode 2/2; stored: 1 episode, \d+ success(es)?, "
+    r"to the end of episode 1 \(tick ([\d,]+)\)$"
+)
+
+
+def number(text: str) -> int:
+    return int(text.replace(",", ""))
+
+
+def test_each_progress_line_counts_the_episodes_ended_by_its_tick(
+    db_url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(run_cli, "PROGRESS_EVERY_S", 0.0)  # a line at each look (4 a second)
+    argv = ["run", "--condition", "kp", "--episodes", "1", "--mode", "realtime", "--hz", "100"]
+    err = io.StringIO()  # no terminal: plain lines
+    assert run_cli.run(build_parser().parse_args(argv), io.StringIO(), err) == 0
+    store, engine = open_store(db_url)
+    try:
+        ends = [e.start_tick + e.ticks for e in store.episode_summaries(1)]
+    finally:
+        engine.dispose()
+    assert len(ends) == 1
+    lines = err.getvalue().splitlines()[1:]
+    claims = [m for m in map(PROGRESS.match, lines) if m]
+    assert lines and len(claims) == len(lines), err.getvalue()
+    for claim in claims:
+        ended, tick = int(claim[1]), number(claim[4])
+        assert ended == sum(end <= tick for end in ends), claim[0]
+    assert int(claims[0][1]) == 0  # the first look comes long before the episode ends
+    assert claims[-1][0].startswith("1/1 episodes ended") and claims[-1][5] == "finished"
+
+
+@pytest.mark.slow
+def test_a_run_interrupted_mid_episode_says_what_resume_keeps_and_goes_on_to_the_same_end(
+    db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    env = {**os.environ, "SRLAB_DATABASE_URL": db_url}
+    argv = ["--condition", "kp", "--seed", "0", "--episodes", "2"]
+    child = srlab("run", *argv, "--mode", "realtime", "--hz", "50", env=env)
+    assert child.stderr is not None
+    lines = []
+    for line in child.stderr:  # a line at the first episode's end (realtime, no terminal)
+        lines.append(line)
+        if line.startswith("1/2 episodes ended"):
+            break
+    else:
+        pytest.fail(f"no line at the first episode's end: {lines}")
+    time.sleep(1)  # some ticks into the second episode (200 ticks long at this seed: 4 s)
+    child.send_signal(signal.SIGINT)
+    out, err = child.communicate(timeout=60)
+    assert child.returncode == 0, err
+    assert "Traceback" not in err
+    said = out.splitlines()
+    stopped = INTERRUPTED.match(said[0])
+    assert stopped is not None, out
+    live, kept = number(stopped[1]), number(stopped[3])
+    assert said[1] == (
+        f"--resume runs episode 2 again from its start ({live - kept:,} ticks), to the same "
+        "end as if it had not stopped"
+    )
+    assert said[2] == "resume it with: srlab run --resume 1"
+    # `srlab runs` shows what the message said was kept, and says what resume does.
+    [run] = runs_json(capsys)
+    assert (run["status"], run["episodes"], run["ticks"]) == ("interrupted", 1, kept)
+    assert 0 < kept < live
+    assert main(["runs"]) == 0
+    assert "--resume runs the episode it stopped in again" in capsys.readouterr().out
+
+    again = srlab("run", "--resume", "1", env=env)
+    out, err = again.communicate(timeout=120)
+    assert again.returncode == 0, err
+    assert f"resumed from the end of episode 1 (tick {kept:,})" in err.splitlines()[0]
+    # The same end as a run that never stopped: the same episodes, ticks and LTM.
+    assert main(["run", *argv, "--quiet"]) == 0
+    resumed, uninterrupted = runs_json(capsys)
+    for key in ("status", "episodes", "successes", "ticks"):
+        assert resumed[key] == uninterrupted[key], key
+    store, engine = open_store(db_url)
+    try:
+        assert store.ltm(1) == store.ltm(2)
+    finally:
+        engine.dispose()

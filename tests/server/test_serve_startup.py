@@ -8,6 +8,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import os
+import socket
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
@@ -17,6 +21,7 @@ import pytest
 import uvicorn
 from fastapi import FastAPI
 
+from bench.liveserver import ROOT, free_port
 from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
@@ -68,3 +73,31 @@ async def test_the_server_builds_the_api_document_before_the_lifespan_which_free
     finally:
         server.should_exit = True
         await serving
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("taken", ["SRLAB_PORT", "SRLAB_VISER_PORT"])
+def test_a_taken_port_is_one_line_naming_its_setting(tmp_path: Path, taken: str) -> None:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SRLAB_")}
+    env |= {
+        "SRLAB_DATABASE_URL": f"sqlite:///{tmp_path / 'srlab.db'}",
+        "SRLAB_PORT": str(free_port()),
+        "SRLAB_VISER_PORT": str(free_port()),
+    }
+    with socket.socket() as other:  # another program on the port
+        other.bind(("127.0.0.1", int(env[taken])))
+        other.listen()
+        done = subprocess.run(
+            [sys.executable, "-m", "server.cli", "serve"],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=240,  # a hang guard
+        )
+    assert done.returncode != 0
+    assert "Traceback" not in done.stderr
+    [line] = done.stderr.splitlines()
+    assert line.startswith("srlab: error: ")
+    assert f"port {env[taken]} on 127.0.0.1 is taken" in line
+    assert f"set {taken}" in line

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from pydantic import ValidationError
 
+from bench.liveserver import free_port
 from server.cli import main
 from server.config import Settings
 
@@ -74,3 +75,61 @@ def test_serve_with_a_bad_setting_exits_2_without_a_traceback(
     err = capsys.readouterr().err
     assert err.startswith("srlab: error: SRLAB_REWARD_RATE_PER_S: ")
     assert "got '-1'" in err and "Traceback" not in err and "pydantic.dev" not in err
+
+
+@pytest.mark.parametrize(
+    ("overrides", "says"),
+    [
+        ({"host": "0.0.0.0"}, "it listens on 0.0.0.0 (SRLAB_HOST)"),
+        ({"forwarded_allow_ips": ["127.0.0.1"]}, "SRLAB_FORWARDED_ALLOW_IPS trusts a proxy"),
+        ({"allowed_hosts": ["localhost", "srlab.lab"]}, "SRLAB_ALLOWED_HOSTS names srlab.lab"),
+        ({"allowed_hosts": ["*"]}, "SRLAB_ALLOWED_HOSTS names *"),
+        (
+            {"cors_origins": ["http://localhost:5173", "https://lab.example"]},
+            "SRLAB_CORS_ORIGINS lets pages of https://lab.example write",
+        ),
+        ({"cors_origins": ["*"]}, "SRLAB_CORS_ORIGINS lets pages of * write"),
+    ],
+)
+def test_a_service_reachable_from_elsewhere_needs_the_token(
+    overrides: dict[str, object], says: str
+) -> None:
+    settings = Settings(**overrides)  # type: ignore[arg-type]
+    with pytest.raises(ValueError) as e:
+        settings.check()
+    [line] = str(e.value).splitlines()
+    assert line.startswith("srlab is reachable from beyond this machine (")
+    assert says in line and "set SRLAB_TOKEN" in line
+    with_token = Settings(**overrides, token="s3cret")  # type: ignore[arg-type]
+    with_token.check()
+    assert with_token.writes_need_token
+
+
+def test_names_and_origins_of_this_machine_alone_need_no_token() -> None:
+    settings = Settings(
+        allowed_hosts=["localhost", "127.0.0.2", "[::1]", "::1"],
+        cors_origins=["http://localhost:5173", "http://127.0.0.1:3000", "http://[::1]:3000"],
+    )
+    settings.check()
+    assert settings.reachable_through() == []
+    assert not settings.writes_need_token
+    assert Settings(token="s3cret").writes_need_token  # a token set is asked for
+
+
+def test_serve_behind_a_proxy_without_a_token_is_refused_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("SRLAB_TOKEN", raising=False)
+    monkeypatch.setenv("SRLAB_FORWARDED_ALLOW_IPS", "127.0.0.1")
+    monkeypatch.setenv("SRLAB_ALLOWED_HOSTS", "srlab.example")
+    # Were it not refused, it would stop at this database instead of serving.
+    monkeypatch.setenv("SRLAB_DATABASE_URL", "sqlite:////proc/srlab.db")
+    monkeypatch.setenv("SRLAB_PORT", str(free_port()))
+    monkeypatch.setenv("SRLAB_VISER", "false")
+    with pytest.raises(SystemExit) as e:
+        main(["serve"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    [line] = err.splitlines()
+    assert "SRLAB_FORWARDED_ALLOW_IPS" in line and "SRLAB_ALLOWED_HOSTS names srlab.example" in line
+    assert "set SRLAB_TOKEN" in line and "Traceback" not in err

@@ -33,7 +33,10 @@ async def inject_reward(
     It is stamped with the next tick boundary and credits the STM records before it.
     """
     limiter = state.rewards_limiter
-    token = bearer(request) if state.settings.writes_need_token else None  # checked: a write
+    # The trainer: the token when writes need it (checked: this is a write), unless a
+    # trusted proxy names each client: SRLAB_TOKEN is one secret all trainers share.
+    by_token = state.settings.writes_need_token and not state.settings.forwarded_allow_ips
+    token = bearer(request) if by_token else None
     address = request.client.host if request.client else None
     client = client_key(address, token)
     wait = limiter.allow(client, run=run_id)
