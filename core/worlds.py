@@ -84,6 +84,28 @@ def _value(current: Any, value: Any, where: str) -> Any:
     return value
 
 
+WorldSettings = tuple[tuple[str, float], ...]
+"""Settings over a preset by dotted path (``("track.obstacle.echo_range_m", 0.4)``), sorted."""
+
+
+def with_settings(config: WorldConfig, settings: WorldSettings) -> WorldConfig:
+    """`config` with each dotted-path setting of `settings` changed.
+
+    A path that names no setting, or a value the setting cannot take, is a CatalogError
+    naming it.
+    """
+    nested: dict[str, Any] = {}
+    for path, value in settings:
+        *tables, key = path.split(".")
+        at = nested
+        for t in tables:
+            at = at.setdefault(t, {})
+            if not isinstance(at, dict):
+                raise CatalogError(f"world setting {path!r}: {t!r} is a setting, not a table")
+        at[key] = value
+    return _apply(config, nested, "world") if nested else config
+
+
 @cache
 def _raw() -> dict[str, dict[str, Any]]:
     path = data_dir() / "worlds.toml"
