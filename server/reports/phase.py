@@ -172,7 +172,8 @@ def _region(region: Mapping[str, Any], total: int) -> str:
     if not labels:
         return "nowhere"
     low, high = region["reflexes_low"], region["reflexes_high"]
-    span = "" if low is None else f"reflexes {100 * low:.0f}-{100 * high:.0f}%"
+    lo, hi = (f"{100 * x:.0f}" for x in (low, high)) if low is not None else ("", "")
+    span = "" if low is None else f"reflexes {lo}%" if lo == hi else f"reflexes {lo}-{hi}%"
     if len(labels) == total:
         return f"every point ({span})"
     listed = ", ".join(labels) if len(labels) <= LISTED else ""
@@ -246,6 +247,32 @@ def _err(mean: Sequence[float], low: Sequence[float], high: Sequence[float]) -> 
     return out
 
 
+LABEL_OFFSETS = ((5, 6, "left"), (5, 6, "left"), (-6, 0, "right"), (6, -7, "left"))
+"""Where each parameter's value labels go (points, alignment): apart where points gather."""
+
+
+def _labels(
+    axis: Mapping[str, Any],
+    points: Sequence[Mapping[str, Any]],
+    x: Sequence[float],
+    y: Sequence[float],
+) -> list[tuple[tuple[float, float], str]]:
+    """Each of a parameter's points off the base, labelled with its value.
+
+    Points within a point of each other share one label (``0.5, 0.6``).
+    """
+    out: list[tuple[tuple[float, float], list[str]]] = []
+    for value, xi, yi, i in zip(axis["values"], x, y, axis["points"], strict=True):
+        if points[i]["varies"] is None or math.isnan(xi + yi):
+            continue
+        near = [o for o in out if abs(o[0][0] - xi) < 1.0 and abs(o[0][1] - yi) < 1.0]
+        if near:
+            near[0][1].append(format_value(value))
+        else:
+            out.append(((xi, yi), [format_value(value)]))
+    return [(at, ", ".join(texts)) for at, texts in out]
+
+
 def plot_phase(path: Path, phase: Phase, summary: Mapping[str, Any]) -> None:
     """Each difference against the reflexes' success, one panel per difference."""
     names = list(summary["regions"])
@@ -267,19 +294,20 @@ def plot_phase(path: Path, phase: Phase, summary: Mapping[str, Any]) -> None:
                 elinewidth=0.8, alpha=0.9,
                 label=f"{name} ({get_world_parameter(name).unit})" if k == 0 else None,
             )  # fmt: skip
-            for value, xi, yi, i in zip(axis["values"], x, y, axis["points"], strict=True):
-                if points[i]["varies"] is not None and not math.isnan(xi + yi):
-                    ax.annotate(
-                        format_value(value), (xi, yi), textcoords="offset points",
-                        xytext=(4, 4), fontsize=7, color=palette[j % len(palette)],
-                    )  # fmt: skip
+            dx, dy, align = LABEL_OFFSETS[j % len(LABEL_OFFSETS)]
+            for (xi, yi), text in _labels(axis, points, x, y):
+                ax.annotate(
+                    text, (xi, yi), textcoords="offset points", xytext=(dx, dy),
+                    ha=align, va="center", fontsize=7, color=palette[j % len(palette)],
+                )  # fmt: skip
         base = _point_xy(points[0], n)
         ax.plot(
             base[0], base[3], marker="*", color="black", markersize=13, linestyle="none",
             zorder=5, label="base world" if k == 0 else None,
         )  # fmt: skip
-        ax.set_title(f"{n} (points)", fontsize=11)
-        ax.set_ylabel(f"{n}, success difference (points)")
+        ax.set_title(n, fontsize=11)
+        if k % cols == 0:
+            ax.set_ylabel("success difference (points)")
         ax.set_xlim(-2, 102)
         ax.grid(alpha=0.3)
         if k // cols == rows - 1:
