@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.brain.catalog import Catalog
-from core.brain.motor import Motor
+from core.brain.motor import Motor, cruise_scale
 from core.brain.sensors import compile_detector
 from core.setup import Setup
 from core.sim.world import PymunkWorld, WorldConfig
@@ -122,8 +122,15 @@ class _Prober:
         self.catalog = catalog
         self.detect = compile_detector(catalog)
         robot = config.robot
-        self.motor = Motor(catalog, robot.align_gain, robot.max_turn_rad_s, config.dt_s)
-        self.forward = catalog.behaviour("goforward3").id
+        cruise = "goforward3"
+        self.motor = Motor(
+            catalog,
+            robot.align_gain,
+            robot.max_turn_rad_s,
+            config.dt_s,
+            cruise_scale(catalog, robot, cruise),
+        )
+        self.forward = catalog.behaviour(cruise).id
         geo = self.world.geometry
         self.leg_length = float(geo.leg_lengths_m[0])
         self.clear_m = config.track.obstacle.size_m / 2 + robot.length_m / 2

@@ -17,7 +17,7 @@ from core.brain.network import BehaviourNetwork
 from core.conditions import Condition
 from core.errors import UnknownNameError
 from core.sim.world import WorldConfig
-from core.worlds import default_world, load_world
+from core.worlds import WorldSettings, default_world, load_world, with_settings
 
 SignalMode = Literal["learned", "given"]
 SIGNAL_MODES: tuple[SignalMode, ...] = ("learned", "given")
@@ -50,18 +50,22 @@ class Setup:
         signal: ``learned``, as the condition has it, or ``given``: the signal's correct
             responses added (locked) and the signal taken out of what is learned, so that
             success measures the obstacle alone.
+        world_settings: settings changed over the world preset, by dotted path (a phase
+            diagram's point, `core.phase`); none by default.
     """
 
     world: str = ""
     sensors: str = ""
     signal: SignalMode = "learned"
+    world_settings: WorldSettings = ()
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNAL_MODES:
             raise UnknownNameError(
                 f"unknown signal mode {self.signal!r} (known: {', '.join(SIGNAL_MODES)})"
             )
-        load_world(self.world or None)  # an unknown name fails here, with the known ones
+        preset = load_world(self.world or None)  # an unknown name fails here, with the known ones
+        with_settings(preset.config, self.world_settings)  # and so does a bad setting
         if self.sensors and self.sensors not in sensor_definitions():
             known = ", ".join(sensor_definitions())
             raise UnknownNameError(f"unknown sensor definition {self.sensors!r} (known: {known})")
@@ -85,8 +89,8 @@ class Setup:
         return shared_catalog(self.sensors_name)
 
     def world_config(self) -> WorldConfig:
-        """The world preset's configuration."""
-        return load_world(self.world_name).config
+        """The world preset's configuration, with the setup's settings changed."""
+        return with_settings(load_world(self.world_name).config, self.world_settings)
 
     def condition(self, condition: Condition) -> Condition:
         """`condition` as it runs in this setup."""

@@ -25,7 +25,7 @@ from core.experiment import (
     run_tasks,
     summarise,
 )
-from core.params import ParameterError, ParamValue, applicable, get_parameter
+from core.params import Parameter, ParameterError, ParamValue, applicable, get_parameter
 from core.setup import Setup
 from core.stats import paired_difference
 
@@ -34,29 +34,41 @@ Axes = tuple[tuple[str, tuple[ParamValue, ...]], ...]
 """The swept parameters in the order given, each with its values in the order given."""
 
 
-def parse_param(text: str) -> tuple[str, tuple[ParamValue, ...]]:
-    """``NAME=V1,V2,...`` as the parameter's name and its checked values."""
+def parse_param(
+    text: str, lookup: Callable[[str], Parameter] = get_parameter
+) -> tuple[str, tuple[ParamValue, ...]]:
+    """``NAME=V1,V2,...`` as the parameter's name and its checked values.
+
+    `lookup` finds the parameter by name (the learning parameters' by default).
+    """
     name, sep, values = text.partition("=")
     name = name.strip()
     if not sep or not name:
         raise ParameterError(f"--param takes NAME=V1,V2,..., got {text!r}")
-    parameter = get_parameter(name)
+    parameter = lookup(name)
     parts = [v for v in values.split(",") if v.strip()]
     if not parts:
         raise ParameterError(f"--param {name}: no value given")
-    parsed = tuple(parameter.parse(v) for v in parts)
-    if len(set(parsed)) != len(parsed):
-        raise ParameterError(f"--param {name}: a value is repeated in {values!r}")
-    return name, parsed
+    return name, checked_values(parameter, [parameter.parse(v) for v in parts])
 
 
-def parse_grid(specs: Sequence[str]) -> Axes:
-    """Every ``--param`` of the command line, each parameter once."""
+def checked_values(parameter: Parameter, values: Sequence[ParamValue]) -> tuple[ParamValue, ...]:
+    """`values` checked against `parameter`'s kind and bounds, none repeated."""
+    checked = tuple(parameter.check(v) for v in values)
+    if not checked:
+        raise ParameterError(f"--param {parameter.name}: no value given")
+    if len(set(checked)) != len(checked):
+        raise ParameterError(f"--param {parameter.name}: a value is repeated in {list(values)}")
+    return checked
+
+
+def parse_grid(specs: Sequence[str], lookup: Callable[[str], Parameter] = get_parameter) -> Axes:
+    """Every ``--param`` of the command line, each parameter once (see `parse_param`)."""
     if not specs:
         raise ParameterError("give at least one --param NAME=V1,V2,...")
     axes: list[tuple[str, tuple[ParamValue, ...]]] = []
     for spec in specs:
-        name, values = parse_param(spec)
+        name, values = parse_param(spec, lookup)
         if any(n == name for n, _ in axes):
             raise ParameterError(f"--param {name} is given twice")
         axes.append((name, values))

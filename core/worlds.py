@@ -3,7 +3,8 @@
 A preset is a set of overrides of `WorldConfig`'s defaults, nested as the dataclasses are
 (``[world.robot]``, ``[world.track.obstacle]`` ...), with the physical reasons for them
 written beside them. `srlab world-check --world NAME` measures whether a preset poses the
-paper's problem, on properties of the world alone (no learning).
+paper's problem, on properties of the world alone (no learning). `WORLD_PARAMETERS` names
+the settings a phase diagram varies around a preset (`srlab phase`, `core.phase`).
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ from functools import cache
 from typing import Any
 
 from core.brain.catalog import data_dir
+from core.conditions import Condition
 from core.errors import CatalogError, UnknownNameError
+from core.params import Parameter
 from core.sim.world import WorldConfig
 
 
@@ -84,6 +87,28 @@ def _value(current: Any, value: Any, where: str) -> Any:
     return value
 
 
+WorldSettings = tuple[tuple[str, float], ...]
+"""Settings over a preset by dotted path (``("track.obstacle.echo_range_m", 0.4)``), sorted."""
+
+
+def with_settings(config: WorldConfig, settings: WorldSettings) -> WorldConfig:
+    """`config` with each dotted-path setting of `settings` changed.
+
+    A path that names no setting, or a value the setting cannot take, is a CatalogError
+    naming it.
+    """
+    nested: dict[str, Any] = {}
+    for path, value in settings:
+        *tables, key = path.split(".")
+        at = nested
+        for t in tables:
+            at = at.setdefault(t, {})
+            if not isinstance(at, dict):
+                raise CatalogError(f"world setting {path!r}: {t!r} is a setting, not a table")
+        at[key] = value
+    return _apply(config, nested, "world") if nested else config
+
+
 @cache
 def _raw() -> dict[str, dict[str, Any]]:
     path = data_dir() / "worlds.toml"
@@ -136,3 +161,70 @@ def load_world(name: str | None = None) -> WorldPreset:
         config,
         overrides,
     )
+
+
+def _every(_: Condition) -> bool:
+    return True
+
+
+@dataclass(frozen=True, slots=True)
+class WorldParameter:
+    """A named world setting a phase diagram may vary (`core.phase`).
+
+    Attributes:
+        parameter: its name, physical meaning, kind and allowed values.
+        path: the `WorldConfig` setting it changes, as a dotted path.
+        unit: its unit, for people.
+    """
+
+    parameter: Parameter
+    path: str
+    unit: str
+
+    @property
+    def name(self) -> str:
+        """Its name on the command line and in reports."""
+        return self.parameter.name
+
+
+def _world(
+    name: str, path: str, unit: str, low: float, high: float, meaning: str
+) -> WorldParameter:
+    return WorldParameter(
+        Parameter(name, meaning, "float", low, high, False, _every, "every condition"), path, unit
+    )
+
+
+WORLD_PARAMETERS: dict[str, WorldParameter] = {
+    p.name: p
+    for p in (
+        _world(
+            "echo_range_m", "track.obstacle.echo_range_m", "m", 0.0, 3.0,
+            "how far away the sonars hear the obstacle's echo: a soft obstacle's weak echo "
+            "only near, a hard carton's as far as the sonars reach (3 m)",
+        ),
+        _world(
+            "obstacle_size_m", "track.obstacle.size_m", "m", 0.0, 0.6,
+            "the side of the square obstacle (the robot is 0.33 m x 0.28 m, the corridor 1.2 m)",
+        ),
+        _world(
+            "camera_range_m", "track.obstacle.sight_range_m", "m", 0.0, 3.0,
+            "how far away the camera makes the obstacle out (the camera stimuli start at "
+            "1.5 m; the lamp is still seen from the camera's 3 m)",
+        ),
+        _world(
+            "cruise_speed_mps", "robot.cruise_speed_mps", "m/s", 0.0, 0.75,
+            "the robot's cruise (goforward3) speed; the other forward speeds scale with it, "
+            "turns keep theirs",
+        ),
+    )
+}  # fmt: skip
+
+
+def get_world_parameter(name: str) -> WorldParameter:
+    """The world parameter called `name`."""
+    try:
+        return WORLD_PARAMETERS[name]
+    except KeyError:
+        known = ", ".join(WORLD_PARAMETERS)
+        raise UnknownNameError(f"unknown world parameter {name!r} (known: {known})") from None

@@ -41,6 +41,8 @@ run classic-full-task experiment --conditions "$ALL" --world classic "${COMMON[@
     --out docs/results/classic-full-task
 run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid --sensors paper \
     --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
+run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \
+    --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out docs/results/phase
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then
     echo "results: deep-curve" >&2
     .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 1000 --seeds 3 \

@@ -8,7 +8,7 @@ import numpy as np
 
 from core.brain.catalog import Behaviour, Catalog
 from core.brain.memory import LongTermMemory, ShortTermMemory
-from core.brain.motor import Motor
+from core.brain.motor import Motor, cruise_scale
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
 from core.brain.propagation import KnowledgePropagation, KpConfig, Propagated
@@ -89,7 +89,13 @@ class Brain:
         self.selector = Selector(
             catalog, network, self.perception, config.selection, learnable, rng
         )
-        self.motor = Motor(catalog, robot.align_gain, robot.max_turn_rad_s, dt_s)
+        self.motor = Motor(
+            catalog,
+            robot.align_gain,
+            robot.max_turn_rad_s,
+            dt_s,
+            cruise_scale(catalog, robot, config.selection.default_behaviour),
+        )
         self.stm = ShortTermMemory(config.learning.stm_capacity)
         self.ltm = LongTermMemory(config.learning.eta)
         self.kp = (

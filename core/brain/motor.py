@@ -6,6 +6,7 @@ import math
 
 from core.brain.catalog import Behaviour, Catalog
 from core.sim.channels import Channel
+from core.sim.robot import RobotConfig
 from core.sim.types import MotorCommand
 
 _HEADING_ERROR = int(Channel.HEADING_ERROR_RAD)
@@ -18,20 +19,39 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % _TWO_PI - math.pi
 
 
+def cruise_scale(catalog: Catalog, robot: RobotConfig, cruise: str = "goforward3") -> float:
+    """The factor on the forward primitives' speeds that runs `cruise` at the robot's cruise.
+
+    1.0 (exactly) when the robot cruises at the catalogue's speed of `cruise`.
+    """
+    nominal = catalog.behaviour(cruise).speed_mps
+    if nominal <= 0.0:
+        raise ValueError(f"the cruise behaviour {cruise!r} does not move forward")
+    return robot.cruise_speed_mps / nominal
+
+
 class Motor:
     """Runs one motor primitive at a time for its duration.
 
     ``align`` primitives hold the corridor's heading with a proportional controller on the
     odometry's heading error; ``steer`` primitives turn towards a heading fixed when they
-    start (the corridor's direction plus their angle); ``constant`` ones run as given.
+    start (the corridor's direction plus their angle); ``constant`` ones run as given. The
+    forward primitives' speeds are the catalogue's times `forward_scale` (see
+    `cruise_scale`).
     """
 
     def __init__(
-        self, catalog: Catalog, align_gain: float, max_turn_rad_s: float, dt_s: float
+        self,
+        catalog: Catalog,
+        align_gain: float,
+        max_turn_rad_s: float,
+        dt_s: float,
+        forward_scale: float = 1.0,
     ) -> None:
         self._dt = dt_s
         self._gain = align_gain
         self._max_turn = max_turn_rad_s
+        self._forward_scale = forward_scale
         self._speed: list[float] = []
         self._rate: list[float] = []
         self._angle: list[float] = []
@@ -46,7 +66,8 @@ class Motor:
     def add_behaviour(self, b: Behaviour) -> None:
         """Make a behaviour runnable (the catalogue's, or one synthesised later)."""
         rate = math.radians(b.turn_dps)
-        self._speed.append(b.speed_mps)
+        forward = b.family == "forward" and not b.synthesized
+        self._speed.append(b.speed_mps * self._forward_scale if forward else b.speed_mps)
         self._rate.append(rate)
         self._angle.append(rate * b.ticks * self._dt)
         self._mode.append({"align": _ALIGN, "steer": _STEER}.get(b.mode, _CONSTANT))

@@ -23,6 +23,7 @@ from core.sim.sensing import (
     G_LAMP_X,
     G_LAMP_Y,
     G_OBSTACLE_ECHO,
+    G_OBSTACLE_SIGHT,
     G_OUTER,
     G_SIGNAL_LEG,
     G_SONAR_MOUNT,
@@ -97,15 +98,15 @@ def _wrap(a: float) -> float:
 
 @_jit
 def _sees(
-    cx: float, cy: float, c: float, s: float, tx: float, ty: float, g: Any
+    cx: float, cy: float, c: float, s: float, tx: float, ty: float, g: Any, reach: float
 ) -> tuple[bool, float, float, float]:
-    """Whether the camera at (cx, cy) heading (c, s) sees the point (tx, ty)."""
+    """Whether the camera at (cx, cy) heading (c, s) sees the point (tx, ty) within `reach`."""
     rx = tx - cx
     ry = ty - cy
     fwd = rx * c + ry * s
     lat = -rx * s + ry * c
     dist = math.sqrt(rx * rx + ry * ry)
-    if fwd <= 0.0 or dist > g[G_CAMERA_RANGE]:
+    if fwd <= 0.0 or dist > reach:
         return False, dist, fwd, lat
     if abs(math.atan2(lat, fwd)) > g[G_FOV_HALF]:
         return False, dist, fwd, lat
@@ -209,7 +210,7 @@ def sense(
     if has_obstacle:
         ocx = 0.5 * (obstacle[0] + obstacle[2])
         ocy = 0.5 * (obstacle[1] + obstacle[3])
-        ok, _, fwd, lat = _sees(cx, cy, c, s, ocx, ocy, g)
+        ok, _, fwd, lat = _sees(cx, cy, c, s, ocx, ocy, g, g[G_OBSTACLE_SIGHT])
         if ok:
             out[20] = 1.0
             out[31] = math.atan2(lat, fwd) / g[G_FOV_HALF]
@@ -235,7 +236,7 @@ def sense(
             )
         else:
             track[0] = 0.0
-    ok, _, _, _ = _sees(cx, cy, c, s, g[G_LAMP_X], g[G_LAMP_Y], g)
+    ok, _, _, _ = _sees(cx, cy, c, s, g[G_LAMP_X], g[G_LAMP_Y], g, g[G_CAMERA_RANGE])
     out[23] = lamp_color if ok else 0.0
     if best == int(g[G_SIGNAL_LEG]):
         ahead = (g[G_STOPLINE_X] - x) * dxl + (g[G_STOPLINE_Y] - y) * dyl

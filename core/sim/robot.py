@@ -27,6 +27,10 @@ class RobotConfig:
         camera_track_ticks: how long the obstacle logical sensor keeps tracking an obstacle on
             the map after it leaves the camera's view (while it is still ahead).
         align_gain: heading-hold gain of the forward behaviours, 1/s.
+        cruise_speed_mps: the speed the robot cruises at when nothing else is released: its
+            keep-moving default behaviour's (goforward3, 0.45 m/s in behaviours.toml). Every
+            forward primitive's speed is scaled by the same factor (goforward1..5 at 1/3 to
+            5/3 of it), up to `max_speed_mps`; turns keep their speeds.
     """
 
     length_m: float = 0.33
@@ -43,12 +47,15 @@ class RobotConfig:
     camera_offset_m: float = 0.12
     camera_track_ticks: int = 30
     align_gain: float = 2.0
+    cruise_speed_mps: float = 0.45
 
     def __post_init__(self) -> None:
         if len(self.sonar_angles_deg) != 8:
             raise ValueError("the AmigoBot has eight sonars")
         if min(self.length_m, self.width_m, self.mass_kg, self.max_speed_mps) <= 0:
             raise ValueError("body dimensions, mass and top speed must be positive")
+        if not 0 < self.cruise_speed_mps <= self.max_speed_mps:
+            raise ValueError("cruise_speed_mps must be positive and at most max_speed_mps")
 
     @property
     def max_turn_rad_s(self) -> float:

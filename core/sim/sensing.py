@@ -31,7 +31,8 @@ G_HALF_LENGTH = 19
 G_CORRIDOR = 20
 G_TRACK_HOLD = 21
 G_OBSTACLE_ECHO = 22
-G_SIZE = 23
+G_OBSTACLE_SIGHT = 23  # the camera's range for the obstacle
+G_SIZE = 24
 
 
 def empty_channels() -> np.ndarray[Any, np.dtype[np.float64]]:

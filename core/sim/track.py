@@ -49,6 +49,9 @@ class ObstacleConfig:
             flat box echoes like a wall, heard as far as the sonars reach; a small, soft or
             rounded one returns a weak echo that the sonars register only when near, and
             beyond this range they read whatever lies behind it.
+        sight_range_m: how far away the camera recognises the obstacle, within the camera's
+            own range (`RobotConfig.camera_range_m`, which also bounds the lamp's): a small,
+            low-contrast object is made out nearer than a lit lamp.
     """
 
     size_m: float = 0.25
@@ -58,6 +61,7 @@ class ObstacleConfig:
     stopline_clearance_m: float = 0.6
     enabled: bool = True
     echo_range_m: float = 3.0
+    sight_range_m: float = 3.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -174,6 +174,9 @@ class PymunkWorld:
         g[sensing.G_CORRIDOR] = self.config.track.corridor_width_m
         g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
         g[sensing.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
+        g[sensing.G_OBSTACLE_SIGHT] = min(
+            robot.camera_range_m, self.config.track.obstacle.sight_range_m
+        )
         self._track = np.zeros(4)
         self._g = g
         self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))

@@ -1,6 +1,6 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
-`simulate`, `experiment` and `sweep` have a module each; `tune` holds `tune` and
+`simulate`, `experiment`, `sweep` and `phase` have a module each; `tune` holds `tune` and
 `qlambda-sweep`, `world` holds `probe` and `world-check`, `run` holds `run` and `runs`,
 `db` and `serve` the database and the service. `common` has what they share: argument
 types and groups, the backend choice, progress bars and tables. Each module adds its
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 
 from core.errors import CoreError
 from server.backends import BackendError
-from server.cli import db, experiment, run, serve, simulate, sweep, tune, world
+from server.cli import db, experiment, phase, run, serve, simulate, sweep, tune, world
 from server.cli.common import Handler, UsageError
 
 
@@ -34,6 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_parser(sub)
     experiment.add_parser(sub)
     sweep.add_parser(sub)
+    phase.add_parser(sub)
     tune.add_tune_parser(sub)
     world.add_probe_parser(sub)
     world.add_world_check_parser(sub)

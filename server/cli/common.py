@@ -7,6 +7,7 @@ import math
 import os
 import shlex
 import sys
+import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager, nullcontext
 from pathlib import Path
@@ -220,8 +221,11 @@ def progress_bar(
 
 
 def task_label(r: TaskResult) -> str:
-    """A task as people name it: ``kp seed 3``, or ``kp eta=0.1 seed 3`` with parameters."""
-    where = point_label(dict(r.task.params))
+    """A task as people name it: ``kp seed 3``, or ``kp eta=0.1 seed 3`` with parameters.
+
+    World settings (a phase diagram's point) follow the parameters.
+    """
+    where = point_label({**dict(r.task.params), **dict(r.task.setup.world_settings)})
     return f"{r.task.condition}{' ' + where if where else ''} seed {r.task.seed}"
 
 
@@ -241,6 +245,26 @@ def task_progress(
         progress.update(bar, advance=1, last=f"{task_label(r)} {mark}")
 
     return progress, on_result
+
+
+def run_batch(
+    args: argparse.Namespace,
+    err: Console,
+    title: str,
+    total: int,
+    run: Callable[[Backend, Callable[[TaskResult], None]], list[TaskResult]],
+) -> tuple[list[TaskResult], float, str]:
+    """`run` a batch of `total` tasks on the backend the arguments choose, with a progress bar.
+
+    Returns the results, the seconds they took and where they ran, for people.
+    """
+    with open_backend(args, err) as (backend, where):
+        progress, on_result = task_progress(err, title, total, args.quiet)
+        started = time.perf_counter()
+        with progress:
+            results = run(backend, on_result)
+        elapsed = time.perf_counter() - started
+    return results, elapsed, where
 
 
 def report_failures(err: Console, results: Sequence[TaskResult], *, params: bool) -> int:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 from typing import IO
 
@@ -14,12 +13,10 @@ from core.conditions import CONDITIONS
 from core.params import PARAMETERS
 from server.cli.common import (
     add_task_arguments,
-    check_backend_arguments,
     command_line,
-    open_backend,
     report_failures,
+    run_batch,
     setup_of,
-    task_progress,
 )
 from server.reports.base import fmt, setup_params
 
@@ -66,15 +63,11 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
         args.episodes,
         setup_of(args),
     )
-    check_backend_arguments(args)
     tasks = plan.tasks()
     err = Console(file=stderr, stderr=True)
-    with open_backend(args, err) as (backend, where):
-        progress, on_result = task_progress(err, "sweep", len(tasks), args.quiet)
-        started = time.perf_counter()
-        with progress:
-            results = run_sweep(plan, backend, on_result)
-        elapsed = time.perf_counter() - started
+    results, elapsed, where = run_batch(
+        args, err, "sweep", len(tasks), lambda backend, on: run_sweep(plan, backend, on)
+    )
     summary = summarise_sweep(plan, results)
     params = {
         "command": command_line(args),

@@ -93,13 +93,18 @@ def clean_json(value: Any) -> Any:
 
 
 def write_runs(path: Path, results: Sequence[TaskResult], *, params: bool = False) -> None:
-    """Every episode of every task, one JSON object a line; with `params`, the task's too."""
+    """Every episode of every task, one JSON object a line; with `params`, the task's too.
+
+    A task run with world settings (a phase diagram's point) carries them.
+    """
     with path.open("w", encoding="utf-8") as f:
         for r in results:
             for e in r.episodes:
                 line: dict[str, Any] = {"condition": r.task.condition}
                 if params:
                     line["params"] = dict(r.task.params)
+                if r.task.setup.world_settings:
+                    line["world_settings"] = dict(r.task.setup.world_settings)
                 line |= {
                     "seed": r.task.seed,
                     "episode": e.episode,

@@ -24,10 +24,15 @@ ROLLING = 5
 """Episodes in the rolling mean of a learning curve."""
 
 
-def subplots(cols: int, **kwargs: Any) -> tuple[Figure, Any]:
-    """A figure of one row of `cols` panels (axes always 2-D: ``axes[0][i]``)."""
-    fig, axes = plt.subplots(1, cols, dpi=110, squeeze=False, **kwargs)
+def subplots(cols: int, rows: int = 1, **kwargs: Any) -> tuple[Figure, Any]:
+    """A figure of `rows` x `cols` panels (axes always 2-D: ``axes[row][col]``)."""
+    fig, axes = plt.subplots(rows, cols, dpi=110, squeeze=False, **kwargs)
     return fig, axes
+
+
+def colours(name: str = "tab10") -> tuple[Any, ...]:
+    """A qualitative colour map's colours."""
+    return tuple(matplotlib.colormaps[name].colors)  # type: ignore[attr-defined]
 
 
 def save(fig: Figure, path: Path, *, layout: bool = True, bbox_inches: str | None = None) -> None:

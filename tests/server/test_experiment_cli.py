@@ -8,21 +8,9 @@ from typing import Any
 
 import matplotlib.image
 import pytest
+from clihelpers import PNG_SIGNATURE, exits_2
 
 from server.cli import main
-
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-def exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
-    """Run the CLI expecting exit code 2 and no traceback; return stderr."""
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    assert e.value.code == 2
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err
-    assert "Traceback" not in captured.out
-    return captured.err
 
 
 @pytest.fixture(scope="module")

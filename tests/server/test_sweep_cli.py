@@ -7,14 +7,13 @@ import socket
 import sys
 from pathlib import Path
 
-import matplotlib.image
 import pytest
+from clihelpers import assert_png, exits_2
 
 from server.backends import BackendError
 from server.backends.ray import RayBackend, check_reachable
 from server.cli import main
 
-PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SWEEP = [
     "sweep",
     "--param",
@@ -29,16 +28,6 @@ SWEEP = [
     "3",
     "--quiet",
 ]
-
-
-def exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
-    """Run the CLI expecting exit code 2 and no traceback; return stderr."""
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    assert e.value.code == 2
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.err + captured.out
-    return captured.err
 
 
 @pytest.fixture(scope="module")
@@ -107,11 +96,7 @@ def test_sweep_summary_md_has_a_table_per_parameter(report: Path) -> None:
 
 @pytest.mark.parametrize("name", ["learning_curves.png", "param_eta.png", "param_epsilon.png"])
 def test_sweep_plots_are_pngs(report: Path, name: str) -> None:
-    path = report / name
-    assert path.read_bytes()[:8] == PNG_SIGNATURE
-    height, width = matplotlib.image.imread(path).shape[:2]
-    assert height > 100
-    assert width > 100
+    assert_png(report / name)
 
 
 @pytest.mark.parametrize(
