@@ -110,6 +110,22 @@ def _family(pid: int) -> set[int]:
     return family
 
 
+def children(pid: int) -> dict[int, str]:
+    """The processes whose parent is `pid`, with their command lines (a zombie's is '')."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            command = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found[int(entry)] = command.decode(errors="replace")
+    return found
+
+
 def listens_on(pid: int, port: int) -> bool:
     """Whether process `pid` (or a descendant) holds the socket listening on `port`.
 
