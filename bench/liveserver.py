@@ -137,6 +137,19 @@ def listens_on(pid: int, port: int) -> bool:
     return any(_links(Path(f"/proc/{p}/fd")) & wanted for p in _family(pid))
 
 
+def listening_ports(pid: int) -> set[int]:
+    """Every TCP port that `pid` or a descendant listens on, read from the kernel's tables."""
+    held = set().union(*(_links(Path(f"/proc/{p}/fd")) for p in _family(pid)))
+    ports: set[int] = set()
+    for table in TCP_TABLES:
+        with contextlib.suppress(OSError):
+            for line in table.read_text().splitlines()[1:]:
+                fields = line.split()
+                if fields[3] == LISTEN and f"socket:[{fields[9]}]" in held:
+                    ports.add(int(fields[1].rsplit(":", 1)[1], 16))
+    return ports
+
+
 def _links(folder: Path) -> set[str]:
     """What the links in `folder` point to (a process's open files); none if it is gone."""
     links = set()

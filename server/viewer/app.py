@@ -20,6 +20,7 @@ from core.worlds import load_world
 from server.engines import Engines
 from server.guard import SitePolicy
 from server.ratelimit import RateLimiter
+from server.viewer import upstream
 from server.viewer.control import Controller
 from server.viewer.gate import Gate, Peer
 from server.viewer.inbound import quiet_malformed
@@ -175,7 +176,16 @@ class Viewer:
         session.renderer.stop(session.inbox)
 
     def connected(self, client: viser.ClientHandle) -> None:
-        """A browser connected (viser's thread pool): build and start its session."""
+        """A browser connected (viser's thread pool): build and start its session.
+
+        Only a socket the gate relays gets one (viser's server answers nobody else; this
+        holds if that ever fails): a session is what carries a viewer's panel and its writes.
+        """
+        peer = _peer(self.server, client.client_id)
+        if peer is None or not self.gate.relays(peer):
+            log.warning("the 3D view refused a viewer that did not come through its gate")
+            upstream.drop(self.server, client.client_id)
+            return
         session = self.open(client, self._named_run(client))
         with self._lock:
             self.sessions[client.client_id] = session
@@ -200,6 +210,7 @@ class Viewer:
         writable: bool,
         policy: SitePolicy | None = None,
         world: WorldConfig | None = None,
+        max_viewers: int | None = None,
     ) -> Viewer:
         """Listen on `host`:`port` and show the runs of `manager` and `store`.
 
@@ -207,6 +218,11 @@ class Viewer:
         A busy port is an error here (viser itself would silently take the next one, and
         the editor's link would point at someone else's server). `policy` says which Host
         names and origins the view accepts (default: loopback names, no other origin).
+        `max_viewers` bounds the viewers open at once (None: no bound).
+
+        Raises:
+            OSError: the port is taken.
+            UnguardedViewerError: viser's own server could not be limited to the gate.
         """
         policy = policy or SitePolicy.of(["127.0.0.1", "localhost", "[::1]", host], [])
         loop = asyncio.get_running_loop()
@@ -226,13 +242,15 @@ class Viewer:
         server = await asyncio.to_thread(_listen)
         quiet_malformed(server)
         server.scene.world_axes.visible = False  # for every client
-        gate = Gate(host, port, server.get_port(), policy)
+        gate = Gate(host, port, server.get_port(), policy, max_sockets=max_viewers)
         # Wired before the gate opens: a browser reconnecting after a restart may be the
         # very first connection, and its /run/<id> must find the viewer to choose with.
         viewer = cls(server, gate, loop, make)
         server.on_client_connect(viewer.connected)
         server.on_client_disconnect(viewer.disconnected)
         try:
+            # viser answers only the gate's relays, from before the gate opens.
+            await asyncio.to_thread(upstream.guard, server, gate.relays, policy)
             await asyncio.to_thread(_open, gate)
         except BaseException:
             await asyncio.to_thread(server.stop)
@@ -259,9 +277,13 @@ class Viewer:
 
 
 def _listen() -> viser.ViserServer:
-    """The viser server, on an ephemeral loopback port reached only through the gate."""
+    """The viser server, on an ephemeral loopback port reached only through the gate.
+
+    Its port is not printed: only the gate's is anybody's business.
+    """
     install_loop_safe_buffers()
-    return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
+    with upstream.quiet_start():
+        return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
 
 
 def _peer(server: viser.ViserServer, client_id: int) -> Peer | None:

@@ -29,6 +29,14 @@ back for the runs, and on a machine busy with other work that took longer than a
 after a restart, so the page never reconnected. The gate's answer is a header check and a
 hash on its own thread. viser's own answer is awaited at most `VISER_ANSWER_S`: the page
 must not sit on an open, silent socket it would never retry.
+
+The gate keeps the address of each of its live connections to viser (`relays`): viser's
+server answers those and nobody else (`server.viewer.upstream`). A plain request is relayed
+alone: viser answers one request a connection and closes it, and bytes a client sends after
+its first head (a pipelined second request) are not passed on, where they failed viser's
+`websockets` server with a traceback. At most `max_sockets` websockets are relayed at once
+(each is a viewer, with its own renderer): past that, a handshake or a page's request gets
+503 with `Retry-After`.
 """
 
 from __future__ import annotations
@@ -59,6 +67,8 @@ VISER_ANSWER_S = 30.0
 it closes the page's socket, and the page tries again."""
 Peer = tuple[str, int]
 """A TCP address as viser sees a connection's far end: (host, port)."""
+RETRY_AFTER_S = 10
+"""What a request refused for want of a viewer's place is told to wait."""
 RUN_PATH = re.compile(r"/run/([0-9]{1,18})/?")
 """A view URL's path that names a run. At most 18 digits: run ids stay below 2**62 (the
 API's bound), and a longer or non-digit id is no run but a plain path (viser's 404)."""
@@ -135,14 +145,25 @@ def handshake_answer(headers: dict[str, str]) -> bytes | None:
     return ("\r\n".join(lines) + "\r\n\r\n").encode()
 
 
-def _response(status: HTTPStatus, detail: str) -> bytes:
+def _response(status: HTTPStatus, detail: str, *extra: str) -> bytes:
     body = json.dumps({"detail": detail}).encode()
-    return (
-        f"HTTP/1.1 {status.value} {status.phrase}\r\n"
-        "Content-Type: application/json\r\n"
-        f"Content-Length: {len(body)}\r\n"
-        "Connection: close\r\n\r\n"
-    ).encode() + body
+    lines = [
+        f"HTTP/1.1 {status.value} {status.phrase}",
+        "Content-Type: application/json",
+        f"Content-Length: {len(body)}",
+        *extra,
+        "Connection: close",
+    ]
+    return ("\r\n".join(lines) + "\r\n\r\n").encode() + body
+
+
+def is_page(head: bytes) -> bool:
+    """Whether a request head asks for the view's page (`/` or a run's URL), not a file."""
+    line = head.split(b"\r\n", 1)[0].split(b" ")
+    if len(line) != 3:
+        return False
+    path = line[1].partition(b"?")[0]
+    return path == b"/" or RUN_PATH.fullmatch(path.decode("latin-1")) is not None
 
 
 class Gate:
@@ -150,7 +171,9 @@ class Gate:
 
     `on_run` is called (on the gate's thread) with the run of each accepted websocket
     handshake on `/run/<id>` and the address of the gate's connection to viser that will
-    carry it, before viser gets it. `start` raises OSError when the port is taken; `stop`
+    carry it, before viser gets it. `relays` tells whether an address is one of the gate's
+    live connections to viser (from any thread). `max_sockets` bounds the websockets
+    relayed at once (None: no bound). `start` raises OSError when the port is taken; `stop`
     closes it and every relay.
     """
 
@@ -161,14 +184,20 @@ class Gate:
         upstream_port: int,
         policy: SitePolicy,
         on_run: Callable[[int, Peer], None] | None = None,
+        max_sockets: int | None = None,
     ) -> None:
         self.host = host
         self.port = port
         self.upstream_port = upstream_port
         self.policy = policy
         self.on_run = on_run
+        self.max_sockets = max_sockets
         self.refused = 0
         """Requests refused so far (tests and the reliability suite read it)."""
+        self.sockets = 0
+        """Websockets relayed now (the gate's thread counts them)."""
+        self._upstreams: set[Peer] = set()
+        self._upstreams_lock = threading.Lock()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: asyncio.Server | None = None
         self._thread: threading.Thread | None = None
@@ -206,6 +235,11 @@ class Gate:
         ready.wait()
         if failure:
             raise failure[0]
+
+    def relays(self, peer: Peer) -> bool:
+        """Whether `peer` is the address of one of the gate's live connections to viser."""
+        with self._upstreams_lock:
+            return peer in self._upstreams
 
     def stop(self) -> None:
         """Close the listener and every open relay."""
@@ -245,15 +279,39 @@ class Gate:
         async with asyncio.timeout(HEAD_TIMEOUT_S):
             head = await reader.readuntil(b"\r\n\r\n")
         _, headers = _parse_head(head)
-        refused = refusal(headers, self.policy)
+        upgrade = headers.get("upgrade", "").lower() == "websocket"
+        refused = refusal(headers, self.policy) or self._full(head, upgrade)
         if refused is not None:
             self.refused += 1
             status, detail = refused
             log.warning("the 3D view refused a request: %s", detail)
-            writer.write(_response(status, detail))
+            extra = (
+                (f"Retry-After: {RETRY_AFTER_S}",)
+                if status is HTTPStatus.SERVICE_UNAVAILABLE
+                else ()
+            )
+            writer.write(_response(status, detail, *extra))
             await writer.drain()
             return
         head, run_id = run_path(head)
+        # A viewer's place is taken now, before any await: sockets arriving together
+        # cannot all pass `_full` on the same count.
+        taken = 1 if upgrade else 0
+        self.sockets += taken
+        try:
+            await self._relay(reader, writer, head, headers, run_id if upgrade else None)
+        finally:
+            self.sockets -= taken
+
+    async def _relay(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        head: bytes,
+        headers: dict[str, str],
+        run_id: int | None,
+    ) -> None:
+        """Relay one accepted request to viser: a plain one alone, a websocket both ways."""
         upgrade = headers.get("upgrade", "").lower() == "websocket"
         answer = handshake_answer(headers) if upgrade else None
         if answer is not None:
@@ -263,12 +321,21 @@ class Gate:
             # reconnecting (tests/web/test_viewer.py beside busy processes).
             writer.write(answer)
         up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
+        sockname = up_writer.get_extra_info("sockname")
+        peer: Peer = (str(sockname[0]), int(sockname[1]))
+        # Known before viser reads a byte from it: viser's server answers no other address.
+        with self._upstreams_lock:
+            self._upstreams.add(peer)
         try:
             # Past the guard (a foreign page chooses nothing) and before viser sees the
             # handshake, so the choice is there when viser opens the session.
-            if run_id is not None and upgrade:
-                self._chose(run_id, up_writer.get_extra_info("sockname"))
+            if run_id is not None:
+                self._chose(run_id, peer)
             up_writer.write(head)
+            if not upgrade:
+                # One request a connection, as viser serves: its answer, then the end.
+                await _pipe(up_reader, writer)
+                return
             if answer is not None:
                 # viser's own 101 (the same one) was answered already; anything else ends
                 # the socket, as viser would have.
@@ -284,13 +351,27 @@ class Gate:
                 _pipe(reader, up_writer), _pipe(up_reader, writer), return_exceptions=True
             )
         finally:
+            with self._upstreams_lock:
+                self._upstreams.discard(peer)
             up_writer.close()
 
-    def _chose(self, run_id: int, sockname: object) -> None:
-        if self.on_run is None or not isinstance(sockname, tuple):
+    def _full(self, head: bytes, upgrade: bool) -> tuple[HTTPStatus, str] | None:
+        """A 503 for a viewer's socket or page when `max_sockets` viewers are open."""
+        if self.max_sockets is None or self.sockets < self.max_sockets:
+            return None
+        if not upgrade and not is_page(head):
+            return None
+        return (
+            HTTPStatus.SERVICE_UNAVAILABLE,
+            f"the 3D view has {self.sockets} viewers open, the most it serves at once "
+            f"(SRLAB_VISER_MAX_VIEWERS): close one, or try again in {RETRY_AFTER_S} s",
+        )
+
+    def _chose(self, run_id: int, peer: Peer) -> None:
+        if self.on_run is None:
             return
         try:
-            self.on_run(run_id, (str(sockname[0]), int(sockname[1])))
+            self.on_run(run_id, peer)
         except Exception:
             # The view still opens, on the run it would show without the URL's.
             log.exception("the 3D view could not choose run %d", run_id)

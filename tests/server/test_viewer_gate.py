@@ -18,10 +18,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-import viser
 from apphelpers import client_for, settings_for
-from fastapi import FastAPI
-from viserpage import camera_message
+from viserpage import camera_message, page_socket, viewer_of
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 from websockets.typing import Subprotocol
@@ -296,12 +294,6 @@ async def until(check: Callable[[], object], what: str) -> None:
         await asyncio.sleep(0.02)
 
 
-def viewer_of(app: FastAPI) -> Viewer:
-    viewer = app.state.srlab.viewer
-    assert isinstance(viewer, Viewer)
-    return viewer
-
-
 async def start_run(client: httpx.AsyncClient, start: bool = True, **body: object) -> int:
     r = await client.post("/api/runs", json=body)
     assert r.status_code == 201, r.text
@@ -309,25 +301,6 @@ async def start_run(client: httpx.AsyncClient, start: bool = True, **body: objec
     if start:
         assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
     return run_id
-
-
-@asynccontextmanager
-async def page_socket(viewer: Viewer, path: str) -> AsyncIterator[ClientConnection]:
-    """A websocket on the view's `path`, as viser's page opens it (no viewer yet)."""
-    url = f"ws://127.0.0.1:{viewer.port}{path}"
-    protocol = Subprotocol(f"viser-v{viser.__version__}")  # viser refuses other versions
-    async with connect(url, subprotocols=[protocol]) as socket:
-        drain = asyncio.create_task(_drain(socket))
-        try:
-            yield socket
-        finally:
-            drain.cancel()
-
-
-async def _drain(socket: ClientConnection) -> None:
-    """Read what viser sends, as the page does (an unread socket would push back)."""
-    async for _ in socket:
-        pass
 
 
 async def becomes_viewer(viewer: Viewer, socket: ClientConnection) -> Session:
@@ -342,7 +315,7 @@ async def becomes_viewer(viewer: Viewer, socket: ClientConnection) -> Session:
 @asynccontextmanager
 async def watching(viewer: Viewer, path: str) -> AsyncIterator[Session]:
     """A page's viewer on the view's `path`; its session ends on the way out."""
-    async with page_socket(viewer, path) as socket:
+    async with page_socket(viewer.port, path) as socket:
         yield await becomes_viewer(viewer, socket)
     await until(lambda: not viewer.sessions, "the viewer's session to end")
 
@@ -399,9 +372,9 @@ async def test_pages_reconnecting_together_each_get_their_own_run(tmp_path: Path
         # first camera message), as when pages reconnect at the same moment after a
         # restart; the second to connect becomes a viewer first.
         async with (
-            page_socket(viewer, f"/run/{one}") as first,
-            page_socket(viewer, f"/run/{two}") as second,
-            page_socket(viewer, "/") as plain,
+            page_socket(viewer.port, f"/run/{one}") as first,
+            page_socket(viewer.port, f"/run/{two}") as second,
+            page_socket(viewer.port, "/") as plain,
         ):
             two_session = await becomes_viewer(viewer, second)
             one_session = await becomes_viewer(viewer, first)
