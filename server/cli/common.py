@@ -99,13 +99,13 @@ def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True)
         default="",
         help=f"world preset (default {default_world()}; see `srlab world-check`)",
     )
-    definitions = list(sensor_definitions())
+    definitions = sensor_definitions()  # default first, each with its description
+    described = "; ".join(f"{n}: {d.rstrip('.')}" for n, d in definitions.items())
     parser.add_argument(
         "--sensors",
-        choices=definitions,
+        choices=list(definitions),
         default="",
-        help=f"camera obstacle stimuli: {', '.join(definitions)} (default {definitions[0]}: "
-        "the paper's Fig. 10)",
+        help=f"camera obstacle stimuli (default {next(iter(definitions))}). {described}",
     )
     if signal:
         parser.add_argument(

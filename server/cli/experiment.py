@@ -13,6 +13,7 @@ from rich.table import Table
 
 from core.conditions import CONDITIONS
 from server.cli.common import (
+    UsageError,
     add_task_arguments,
     command_line,
     non_negative_int,
@@ -56,6 +57,14 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "(core/data/tuned.toml, written by srlab tune)",
     )
     exp.add_argument(
+        "--declare",
+        metavar="A-B,...",
+        help="the comparisons the conclusions rest on, declared before running: pairs of "
+        "conditions (kp-sonar), each tested on all episodes and held out, Holm-corrected "
+        "together in the summary; every other comparison is marked exploratory (default: "
+        "kp-sonar,kp-rp,kp-qlambda-hybrid,kp-dp, those whose conditions run)",
+    )
+    exp.add_argument(
         "--no-probe",
         action="store_true",
         help="do not judge what was learned with the placement probe (srlab probe)",
@@ -65,12 +74,23 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab experiment`."""
+    from core.analysis import DECLARED, parse_pairs
     from core.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
     from core.params import tuned_params
     from core.stats import Estimate, pct
     from server.reports.experiment import write_report
 
     conditions = parse_conditions(args.conditions)
+    if args.declare is None:
+        declared = [p for p in DECLARED if set(p) <= set(conditions)]
+    else:
+        declared = parse_pairs(args.declare)
+        missing = sorted({c for p in declared for c in p} - set(conditions))
+        if missing:
+            raise UsageError(
+                f"--declare: {', '.join(missing)} not among --conditions; a declared "
+                "comparison needs both its conditions run"
+            )
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     setup = setup_of(args)
     catalog = setup.catalog()
@@ -122,6 +142,8 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
             c: dict(tuned_params(c)) for c in conditions if not args.untuned and tuned_params(c)
         },
         "probe": probed.as_dict() if probed is not None else None,
+        "declared": [list(p) for p in declared],
+        "declared_given": args.declare is not None,
     }
     paths = write_report(args.out, results, summary, catalog, params)
     table = Table(

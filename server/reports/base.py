@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from core.params import point_label
-from core.stats import Estimate
+from core.stats import Estimate, interval_name
 from core.stats import pct as stats_pct
 
 if TYPE_CHECKING:
@@ -24,9 +24,9 @@ if TYPE_CHECKING:
 def fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
     """A figure over seeds with its interval: a rate as ``5% [0, 15]``, else ``0.12 ± 0.03``.
 
-    A rate's interval is the percentile bootstrap's (`core.stats`, within [0, 1]; clipped
-    there all the same) when the summary has one: a mean ± Student's t half-width ran past
-    0% and 100% with few seeds ("5% ± 64%").
+    A rate's interval is the summary's (`core.stats.mean_interval`, within the values'
+    range, so within [0, 1]; clipped there all the same) when it has one: a mean ± Student's
+    t half-width alone ran past 0% and 100% with few seeds ("5% ± 64%").
     """
     mean, ci = stat.get("mean", math.nan), stat.get("ci95", math.nan)
     if mean is None or math.isnan(mean):
@@ -37,6 +37,16 @@ def fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
             return f"{mean:.0%}"
         return stats_pct(Estimate(mean, max(0.0, low), min(1.0, high), int(stat.get("n", 0))))
     return f"{mean:.{digits}f} ± {ci:.{digits}f}" if not math.isnan(ci) else f"{mean:.{digits}f}"
+
+
+def interval_line() -> str:
+    """What every summary's intervals are, and why that method (its header states it)."""
+    return (
+        f"Intervals: the {interval_name()}, clipped to the values' range: it covers the "
+        "true mean 93-97% of the time on synthetic samples shaped like srlab's at 20 and "
+        "40 seeds, where the percentile bootstrap covers 92-93% at 20 "
+        "(`tests/core/test_stats.py`)."
+    )
 
 
 def diff(d: dict[str, float] | None) -> str:
