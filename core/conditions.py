@@ -8,6 +8,7 @@ from core.brain.brain import BrainConfig, LearningConfig
 from core.brain.propagation import KpConfig
 from core.brain.selection import SelectionConfig
 from core.errors import UnknownNameError
+from core.trainer import PERFECT, Imperfections
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,6 +24,9 @@ class Condition:
         success_reward: the delayed reward a successful lap gives (None: none).
         learnable_sensors: the logical sensors whose stimuli are explored and learned.
         trainer: the reinforcement program that rewards responses at once (None: none).
+        teacher: how the program's judgements are given (`core.trainer.Imperfections`): the
+            perfect teacher, at once and always right, unless set (the teacher_*
+            parameters, `srlab experiment --teacher`).
         kp: whether knowledge propagation runs.
         agent: ``brain`` (the paper's architecture), ``qlambda`` (the tabular baseline), or
             ``dqn`` / ``ppo`` (stable-baselines3's, the ``srlab[baselines]`` extra).
@@ -43,6 +47,7 @@ class Condition:
     success_reward: float | None = None
     learnable_sensors: tuple[str, ...] = ("signal", "camera_obstacle")
     trainer: str | None = None
+    teacher: Imperfections = PERFECT
     kp: bool = False
     agent: str = "brain"
     extra_networks: tuple[str, ...] = ()
