@@ -14,7 +14,7 @@ from typing import Literal
 
 from core.brain.catalog import AssociationSpec, Catalog, load_catalog, sensor_definitions
 from core.brain.network import BehaviourNetwork
-from core.conditions import Condition
+from core.conditions import START_SETS, Condition, Start, with_start
 from core.errors import UnknownNameError
 from core.sim.world import WorldConfig
 from core.worlds import default_world, load_world
@@ -50,11 +50,15 @@ class Setup:
         signal: ``learned``, as the condition has it, or ``given``: the signal's correct
             responses added (locked) and the signal taken out of what is learned, so that
             success measures the obstacle alone.
+        start: what every condition's robot starts from: its own knowledge ("", the
+            default), ``table1`` or ``design`` (kp's; `core.conditions.with_start`), so
+            that methods are compared from equal starting knowledge.
     """
 
     world: str = ""
     sensors: str = ""
     signal: SignalMode = "learned"
+    start: Start = ""
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNAL_MODES:
@@ -65,6 +69,9 @@ class Setup:
         if self.sensors and self.sensors not in sensor_definitions():
             known = ", ".join(sensor_definitions())
             raise UnknownNameError(f"unknown sensor definition {self.sensors!r} (known: {known})")
+        if self.start and self.start not in START_SETS:
+            known = ", ".join(START_SETS)
+            raise UnknownNameError(f"unknown start {self.start!r} (known: {known})")
 
     @property
     def world_name(self) -> str:
@@ -90,6 +97,7 @@ class Setup:
 
     def condition(self, condition: Condition) -> Condition:
         """`condition` as it runs in this setup."""
+        condition = with_start(condition, self.start)
         if self.signal == "given":
             return replace(
                 condition,

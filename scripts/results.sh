@@ -39,6 +39,8 @@ run classic-obstacle experiment --conditions "$ALL" --world classic --signal giv
     --out docs/results/classic-obstacle
 run classic-full-task experiment --conditions "$ALL" --world classic "${COMMON[@]}" \
     --out docs/results/classic-full-task
+run teachers teachers --signal given "${COMMON[@]}" --out docs/results/teachers
+run equal-start equal-start --signal given "${COMMON[@]}" --out docs/results/equal-start
 run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid --sensors paper \
     --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then
