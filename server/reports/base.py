@@ -129,8 +129,15 @@ def write_summary(
     return paths
 
 
-HEAVY = ("success_curve", "success_curve_ci95", "success_by_seed", "correctness")
-"""A cell's per-episode and per-seed figures, left out of a study's summary.json."""
+HEAVY = (
+    "success_curve",
+    "success_curve_ci95",
+    "success_by_seed",
+    "correctness",
+    "camera_reliability",
+)
+"""A cell's per-episode and per-pair figures, left out of a study's summary.json (an
+experiment's report keeps them: `srlab equal-start` writes one per start)."""
 
 
 def study_document(
