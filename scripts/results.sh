@@ -55,6 +55,8 @@ run classic-full-task experiment --conditions "$ALL" --world classic "${COMMON[@
 # The paper's Table II: innate knowledge, the signal not given, 20 seeds x 250 episodes.
 run table2 experiment --conditions innate --seeds 20 --episodes 250 --jobs "$JOBS" --quiet \
     --out docs/results/table2
+run teachers teachers --signal given "${COMMON[@]}" --out docs/results/teachers
+run equal-start equal-start --signal given "${COMMON[@]}" --out docs/results/equal-start
 run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid --sensors paper \
     --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
 run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \

@@ -69,8 +69,9 @@ def head(cells: Sequence[str]) -> list[str]:
 
 
 def setup_params(setup: Setup) -> dict[str, str]:
-    """The setup as a report's parameters."""
-    return {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
+    """The setup as a report's parameters (its start only when one was chosen)."""
+    params = {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
+    return params | ({"start": setup.start} if setup.start else {})
 
 
 def first_line(error: str | None) -> str:
@@ -141,3 +142,34 @@ def write_summary(
     paths[1].write_text(markdown)
     write_runs(paths[2], results, params=params)
     return paths
+
+
+HEAVY = (
+    "success_curve",
+    "success_curve_ci95",
+    "success_by_seed",
+    "correctness",
+    "camera_reliability",
+)
+"""A cell's per-episode and per-pair figures, left out of a study's summary.json (an
+experiment's report keeps them: `srlab equal-start` writes one per start)."""
+
+
+def study_document(
+    params: dict[str, Any], summary: dict[str, Any], results: Sequence[TaskResult]
+) -> dict[str, Any]:
+    """A study's summary.json: its parameters, its figures, each cell's, and what failed."""
+    return {
+        "params": params,
+        **{k: v for k, v in summary.items() if k != "cells"},
+        "cells": {
+            name: {k: v for k, v in s.items() if k not in HEAVY}
+            for name, s in summary["cells"].items()
+        },
+        "failed": [
+            {"condition": r.task.condition, "params": dict(r.task.params),
+             "start": r.task.setup.start, "seed": r.task.seed, "error": r.error}
+            for r in results
+            if not r.ok
+        ],
+    }  # fmt: skip

@@ -222,6 +222,8 @@ def _points(stat: dict[str, float] | None) -> str:
 
 
 def _setup_line(params: dict[str, Any]) -> str:
+    start = {"table1": "Table I", "design": "kp's design"}.get(params.get("start", ""))
+    teacher = params.get("teacher")
     return (
         f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
         f"signal {params.get('signal', 'learned')}"
@@ -229,6 +231,12 @@ def _setup_line(params: dict[str, Any]) -> str:
             " (its correct responses given to every condition, so success measures the obstacle)."
             if params.get("signal") == "given"
             else " (learned as each condition learns)."
+        )
+        + (f" Every condition's robot starts from {start} (--start)." if start else "")
+        + (
+            " rp's teacher: " + ", ".join(f"{k} {v:g}" for k, v in teacher.items()) + "."
+            if teacher
+            else ""
         )
     )
 
@@ -596,13 +604,14 @@ def summary_markdown(
     params: dict[str, Any],
     failed: Sequence[TaskResult],
     declared: Sequence[dict[str, Any]] = (),
+    title: str = "srlab experiment",
 ) -> str:
-    """The experiment's summary as readable tables.
+    """The experiment's summary as readable tables, under `title`.
 
     `declared` holds the pre-declared comparisons (`core.analysis.declared_comparisons`).
     """
     lines = [
-        "# srlab experiment",
+        f"# {title}",
         "",
         f"`{params['command']}`",
         "",
@@ -647,8 +656,9 @@ def write_report(
     summary: dict[str, Any],
     catalog: Catalog,
     params: dict[str, Any],
+    title: str = "srlab experiment",
 ) -> list[Path]:
-    """Write every output file into `out`; returns their paths."""
+    """Write every output file into `out` (summary.md under `title`); returns their paths."""
     failed = [r for r in results if not r.ok]
     doc = {
         "params": params,
@@ -668,7 +678,7 @@ def write_report(
     pairs = [(str(a), str(b)) for a, b in params.get("declared") or DECLARED]
     declared = declared_comparisons(summary, pairs)
     doc["declared"] = declared
-    markdown = summary_markdown(summary, catalog, params, failed, declared)
+    markdown = summary_markdown(summary, catalog, params, failed, declared, title)
     paths = write_summary(out, doc, markdown, results)
     curves = out / "learning_curves.png"
     plot_learning_curves(curves, summary)
