@@ -1,34 +1,33 @@
-"""viser's own server, which only the gate may reach.
+"""viser's own port: it answers the gate's relays and nothing else.
 
-viser listens on an ephemeral loopback port behind the gate (`server.viewer.gate`). A
-browser can reach any loopback port: a page of another loopback origin found viser's by
-scanning (a few thousand ports a second) and, past the gate, opened viser's websocket,
-rewarded runs and re-paced them. So viser's server answers nobody but the gate.
+viser (1.1) listens on TCP, on an ephemeral loopback port behind the gate, and a page in a
+browser on this machine can find that port by scanning (about 40 s for the whole
+ephemeral range) and open viser's websocket past the gate's Host and Origin checks. viser
+can listen nowhere else and has no hook on its handshake, so srlab puts one on the
+`websockets` server viser serves with: that `Server` reads its `process_request` as each
+connection's handler starts, and `guard` puts a check in front of viser's own there. A
+connection whose far end is not one of the gate's live connections to viser (the gate
+records each before it sends a byte) gets 403; then a foreign Host gets 400 and a
+websocket from another site 403, the gate's rule once more; only then does viser answer.
 
-viser (1.1) serves its page and its websocket with one `websockets` server whose
-`process_request` is viser's own file server, and it offers no hook on a request. The
-`websockets` server reads `process_request` from its attribute at every request, so
-`guard` wraps it there, on viser's event loop, before the gate opens: a request whose
-connection does not come from one of the gate's live relays (`admits`, by the address the
-relay connects from) gets 403, whatever it asks; a Host the service does not answer to
-gets 400 and a websocket from another site 403, as at the gate (defence in depth: the gate
-has refused those already). A viser whose server cannot be found so is refused at start:
-the 3D view does not run unguarded.
+viser keeps that `Server` in no attribute: its `start_server` coroutine holds it while it
+serves, suspended on viser's loop. `guard` looks there, on viser's loop, for a value of
+websockets' `Server` type (not a name), wraps its `process_request` and closes every
+connection made before (their handlers read the unwrapped one). A viser that keeps it
+elsewhere gets `UnguardedViewError`: the service does not serve a 3D view it cannot guard.
 
-`quiet_start` keeps viser's address out of the log: viser prints a banner with its URL and
-`websockets` logs "server listening on" it; only the gate's port is anybody's business.
+The port is not printed either (viser's start-up panel, websockets' "server listening"
+line): `quietly` keeps both out of the service's output.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import inspect
 import json
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from http import HTTPStatus
-from typing import Any
 
 import rich
 import viser
@@ -37,151 +36,143 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from server.guard import SitePolicy
-from server.viewer.gate import Peer
-from server.viewer.gate import refusal as site_refusal
+from server.viewer.gate import Peer, Relay, refusal
 
 log = logging.getLogger("srlab.viewer")
-GUARD_TIMEOUT_S = 30.0
-"""How long `guard` waits for viser's event loop (a bound for a hung viser)."""
+
+FIND_S = 30.0
+"""A bound for viser's loop to run `guard`'s look (it is idle at start-up)."""
+NOT_THE_GATE = (
+    "this port answers the 3D view's gate only: open the view on the view's own port "
+    "(GET /api/health names it as viser_port)"
+)
+
+ProcessRequest = Callable[[ServerConnection, Request], Awaitable[Response | None] | Response | None]
 
 
-class UnguardedViewerError(RuntimeError):
-    """viser's server could not be guarded: the 3D view must not start."""
+class UnguardedViewError(RuntimeError):
+    """viser's websocket server is not where srlab can guard it."""
 
 
-def peer_of(connection: ServerConnection) -> Peer | None:
-    """The address a connection comes from, as (host, port), if it is a TCP one."""
-    address = connection.remote_address
-    if not isinstance(address, tuple) or len(address) < 2:
-        return None
-    return str(address[0]), int(address[1])
+class Checked:
+    """viser's `process_request` behind the gate-only check (`original` is viser's own)."""
+
+    def __init__(
+        self,
+        original: ProcessRequest | None,
+        relay: Callable[[Peer], Relay | None],
+        policy: SitePolicy,
+    ) -> None:
+        self.original = original
+        self.relay = relay
+        self.policy = policy
+        self.refused = 0
+        """Requests refused so far (tests)."""
+
+    def __call__(
+        self, connection: ServerConnection, request: Request
+    ) -> Awaitable[Response | None] | Response | None:
+        """Refuse what did not come through the gate, then let viser answer."""
+        address = connection.remote_address
+        peer = (str(address[0]), int(address[1])) if isinstance(address, tuple) else None
+        if peer is None or self.relay(peer) is None:
+            return self._refuse(HTTPStatus.FORBIDDEN, NOT_THE_GATE)
+        headers = {k.lower(): v for k, v in request.headers.raw_items()}
+        problem = refusal(headers, self.policy)
+        if problem is not None:
+            return self._refuse(*problem)
+        return None if self.original is None else self.original(connection, request)
+
+    def _refuse(self, status: HTTPStatus, detail: str) -> Response:
+        self.refused += 1
+        log.warning("the 3D view's server refused a request: %s", detail)
+        body = json.dumps({"detail": detail}).encode()
+        headers = Headers(
+            [
+                ("Content-Type", "application/json"),
+                ("Content-Length", str(len(body))),
+                ("Connection", "close"),
+            ]
+        )
+        return Response(status.value, status.phrase, headers, body)
 
 
-def refusal(
-    peer: Peer | None, headers: dict[str, str], admits: Callable[[Peer], bool], policy: SitePolicy
-) -> tuple[HTTPStatus, str] | None:
-    """Why viser's server refuses a request from `peer` with these headers, or None."""
-    if peer is None or not admits(peer):
-        return HTTPStatus.FORBIDDEN, "the 3D view is served on its own port only"
-    return site_refusal(headers, policy)
-
-
-def _answer(status: HTTPStatus, detail: str) -> Response:
-    body = json.dumps({"detail": detail}).encode()
-    headers = Headers(
-        [
-            ("Content-Type", "application/json"),
-            ("Content-Length", str(len(body))),
-            ("Connection", "close"),
-        ]
-    )
-    return Response(status.value, status.phrase, headers, body)
-
-
-def guarded(
-    inner: Callable[[ServerConnection, Request], Any] | None,
-    admits: Callable[[Peer], bool],
-    policy: SitePolicy,
-) -> Callable[[ServerConnection, Request], Any]:
-    """`inner` (viser's `process_request`, or None) behind the checks of `refusal`."""
-
-    async def process_request(connection: ServerConnection, request: Request) -> Any:
-        headers = {name.lower(): value for name, value in request.headers.raw_items()}
-        refused = refusal(peer_of(connection), headers, admits, policy)
-        if refused is not None:
-            status, detail = refused
-            log.warning("viser's server refused a request: %s", detail)
-            return _answer(status, detail)
-        if inner is None:
-            return None
-        answer = inner(connection, request)
-        return await answer if inspect.isawaitable(answer) else answer
-
-    process_request.srlab_inner = inner  # type: ignore[attr-defined]
-    return process_request
-
-
-def _servers_of(coroutine: object) -> Iterator[Server]:
-    """The `websockets` servers held by a suspended coroutine or those it awaits."""
-    while coroutine is not None:
-        frame = getattr(coroutine, "cr_frame", None)
-        if frame is not None:
-            for value in frame.f_locals.values():
-                if isinstance(value, Server):
-                    yield value
-        coroutine = getattr(coroutine, "cr_await", None)
-
-
-def websockets_server(port: int) -> Server:
-    """The `websockets` server viser listens with on `port`; call on viser's event loop.
-
-    viser keeps it only in a local of the task that serves (`async with serve(...) as
-    server: await stop.wait()`): it is found there, by type and by the port it listens on.
-    """
+def _servers() -> list[Server]:
+    """The websockets servers the tasks of the running loop hold (run on viser's loop)."""
+    servers: list[Server] = []
     for task in asyncio.all_tasks():
-        for server in _servers_of(task.get_coro()):
-            if any(sock.getsockname()[1] == port for sock in server.sockets):
-                return server
-    raise UnguardedViewerError(
-        f"viser {viser.__version__}'s server on port {port} was not found, so it could not "
-        "be limited to the 3D view's gate; run with SRLAB_VISER=false, or a viser srlab knows"
-    )
+        frame = getattr(task.get_coro(), "cr_frame", None)
+        if frame is not None:
+            servers += [v for v in frame.f_locals.values() if isinstance(v, Server)]
+    return servers
 
 
-def guard(server: viser.ViserServer, admits: Callable[[Peer], bool], policy: SitePolicy) -> None:
-    """Let only connections `admits` reach viser's server; close any already open.
+async def _install(relay: Callable[[Peer], Relay | None], policy: SitePolicy) -> int:
+    """On viser's loop: guard every websockets `Server` its tasks hold; how many there are."""
+    servers = _servers()
+    for server in servers:
+        if not isinstance(server.process_request, Checked):
+            server.process_request = Checked(server.process_request, relay, policy)
+        # Each connection's handler took `process_request` as it started: one made before
+        # (nobody could know the port yet, but nothing says so) goes, viewer or not.
+        handlers: dict[ServerConnection, object] = getattr(server, "handlers", {})
+        early = list(handlers)
+        for connection in early:
+            connection.transport.abort()
+        if early:
+            log.warning("the 3D view closed %d connection(s) made before its gate", len(early))
+    return len(servers)
 
-    Blocking: it waits for viser's event loop. Call it before the gate opens.
+
+async def guard(
+    server: viser.ViserServer, relay: Callable[[Peer], Relay | None], policy: SitePolicy
+) -> None:
+    """Make `server` answer only connections `relay` knows, with a Host and Origin `policy` takes.
 
     Raises:
-        UnguardedViewerError: viser's server could not be found or guarded.
+        UnguardedViewError: this viser's websocket server was not found.
     """
-    infra = server._websock_server
-    loop = getattr(infra, "_background_event_loop", None)
-    if not isinstance(loop, asyncio.AbstractEventLoop):
-        raise UnguardedViewerError(
-            f"viser {viser.__version__} runs no event loop srlab can reach, so its server "
-            "could not be limited to the 3D view's gate; run with SRLAB_VISER=false"
+    found = asyncio.run_coroutine_threadsafe(_install(relay, policy), server.get_event_loop())
+    async with asyncio.timeout(FIND_S):
+        count = await asyncio.wrap_future(found)
+    if count == 0:
+        raise UnguardedViewError(
+            f"viser {viser.__version__} keeps its websocket server where srlab cannot guard "
+            "it, and any page on this machine could then reach the 3D view past its gate: "
+            "install the viser that pyproject.toml names, or set SRLAB_VISER=false"
         )
 
-    async def install() -> None:
-        found = websockets_server(server.get_port())
-        if not hasattr(found.process_request, "srlab_inner"):
-            found.process_request = guarded(found.process_request, admits, policy)
 
-    asyncio.run_coroutine_threadsafe(install(), loop).result(GUARD_TIMEOUT_S)
-    # Nobody but a scanner can have connected before the guard: the gate is not open yet.
-    infra.disconnect_all_clients()
+def websocket_servers(server: viser.ViserServer) -> list[Server]:
+    """The websockets servers `server` serves with (tests; blocking, not on viser's loop)."""
 
+    async def look() -> list[Server]:
+        return _servers()
 
-def drop(server: viser.ViserServer, client_id: int) -> None:
-    """Close client `client_id`'s websocket (from any thread but viser's)."""
-    infra = server._websock_server
-    connection = infra._live_connections.get(client_id)
-    loop = getattr(infra, "_background_event_loop", None)
-    if connection is None or not isinstance(loop, asyncio.AbstractEventLoop):
-        return
-    with contextlib.suppress(RuntimeError):  # viser's loop closed: the socket is gone too
-        asyncio.run_coroutine_threadsafe(connection.close(1008, "not through the gate"), loop)
+    return asyncio.run_coroutine_threadsafe(look(), server.get_event_loop()).result(FIND_S)
 
 
-class _NotListening(logging.Filter):
-    """Drops `websockets`' "server listening on" line: viser's address is nobody's business."""
+class ListeningLine(logging.Filter):
+    """On websockets' server logger: drops the line that names viser's port."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith("server listening on")
+        """False for "server listening on ...", else True."""
+        return record.msg != "server listening on %s"
 
 
 @contextlib.contextmanager
-def quiet_start() -> Iterator[None]:
-    """Start viser in this block: its banner and its listening line say nothing.
-
-    viser prints its banner with `rich.print` on the thread that makes the server (this
-    one): a capture of rich's console is this thread's only. The log filter stays on
-    `websockets.server`'s logger, where only viser's server logs.
-    """
-    logger = logging.getLogger("websockets.server")
-    if not any(isinstance(f, _NotListening) for f in logger.filters):
-        logger.addFilter(_NotListening())
-    with rich.get_console().capture():
+def quietly() -> Iterator[None]:
+    """Start viser without printing its port (its panel on stdout, websockets' log line)."""
+    websockets_log = logging.getLogger("websockets.server")
+    if not any(isinstance(f, ListeningLine) for f in websockets_log.filters):
+        websockets_log.addFilter(ListeningLine())
+    console = rich.get_console()
+    before = console.quiet
+    console.quiet = True
+    try:
         yield
+    finally:
+        console.quiet = before
+
+
+__all__ = ["Checked", "UnguardedViewError", "guard", "quietly", "websocket_servers"]
