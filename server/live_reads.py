@@ -244,6 +244,7 @@ def _kp_live(run_id: int, view: RunView, kp: KnowledgePropagation) -> KpPublic:
         percepts=percepts,
         associations=associations,
         count=len(associations),
+        insert_threshold=kp.config.insert_threshold,
     )
 
 

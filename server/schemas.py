@@ -786,3 +786,6 @@ class KpPublic(BaseModel):
     percepts: list[KpPerceptPublic] = Field(default_factory=list)
     associations: list[KpAssociationPublic] = Field(default_factory=list)
     count: int = 0
+    insert_threshold: float | None = Field(
+        None, description="the RLTM reliability at which a KP pair joins the behaviour network"
+    )

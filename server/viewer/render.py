@@ -233,7 +233,8 @@ class Renderer:
             if isinstance(self.server, viser.ViserServer)
             else self.server.camera
         )
-        camera.position = (cx, cy - 0.8 * (oy1 - oy0) - 0.4, 0.7 * (ox1 - ox0))
+        # Far enough that the whole track fits the canvas beside the docked panel at 1024 px.
+        camera.position = (cx, cy - 1.0 * (oy1 - oy0) - 0.5, 0.9 * (ox1 - ox0))
         camera.look_at = (cx, cy - 0.1, 0.0)
         sc.add_box(
             "/ground",
@@ -359,6 +360,9 @@ class Renderer:
         # Before the inputs exist: a socket may send values as soon as it learns their ids.
         guard_panel(gui, lambda problem: post(ShowNotice(f"**Refused:** {problem}")))
         gui.configure_theme(show_share_button=False, control_width="medium")
+        # Docked, the panel takes its own strip and the canvas the rest: floating over the
+        # canvas, it covered the track's right side (and the robot there) at 1024 px.
+        gui.main_panel.dock_right()
         gui.set_panel_label("srlab 3D view")
         self._header = gui.add_markdown("**srlab**: waiting for a run")
         self._runs = gui.add_dropdown("Run", (NO_RUNS,))

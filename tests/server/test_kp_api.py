@@ -10,6 +10,8 @@ import httpx
 import pytest
 from apphelpers import client_for, create, settings_for
 
+from core.brain.propagation import KpConfig
+
 pytestmark = pytest.mark.anyio
 HANG_GUARD_S = 300
 """Not a timing: how long a busy machine may take before the test is called hung."""
@@ -36,6 +38,7 @@ async def test_get_run_kp_shows_provenance_of_a_live_kp_run(tmp_path: Path) -> N
         body = (await client.get(f"/api/runs/{run['id']}/kp")).json()
 
         assert (body["kp"], body["live"], body["condition"]) == (True, True, "kp")
+        assert body["insert_threshold"] == KpConfig().insert_threshold
         assert body["tick"] >= 0 and body["window_ticks"] > 0
         assert {r["sensor"] for r in body["rstm"]} <= {"camera_obstacle"}
         for rstm in body["rstm"]:
@@ -60,6 +63,7 @@ async def test_get_run_kp_shows_provenance_of_a_live_kp_run(tmp_path: Path) -> N
         await client.post(f"/api/runs/{run['id']}/stop")
         stored = (await client.get(f"/api/runs/{run['id']}/kp")).json()
         assert (stored["kp"], stored["live"]) == (True, False)
+        assert stored["insert_threshold"] == KpConfig().insert_threshold
         assert "not running here" in stored["reason"]
         assert any(
             (a["stimulus"], a["behaviour"]) == (assoc["stimulus"], assoc["behaviour"])

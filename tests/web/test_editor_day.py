@@ -185,7 +185,7 @@ def test_run_this_network_and_compare_it_with_an_earlier_version(
     expect(out.locator(".side-a")).to_contain_text(f"{name} v2")
     expect(out.locator(".side-b")).to_contain_text(f"{name} v1")
     expect(out.locator(".side-a")).to_contain_text("2 episodes \u00d7 2 seeds")
-    expect(out.locator(".run-diff")).to_contain_text("A \u2212 B")
+    expect(out.locator(".run-diff")).to_contain_text(f"{name} v2 \u2212 {name} v1")
     expect(out.locator(".run-diff")).to_contain_text("paired by seed")
     expect(out.locator("svg.run-curve polyline.line-a")).to_have_attribute("data-points", "2")
     expect(out.locator("svg.run-curve polyline.line-b")).to_have_attribute("data-points", "2")

@@ -69,14 +69,32 @@ def test_a_tab_shows_what_another_tab_saved_without_reloading(
     assert association(server, "Red", "goforward1") and association(server, "Green", "stop")
 
 
+def test_a_redraw_for_a_change_elsewhere_keeps_the_draft_unsaved(
+    server: LiveServer, tabs: tuple[Page, Page]
+) -> None:
+    a, _ = tabs
+    edit(a, "Green", "stop", "Space", "7")  # a draft: nothing saved until Enter
+    expect(a.locator("#draft-note")).to_contain_text("Unsaved: Green → stop")
+    r = server.client.put("/api/networks/tabs/associations/Red/stop", json={"strength": 0.4})
+    assert r.status_code == 200  # another cell, elsewhere: version 2
+    # The poll finds version 2 and redraws the matrix under the draft: the draft stays a
+    # draft, its cell keeps the focus, and nothing of it is written.
+    expect(a.locator("#net-meta")).to_contain_text("version 2")
+    expect(a.locator(cell(a, "Red", "stop"))).to_have_text(".4")
+    expect(a.locator("#draft-note")).to_contain_text("Unsaved: Green → stop")
+    assert association(server, "Green", "stop") is None and version(server) == 2
+    a.keyboard.press("Enter")  # the user's Enter writes it, on top of version 2
+    eventually(lambda: (association(server, "Green", "stop") or {}).get("strength") == 0.7)
+    assert version(server) == 3
+
+
 def test_a_change_to_a_cell_changed_elsewhere_asks_and_reapplies_only_if_told(
     server: LiveServer, tabs: tuple[Page, Page]
 ) -> None:
     a, b = tabs
-    # Tab A asks when it writes its draft: on Enter, or already when its poll redraws the
-    # matrix under the draft (the redraw takes the focus off the cell, which writes the
-    # draft). On a loaded machine the poll can come first, so A's questions are answered
-    # whenever they come, and each is checked after.
+    # Tab A asks when it writes its draft, on Enter (a poll's redraw under the draft keeps
+    # it a draft: test_a_redraw_for_a_change_elsewhere_keeps_the_draft_unsaved). A's
+    # questions are answered whenever they come, and each is checked after.
     asked: list[str] = []
     reapply = False
 

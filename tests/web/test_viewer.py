@@ -51,10 +51,10 @@ def robot_pixels(png: bytes) -> np.ndarray:
     return np.argwhere(red)
 
 
-def open_view(browser: Browser, server: LiveServer) -> Page:
+def open_view(browser: Browser, server: LiveServer, viewport: dict[str, int] = VIEWPORT) -> Page:
     port = server.client.get("/api/health").json()["viser_port"]
     assert isinstance(port, int)
-    page = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+    page = browser.new_page(viewport=viewport)  # type: ignore[arg-type]
     page.set_default_timeout(BROWSER_WAIT_MS)
     page.goto(f"http://127.0.0.1:{port}/")
     page.get_by_text("srlab 3D view").wait_for(timeout=90_000)
@@ -112,6 +112,28 @@ def test_the_view_shows_the_live_robot_and_its_panel_rewards_it(
         assert mine[0]["value"] == 1.0 and mine[0]["source"] == "trainer"
         assert mine[0]["applied"] and mine[0]["credited"] > 0
         page.get_by_text(f"stored as #{mine[0]['id']}").wait_for(timeout=90_000)
+    finally:
+        page.close()
+        api.post(f"/api/runs/{run_id}/stop")
+
+
+def test_at_1024_px_the_panel_docks_beside_the_track(server: LiveServer, browser: Browser) -> None:
+    api = server.client
+    run_id = api.post("/api/runs", json={"condition": "kp", "mode": "realtime", "hz": 5}).json()[
+        "id"
+    ]
+    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    page = open_view(browser, server, {"width": 1024, "height": 700})
+    try:
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
+        canvas = page.evaluate("document.querySelector('canvas').getBoundingClientRect().right")
+        panel = page.get_by_text("srlab 3D view").first.evaluate(
+            "e => e.getBoundingClientRect().left"
+        )
+        # The panel has its own strip: the canvas (and the track in it) ends where it starts.
+        assert canvas <= panel + 1, f"the canvas runs under the panel: {canvas} > {panel}"
+        png, _ = wait_for_robot(page)
+        artifact("viewer-1024.png").write_bytes(png)
     finally:
         page.close()
         api.post(f"/api/runs/{run_id}/stop")

@@ -7,7 +7,7 @@ import { get, getAll, post } from "./api.js";
 import { learningCurve } from "./chart.js";
 import { columns, key, render, rows } from "./matrix.js";
 import { $, $$, attempt, el, fmt, heat, throttle, toast, typing } from "./ui.js";
-import "./view2d.js"; // issue 18 hook: the 2D view listens for srlab:run and srlab:tick
+import "./view2d.js"; // the 2D view listens for srlab:run and srlab:tick
 
 const LIVE = new Set(["running", "paused"]);
 const TICK_HZ = 10;
@@ -16,6 +16,7 @@ const BACKFILL_MS = 1000;
 const TIMELINE_TICKS = 2000;
 const SOURCES = ["trainer", "program", "task"];
 const MINE_KEY = "srlab.mine";
+const LAST_KEY = "srlab.console.run"; // the run this browser's console showed last
 const KEEP_REWARDS = 3000; // the newest rewards the page holds (a fast rp run logs thousands)
 
 const state = {
@@ -72,7 +73,7 @@ export function init(catalog) {
     drawCurve();
     drawTimeline();
   }, 200));
-  // issue 18 hook: the 2D view's controls (pause, resume, step, rate) changed the run.
+  // The 2D view's controls (pause, resume, step, rate) changed the run.
   document.addEventListener("srlab:run-changed", (e) => {
     if (!state.run || e.detail.id !== state.run.id) return;
     showRun(e.detail);
@@ -91,10 +92,22 @@ export async function show(id, health) {
   if ($("#new-run-form").world.options.length < 2) await fillSetup();
   if (!state.conditions.size) await fillConditions();
   await loadRuns();
-  const wanted = id ? Number(id) : state.runs.length ? state.runs[state.runs.length - 1].id : null;
-  await select(wanted);
+  await select(id ? Number(id) : defaultRun());
   clearInterval(state.poll);
   state.poll = setInterval(poll, POLL_MS);
+}
+
+/**
+ * The run the console opens on when the URL names none: the one this browser last
+ * showed, if it is still there; else the newest running or paused run; else the newest.
+ * (The newest run may be an unrelated finished one: an editor comparison's, say.)
+ */
+function defaultRun() {
+  const last = Number(localStorage.getItem(LAST_KEY));
+  if (state.runs.some((r) => r.id === last)) return last;
+  const live = state.runs.filter((r) => LIVE.has(r.status));
+  const pick = live.length ? live : state.runs;
+  return pick.length ? pick[pick.length - 1].id : null;
 }
 
 export function hide() {
@@ -225,6 +238,7 @@ async function select(id) {
     drawRewards();
     return;
   }
+  localStorage.setItem(LAST_KEY, String(id));
   let run;
   try {
     run = await get(`/runs/${id}`);
@@ -255,15 +269,24 @@ async function openView(event) {
 
 function showRun(run) {
   state.run = run;
-  document.dispatchEvent(new CustomEvent("srlab:run", { detail: run })); // issue 18 hook: the 2D view
+  document.dispatchEvent(new CustomEvent("srlab:run", { detail: run })); // the 2D view listens
   const status = run ? run.status : "—";
   const badge = $("#run-status");
   badge.textContent = status;
   badge.className = `badge ${status}`;
+  // One play button at a time: Resume a paused run (from the tick it paused at), Continue
+  // a stopped or interrupted one (from its last stored episode's end), Start a new one.
+  const paused = status === "paused";
+  const going = paused || status === "running"; // Pause's counterpart is Resume
+  $("#run-start").hidden = going;
+  $("#run-resume").hidden = !going;
   $("#run-start").disabled = !run || !["created", "stopped", "interrupted"].includes(status);
   $("#run-start").textContent = run && status !== "created" ? "▶ Continue" : "▶ Start";
+  $("#run-start").title = run && status !== "created"
+    ? "Go on from the end of its last stored episode (the episode it stopped in runs again from its start)"
+    : "Start the run";
   $("#run-pause").disabled = !run || status !== "running";
-  $("#run-resume").disabled = !run || status !== "paused";
+  $("#run-resume").disabled = !run || !paused;
   $("#run-stop").disabled = !run || !LIVE.has(status);
   const canReward = Boolean(run) && status === "running";
   for (const button of $$(".reward-buttons button.reward")) button.disabled = !canReward;
@@ -364,7 +387,7 @@ function resetLive() {
 
 function onTick(t) {
   state.tick = t;
-  document.dispatchEvent(new CustomEvent("srlab:tick", { detail: t })); // issue 18 hook: the 2D view
+  document.dispatchEvent(new CustomEvent("srlab:tick", { detail: t })); // the 2D view listens
   $("#st-episode").textContent = t.episode;
   $("#st-tick").textContent = t.tick;
   const lamp = $("#st-lamp");
@@ -470,7 +493,8 @@ function showEffect(r, kept, previous) {
     pairs.set(k, p);
   }
   const summed = [...pairs.values()].sort((a, b) => Math.abs(b.total) - Math.abs(a.total));
-  const signed = (v) => `${v >= 0 ? "+" : "−"}${fmt(Math.abs(v), 3)}`;
+  // A credit that changed nothing (a punishment of a pair at 0 stays at 0) has no sign.
+  const signed = (v) => (Math.abs(v) < 5e-4 ? "0.000" : `${v > 0 ? "+" : "−"}${fmt(Math.abs(v), 3)}`);
   const summary = el("table", { class: "pairs" },
     el("thead", {}, el("tr", {}, el("th", { text: "S → R" }), el("th", { text: "records" }), el("th", { text: "credit" }))),
     el("tbody", {}, summed.map((p) => el("tr", {
@@ -478,7 +502,7 @@ function showEffect(r, kept, previous) {
       title: `${p.pair}: ${p.count} STM record${p.count === 1 ? "" : "s"}, d_k ${p.dmin === p.dmax ? p.dmin : `${p.dmin}–${p.dmax}`}, reliability now ${fmt(p.after, 3)}`,
     },
       el("td", { text: p.pair }), el("td", { text: p.count }),
-      el("td", { class: p.total >= 0 ? "good" : "bad", text: signed(p.total) })))));
+      el("td", { class: Math.abs(p.total) < 5e-4 ? "muted" : p.total > 0 ? "good" : "bad", text: signed(p.total), title: Math.abs(p.total) < 5e-4 ? "no change: the reliability was already at its bound" : undefined })))));
   const partial = r.credited > r.credits.length ? ` (the first ${r.credits.length} of ${r.credited})` : "";
   const raw = el("details", { class: "raw" },
     el("summary", { text: `the ${r.credits.length} raw STM rows${partial}` }),

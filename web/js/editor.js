@@ -742,8 +742,11 @@ async function onCreate(event) {
   const body = { name: form.name.value.trim(), base: form.base.value || null, description: form.description.value };
   const created = await attempt(() => post("/networks", body), `Creating ${body.name}`);
   if (!created) return; // the form keeps what was typed
-  form.name.value = "";
-  form.description.value = "";
+  // reset(), not emptied fields: an emptied required field the user typed in is
+  // :user-invalid, and the Name field showed red after a Create that worked.
+  const base = form.base.value;
+  form.reset();
+  form.base.value = base;
   toast(`Created ${created.name}.`, "ok");
   location.hash = `#/editor/${seg(created.name)}`;
 }

@@ -224,15 +224,26 @@ function render() {
   }
   if (stats && stats.diff) {
     const d = stats.diff;
+    const [a, b] = batch.sides;
     parts.push(el("div", { class: "run-diff" },
-      el("b", { text: "A − B: " }),
+      el("b", { text: `${a.label} − ${b.label}: ` }),
       el("span", { class: "diff-value", text: interval(d, true) }),
       el("span", { class: "muted small", text: d.mean === null ? " (no episode yet)"
         : d.low === null ? " a plain difference: one seed gives no interval, run 2 or more to get one"
-          : ` paired by seed (95% Student-t CI), sign-flip p = ${stats.p === null ? "—" : stats.p.toFixed(2)}${stats.complete ? "" : "; so far"}` })));
+          : ` paired by seed (95% Student-t CI), sign-flip p = ${stats.p === null ? "—" : stats.p.toFixed(2)}${stats.complete ? "" : "; so far"}${floorNote(d.n)}` })));
   }
   parts.push(curve(batch));
   out.replaceChildren(...parts);
+}
+
+/**
+ * With n seeds the two-sided sign-flip test's p is at least 2 / 2^n (every seed's
+ * difference with the same sign): said when that floor keeps p above 0.05.
+ */
+function floorNote(n) {
+  if (!n) return "";
+  const floor = 2 / 2 ** n;
+  return floor > 0.05 ? `; with ${n} seed${n > 1 ? "s" : ""} p cannot go below ${floor.toFixed(n > 3 ? 3 : 2)}: run ${Math.ceil(Math.log2(2 / 0.05))} or more to test at 5%` : "";
 }
 
 function causes(side) {

@@ -121,7 +121,7 @@ function provenanceBlock(p) {
         ` — reward after tick ${p.after_tick}.`)));
 }
 
-function associationBlock(a, live, open) {
+function associationBlock(a, live, open, threshold) {
   const key = `${a.stimulus} -> ${a.behaviour}`;
   const latest = a.provenance[a.provenance.length - 1];
   const runs = a.runs.slice(-SHOWN_RUNS).map((r) => (r.first_tick === r.last_tick ? `${r.first_tick}` : `${r.first_tick}–${r.last_tick}`));
@@ -129,7 +129,9 @@ function associationBlock(a, live, open) {
     el("summary", {},
       el("strong", { text: `${a.stimulus} → ${a.behaviour}` }),
       ` RLTM ${fmt(a.reliability)}`,
-      a.in_network ? el("span", { class: "badge kp-in", text: "in network" }) : el("span", { class: "badge muted", text: "below threshold" }),
+      a.in_network
+        ? el("span", { class: "badge kp-in", text: "in network", title: threshold === null || threshold === undefined ? undefined : `its RLTM reached the threshold ${fmt(threshold)}` })
+        : el("span", { class: "badge muted", text: threshold === null || threshold === undefined ? "below threshold" : `below threshold ${fmt(threshold)}` }),
       latest ? ` · ${latest.resolution} · ${latest.sources.length} source(s)` : live ? " · made before this engine started" : "",
       a.ran_ticks ? ` · ran ${a.ran_ticks} ticks` : ""),
     latest ? provenanceBlock(latest) : el("p", { class: "muted small", text: live ? "Its provenance was kept by an earlier engine only." : "Its provenance is kept while the run runs (see above)." }),
@@ -154,7 +156,7 @@ function render(id, body) {
   if (body.kp) {
     parts.push(el("h3", { text: `Associations KP made (${body.count})` }));
     parts.push(body.associations.length
-      ? el("div", { class: "kp-assocs" }, body.associations.map((a) => associationBlock(a, body.live, open)))
+      ? el("div", { class: "kp-assocs" }, body.associations.map((a) => associationBlock(a, body.live, open, body.insert_threshold)))
       : el("p", { class: "muted small", text: "None yet: KP reasons when a reward arrives after sonar responses to a camera stimulus." }));
   }
   box.replaceChildren(...parts);

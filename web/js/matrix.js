@@ -110,8 +110,16 @@ export function render(container, { groups, cols, cell, selected, readonly = fal
     if (first) first.tabIndex = 0;
   }
   const scroll = [container.scrollLeft, container.scrollTop];
+  // A redraw keeps the focus where it was: a cell that had it gets it back at once, so a
+  // redraw (a poll finding a change made elsewhere) is not the user leaving the cell.
+  const focused = container.contains(document.activeElement) ? document.activeElement : null;
+  const at = focused && focused.matches("td.c") ? focused.dataset : null;
   container.replaceChildren(table);
   [container.scrollLeft, container.scrollTop] = scroll;
+  if (at) {
+    const again = table.querySelector(`td.c[data-s="${CSS.escape(at.s)}"][data-b="${CSS.escape(at.b)}"]`);
+    if (again) again.focus({ preventScroll: true });
+  }
   return table;
 }
 

@@ -8,6 +8,7 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
 from core.conditions import CONDITIONS
+from core.params import applicable, configure
 from core.ports import RunQueries
 from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
@@ -74,6 +75,7 @@ async def get_run_kp(
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:
         return not_kp(run_id, run.spec.condition, live=False)
+    _, config = configure(condition, applicable(condition, run.spec.params))
     rltm = await io(store.rltm, run_id)
     network = {
         (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"
@@ -102,4 +104,5 @@ async def get_run_kp(
         ),
         associations=associations,
         count=len(associations),
+        insert_threshold=config.kp.insert_threshold,
     )
