@@ -184,6 +184,11 @@ PARAMETERS: dict[str, Parameter] = {
             "bool", 0.0, 1.0, True, _kp, "kp",
         ),
         Parameter(
+            "kp_failure_penalty",
+            "a failed episode punishes KP's RLTM by this reward's size (default 0: never)",
+            "float", 0.0, 1.0, True, _kp, "kp",
+        ),
+        Parameter(
             "alpha",
             "Q(lambda)'s step size (default 0.3)",
             "float", 0.0, 1.0, True, _qlambda, "qlambda",
@@ -277,6 +282,9 @@ def configure(
         )
     if "kp_window" in values:
         config = replace(config, kp=replace(config.kp, window_ticks=int(values["kp_window"])))
+    if "kp_failure_penalty" in values:
+        penalty = float(values["kp_failure_penalty"])
+        config = replace(config, kp=replace(config.kp, failure_penalty=penalty))
     return condition, config
 
 

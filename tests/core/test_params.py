@@ -42,6 +42,7 @@ def test_each_brain_parameter_sets_its_field() -> None:
             "insert_threshold": 0.7,
             "kp_window": 35,
             "synthesize": True,
+            "kp_failure_penalty": 0.5,
         },
     )
     assert condition.epsilon == 0.2
@@ -51,7 +52,9 @@ def test_each_brain_parameter_sets_its_field() -> None:
     assert config.learning.insert_threshold == config.kp.insert_threshold == 0.7
     assert config.kp.window_ticks == 35
     assert config.kp.synthesize is True
+    assert config.kp.failure_penalty == 0.5
     default = kp.brain_config()
+    assert default.kp.failure_penalty == 0.0, "a failure punishes nothing unless asked"
     assert config.selection.hysteresis == default.selection.hysteresis
     assert config.learning.stm_capacity == default.learning.stm_capacity
 
@@ -73,7 +76,8 @@ def test_each_qlambda_parameter_sets_its_field() -> None:
         ("rp", {"eta", "epsilon", "threshold", "insert_threshold"}),
         (
             "kp",
-            {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"},
+            {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"}
+            | {"kp_failure_penalty"},
         ),
         ("qlambda", {"epsilon", "alpha", "gamma", "lambda"}),
     ],
