@@ -33,6 +33,8 @@ class Condition:
             designed reflexes it starts from are kept until it has learned better.
         interactive: meant for a person giving rewards at the keyboard (the runs API):
             not one of the experiments' conditions, so never tuned or compared.
+        kp_failure_penalty: with `kp`, the punishment a failed episode gives KP's RLTM
+            (`core.brain.propagation.KpConfig.failure_penalty`; 0: none).
     """
 
     name: str
@@ -48,6 +50,7 @@ class Condition:
     extra_networks: tuple[str, ...] = ()
     hybrid: bool = False
     interactive: bool = False
+    kp_failure_penalty: float = 0.0
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -56,7 +59,12 @@ class Condition:
             learning=LearningConfig(
                 enabled=self.learning, eta=eta, learnable_sensors=self.learnable_sensors
             ),
-            kp=KpConfig(enabled=self.kp, eta=eta, synthesize=synthesize),
+            kp=KpConfig(
+                enabled=self.kp,
+                eta=eta,
+                synthesize=synthesize,
+                failure_penalty=self.kp_failure_penalty,
+            ),
         )
 
 
@@ -114,6 +122,17 @@ CONDITIONS: dict[str, Condition] = {
             epsilon=0.1,
             success_reward=1.0,
             kp=True,
+        ),
+        Condition(
+            "kp-punished",
+            "The kp condition whose RLTM is also punished when an episode fails (a reward of "
+            "-1 to what KP taught and would teach), so a wrong copy can be unlearned.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            kp=True,
+            kp_failure_penalty=1.0,
         ),
         Condition(
             "sonar",

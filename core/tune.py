@@ -56,6 +56,7 @@ GRIDS: dict[str, Axes] = {
     "rp": _BRAIN,
     "sonar": _BRAIN,
     "kp": _KP,
+    "kp-punished": _KP,
     "qlambda": _QLAMBDA,
     "qlambda-hybrid": _QLAMBDA,
     "dqn": _DQN,
