@@ -204,6 +204,11 @@ PARAMETERS: dict[str, Parameter] = {
             "float", 0.0, 1.0, True, _qlambda, "qlambda",
         ),
         Parameter(
+            "epsilon_half_life",
+            "episodes over which Q(lambda)'s exploration rate halves (default 0: constant)",
+            "float", 0.0, 1e6, True, _qlambda, "qlambda",
+        ),
+        Parameter(
             "learning_rate",
             "Adam's step size of DQN and PPO (default 5e-4)",
             "float", 0.0, 1.0, False, _deep, "dqn, ppo",
@@ -303,10 +308,11 @@ def qlambda_config(
         alpha=float(values.get("alpha", base.alpha)),
         gamma=float(values.get("gamma", base.gamma)),
         lam=float(values.get("lambda", base.lam)),
-        epsilon=float(values.get("epsilon", base.epsilon)),
+        epsilon=float(values.get("epsilon", condition.epsilon)),
         prior=condition.network,
         defer=condition.hybrid,
         per_encounter=condition.hybrid,
+        epsilon_half_life=float(values.get("epsilon_half_life", condition.epsilon_half_life)),
     )
 
 

@@ -26,7 +26,13 @@ def test_no_parameters_configure_exactly_the_conditions_defaults(name: str) -> N
     condition = get_condition(name)
     if condition.agent == "qlambda":
         hybrid = condition.hybrid  # defers to kp's design and explores per encounter
-        assert qlambda_config(condition) == QLambdaConfig(defer=hybrid, per_encounter=hybrid)
+        assert qlambda_config(condition) == QLambdaConfig(
+            epsilon=condition.epsilon,
+            defer=hybrid,
+            per_encounter=hybrid,
+            epsilon_half_life=condition.epsilon_half_life,
+        )
+        assert condition.epsilon_half_life == 0.0 or condition.name.endswith("-decay")
     else:
         assert configure(condition) == (condition, condition.brain_config())
 
@@ -79,7 +85,7 @@ def test_each_qlambda_parameter_sets_its_field() -> None:
             {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"}
             | {"kp_failure_penalty"},
         ),
-        ("qlambda", {"epsilon", "alpha", "gamma", "lambda"}),
+        ("qlambda", {"epsilon", "alpha", "gamma", "lambda", "epsilon_half_life"}),
     ],
 )
 def test_which_parameters_each_condition_uses(condition: str, uses: set[str]) -> None:
