@@ -35,6 +35,8 @@ class Condition:
             not one of the experiments' conditions, so never tuned or compared.
         kp_failure_penalty: with `kp`, the punishment a failed episode gives KP's RLTM
             (`core.brain.propagation.KpConfig.failure_penalty`; 0: none).
+        epsilon_half_life: for Q(lambda), episodes over which `epsilon` halves
+            (`core.qlambda.epsilon_at`; 0: it stays constant).
     """
 
     name: str
@@ -51,6 +53,7 @@ class Condition:
     hybrid: bool = False
     interactive: bool = False
     kp_failure_penalty: float = 0.0
+    epsilon_half_life: float = 0.0
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -164,6 +167,28 @@ CONDITIONS: dict[str, Condition] = {
             success_reward=1.0,
             agent="qlambda",
             hybrid=True,
+        ),
+        Condition(
+            "qlambda-decay",
+            "qlambda whose exploration decays: it starts at 0.2 and halves every "
+            "epsilon_half_life episodes, so it stops exploring as KP does once confident.",
+            network="kp",
+            learning=True,
+            epsilon=0.2,
+            success_reward=1.0,
+            agent="qlambda",
+            epsilon_half_life=50.0,
+        ),
+        Condition(
+            "qlambda-hybrid-decay",
+            "qlambda-hybrid whose exploration decays as qlambda-decay's.",
+            network="kp",
+            learning=True,
+            epsilon=0.2,
+            success_reward=1.0,
+            agent="qlambda",
+            hybrid=True,
+            epsilon_half_life=50.0,
         ),
         Condition(
             "dqn",
