@@ -3,6 +3,8 @@
 #
 #   bash scripts/results.sh             # all of them (about 40 min on 2 cores)
 #   bash scripts/results.sh obstacle    # one of them, by name
+#   bash scripts/results.sh exploration # the frozen comparison at 50/200/1,000 episodes:
+#                                       # run only when named (the longest folder, see below)
 #
 # The deep baselines (dqn, ppo) need the srlab[baselines] extra (`make install-baselines`);
 # without it the experiments run without them and say so. Tuning (`srlab tune --write`)
@@ -43,6 +45,21 @@ run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid -
     --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
 run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \
     --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out docs/results/phase
+if [[ -z "$ONLY" || "$ONLY" == wrong-teacher ]]; then
+    echo "results: wrong-teacher" >&2
+    .venv/bin/python scripts/wrong_teacher.py docs/results/wrong-teacher --jobs "$JOBS"
+fi
+if [[ "$ONLY" == exploration ]]; then
+    # 20 seeds x 1,250 training episodes per learner (each budget trains from scratch):
+    # over an hour on 2 cores with dqn and ppo, so only when asked for by name.
+    LEARNERS=kp,sonar,qlambda,qlambda-decay,qlambda-hybrid,qlambda-hybrid-decay
+    if [[ "$ALL" == *dqn* ]]; then
+        LEARNERS="$LEARNERS,dqn,ppo"
+    fi
+    echo "results: exploration" >&2
+    .venv/bin/python scripts/frozen_budgets.py docs/results/exploration --learners "$LEARNERS" \
+        --jobs "$JOBS"
+fi
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then
     echo "results: deep-curve" >&2
     .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 1000 --seeds 3 \
