@@ -72,7 +72,7 @@ def epsilon_at(config: QLambdaConfig, episode: int) -> float:
         raise ValueError("episode must be >= 0")
     if config.epsilon_half_life == 0.0:
         return config.epsilon
-    return config.epsilon * 0.5 ** (episode / config.epsilon_half_life)
+    return config.epsilon * math.pow(0.5, episode / config.epsilon_half_life)
 
 
 class WatkinsQLambda:
