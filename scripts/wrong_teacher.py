@@ -144,7 +144,7 @@ def plot(
             ax.fill_between(x, mean - 1.96 * sem, mean + 1.96 * sem, color=palette[c], alpha=0.15)
         success_axes(ax, criterion=False)
         ax.set_ylabel(f"success, last {WINDOW} episodes")
-        ax.set_title(f"{world}: success while learning (mean over seeds, 95% band)")
+        ax.set_title(f"{world}: success while learning (95% band)")
         ax.legend(loc="lower right")
         ax = axes[w][1]
         for j, stim in enumerate(ever_wrong(marks[world], camera)):
@@ -156,7 +156,7 @@ def plot(
                 ax.plot(x, wrong, style, color=colour, label=f"{stim[9:]}, {condition}")
         success_axes(ax, criterion=False)
         ax.set_ylabel("share of seeds answering wrongly")
-        ax.set_title(f"{world}: wrong answers by the probe (solid kp, dashed kp-punished)")
+        ax.set_title(f"{world}: wrong answers (solid kp, dashed kp-punished)")
         ax.legend(loc="upper left", fontsize="small", ncol=2)
     save(fig, path)
 
