@@ -34,7 +34,8 @@ run() {
 }
 
 ONLY=${1:-}
-run world-check world-check --seeds 20 --episodes 50 --jobs "$JOBS" --out docs/results/world-check
+run world-check world-check --sensors all --seeds 20 --episodes 50 --jobs "$JOBS" --quiet \
+    --out docs/results/world-check
 run obstacle experiment --conditions "$ALL" --signal given "${COMMON[@]}" --out docs/results/obstacle
 run full-task experiment --conditions "$ALL" "${COMMON[@]}" --out docs/results/full-task
 run classic-obstacle experiment --conditions "$ALL" --world classic --signal given "${COMMON[@]}" \
