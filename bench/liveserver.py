@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import ipaddress
 import os
 import secrets
 import signal
@@ -77,9 +78,11 @@ TCP_TABLES = (Path("/proc/net/tcp"), Path("/proc/net/tcp6"))
 LISTEN = "0A"
 
 
-def _listening_sockets(port: int) -> set[str]:
-    """The inodes of the sockets listening on `port`, from the kernel's TCP tables."""
-    inodes: set[str] = set()
+def _listeners() -> Iterator[tuple[str, int, str]]:
+    """Every listening TCP socket in the kernel's tables.
+
+    Each as its address (as the table writes it), its port and its inode.
+    """
     for table in TCP_TABLES:
         try:
             lines = table.read_text().splitlines()[1:]
@@ -87,9 +90,14 @@ def _listening_sockets(port: int) -> set[str]:
             continue
         for line in lines:
             fields = line.split()
-            if fields[3] == LISTEN and int(fields[1].rsplit(":", 1)[1], 16) == port:
-                inodes.add(fields[9])
-    return inodes
+            if fields[3] == LISTEN:
+                address, port = fields[1].rsplit(":", 1)
+                yield address, int(port, 16), fields[9]
+
+
+def _listening_sockets(port: int) -> set[str]:
+    """The inodes of the sockets listening on `port`, from the kernel's TCP tables."""
+    return {inode for _, bound, inode in _listeners() if bound == port}
 
 
 def _family(pid: int) -> set[int]:
@@ -108,6 +116,48 @@ def _family(pid: int) -> set[int]:
         family.add(p)
         todo.extend(children.get(p, ()))
     return family
+
+
+def children(pid: int) -> dict[int, str]:
+    """The processes whose parent is `pid`, with their command lines (a zombie's is '')."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            command = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            found[int(entry)] = command.decode(errors="replace")
+    return found
+
+
+def listening(pid: int) -> set[tuple[str, int]]:
+    """The TCP addresses (host, port) that `pid` and its descendants listen on.
+
+    Read from the kernel's tables (`/proc/net/tcp`, `/proc/net/tcp6`) and the processes'
+    open files: every listening socket they hold, whoever opened it. Empty where those
+    cannot be read (not Linux).
+    """
+    held = {link for p in _family(pid) for link in _links(Path(f"/proc/{p}/fd"))}
+    return {
+        (_address(address), port)
+        for address, port, inode in _listeners()
+        if f"socket:[{inode}]" in held
+    }
+
+
+def _address(hexed: str) -> str:
+    """An address as the kernel's TCP tables write it, in text.
+
+    The tables write it in 32-bit words in the machine's byte order: little-endian, as on
+    every machine srlab runs on.
+    """
+    words = bytes.fromhex(hexed)
+    raw = b"".join(words[i : i + 4][::-1] for i in range(0, len(words), 4))
+    return str(ipaddress.ip_address(raw))
 
 
 def listens_on(pid: int, port: int) -> bool:

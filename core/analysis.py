@@ -1,8 +1,9 @@
 """The analysis of an experiment: what each condition achieved, and how they compare.
 
 A seed is the unit of replication: each figure is computed per seed, then summarised over
-seeds with a 95% bootstrap interval (`core.stats`); comparisons pair seeds, since every
-condition meets the same obstacles and lamp cycles on a seed. Reported per condition:
+seeds with a 95% Student's t interval (`core.stats`, which says why); comparisons pair
+seeds, since every condition meets the same obstacles and lamp cycles on a seed. Reported
+per condition:
 
 - success over fixed horizons (episodes 1-10, 1-50, all) and the per-seed trend;
 - failures by cause; the frozen, held-out evaluation and the camera-only transfer test;
@@ -12,6 +13,9 @@ condition meets the same obstacles and lamp cycles on a seed. Reported per condi
   correct and stays correct);
 - episodes to the success criterion, only beside what a process that learns nothing
   would score on it.
+
+Comparisons: the few declared before running (`DECLARED`, each on all episodes and held
+out) form one family, Holm-corrected; every other pair is exploratory.
 """
 
 from __future__ import annotations
@@ -23,8 +27,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from core.conditions import CONDITIONS, get_condition
+from core.errors import UnknownNameError
 from core.events import Cause, Outcome
-from core.stats import bootstrap_mean, paired_difference
+from core.stats import holm, mean_interval, paired_difference, t_quantile
 
 if TYPE_CHECKING:
     from core.experiment import TaskResult
@@ -37,36 +42,29 @@ CHECKPOINTS = (10, 25, 50)
 NULL_DRAWS = 200
 """Simulated no-learning runs per seed for the criterion's null."""
 
-_T975 = (
-    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
-    2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
-    2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
-)  # fmt: skip
-
 
 def t_quantile_975(df: int) -> float:
-    """Student's t 97.5% quantile for `df` degrees of freedom (1.96 beyond 30)."""
-    if df < 1:
-        return math.nan
-    return _T975[df - 1] if df <= len(_T975) else 1.96
+    """Student's t 97.5% quantile for `df` degrees of freedom (NaN below 1)."""
+    return t_quantile(df, 0.95)
 
 
 def mean_ci(values: Sequence[float]) -> dict[str, float]:
-    """The mean over seeds, its 95% bootstrap interval (`low`, `high`), and `ci95`.
+    """The mean over seeds, its 95% interval (`low`, `high`), and `ci95`.
 
-    `ci95` is the half-width of Student's t interval, kept for the learning curves' bands.
+    The interval is `core.stats.mean_interval`'s (Student's t, clipped to the values'
+    range); `ci95` is the t interval's half-width before clipping.
     """
     n = len(values)
     if n == 0:
         return {"mean": math.nan, "ci95": math.nan, "low": math.nan, "high": math.nan, "n": 0}
     arr = np.asarray(values, dtype=np.float64)
     mean = float(arr.mean())
-    boot = bootstrap_mean(arr.tolist())
+    est = mean_interval(arr.tolist())
     if n == 1:
         return {"mean": mean, "ci95": math.nan, "low": math.nan, "high": math.nan, "n": 1}
     sd = float(arr.std(ddof=1))
     ci = t_quantile_975(n - 1) * sd / math.sqrt(n)
-    return {"mean": mean, "ci95": ci, "low": boot.low, "high": boot.high, "n": n}
+    return {"mean": mean, "ci95": ci, "low": est.low, "high": est.high, "n": n}
 
 
 def episodes_to_criterion(
@@ -315,8 +313,8 @@ def paired_against(
 ) -> dict[str, dict[str, float]]:
     """Each condition's success minus `reference`'s, paired by seed.
 
-    Over the first `horizon` episodes (None: all): the mean difference, its 95% bootstrap
-    interval and the sign-flip p, per condition.
+    Over the first `horizon` episodes (None: all): the mean difference, its 95% interval
+    and the sign-flip p, per condition.
     """
     return {
         name: d
@@ -385,3 +383,70 @@ def paired_table(summary: Mapping[str, Any]) -> dict[str, dict[str, dict[str, fl
             if row:
                 out[f"{a} - {b}"] = row
     return out
+
+
+DECLARED: tuple[tuple[str, str], ...] = (
+    ("kp", "sonar"),
+    ("kp", "rp"),
+    ("kp", "qlambda-hybrid"),
+    ("kp", "dp"),
+)
+"""The comparisons the results' conclusions rest on, declared before any run: what
+propagation adds (its ablation), and kp against the reinforcement program, the strongest
+baseline from kp's design, and direct programming."""
+DECLARED_ON: tuple[tuple[str, int | None, str | None], ...] = (
+    ("all", None, None),
+    ("held-out", None, "frozen_by_seed"),
+)
+"""Each declared comparison is tested on all training episodes and held out, frozen."""
+
+
+def parse_pairs(text: str) -> list[tuple[str, str]]:
+    """Comma-separated comparisons ``a-b`` of known condition names, in order, no repeats.
+
+    Condition names hold hyphens themselves (``kp-qlambda-hybrid`` is kp against
+    qlambda-hybrid), so each comparison is split where both sides name a condition; a
+    comparison that splits no way or more than one way is an error.
+    """
+    pairs: list[tuple[str, str]] = []
+    for item in (t.strip() for t in text.split(",")):
+        if not item:
+            continue
+        splits = [
+            (item[:i], item[i + 1 :])
+            for i, ch in enumerate(item)
+            if ch == "-" and item[:i] in CONDITIONS and item[i + 1 :] in CONDITIONS
+        ]
+        if len(splits) != 1:
+            known = "no" if not splits else "more than one"
+            raise UnknownNameError(
+                f"comparison {item!r}: {known} way to read it as a-b of two conditions "
+                f"(known: {', '.join(CONDITIONS)})"
+            )
+        if splits[0][0] == splits[0][1]:
+            raise UnknownNameError(f"comparison {item!r} compares a condition with itself")
+        if splits[0] not in pairs:
+            pairs.append(splits[0])
+    if not pairs:
+        raise UnknownNameError("no comparison given")
+    return pairs
+
+
+def declared_comparisons(
+    summary: Mapping[str, Any], pairs: Sequence[tuple[str, str]] = DECLARED
+) -> list[dict[str, Any]]:
+    """The declared comparisons, each on `DECLARED_ON`, as one family corrected with Holm.
+
+    Per test: the pair (``a - b``), where (`all` or `held-out`), the paired difference with
+    its interval, its raw sign-flip p and its Holm-adjusted p (`p_holm`) over every test
+    in the family. A pair whose conditions did not both run is left out of the family.
+    """
+    rows: list[dict[str, Any]] = []
+    for a, b in pairs:
+        for label, horizon, held_out in DECLARED_ON:
+            d = paired(summary, a, b, horizon, held_out)
+            if d is not None:
+                rows.append({"pair": f"{a} - {b}", "on": label, **d})
+    for r, q in zip(rows, holm([r["p"] for r in rows]), strict=True):
+        r["p_holm"] = q
+    return rows

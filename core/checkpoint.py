@@ -61,6 +61,8 @@ def export_state(sim: Simulation) -> dict[str, Any]:
         else [[t, s[i], b[j]] for t, i, j in brain.stm],
         "rng": brain.rng.bit_generator.state,
         "ticks_by_origin": dict(sim.ticks_by_origin),
+        # A simulated teacher draws its imperfections from a generator of its own.
+        **({"teacher_rng": sim.teacher.rng.bit_generator.state} if sim.teacher else {}),
     }
 
 
@@ -127,6 +129,8 @@ def restore_simulation(
     except KeyError as e:
         raise CheckpointError(f"the checkpoint names {e} which the catalogue lacks") from e
     brain.rng.bit_generator.state = state["rng"]
+    if sim.teacher is not None and "teacher_rng" in state:
+        sim.teacher.rng.bit_generator.state = state["teacher_rng"]
     sim.episode = int(state["episode"])
     sim.tick_count = int(state["tick"])
     # Absent from checkpoints written before the counts were kept: those start at 0.

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Literal
 
 from core.brain.brain import BrainConfig, LearningConfig
 from core.brain.propagation import KpConfig
 from core.brain.selection import SelectionConfig
 from core.errors import UnknownNameError
+from core.trainer import PERFECT, Imperfections
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,6 +25,9 @@ class Condition:
         success_reward: the delayed reward a successful lap gives (None: none).
         learnable_sensors: the logical sensors whose stimuli are explored and learned.
         trainer: the reinforcement program that rewards responses at once (None: none).
+        teacher: how the program's judgements are given (`core.trainer.Imperfections`): the
+            perfect teacher, at once and always right, unless set (the teacher_*
+            parameters, `srlab experiment --teacher`).
         kp: whether knowledge propagation runs.
         agent: ``brain`` (the paper's architecture), ``qlambda`` (the tabular baseline), or
             ``dqn`` / ``ppo`` (stable-baselines3's, the ``srlab[baselines]`` extra).
@@ -47,6 +52,7 @@ class Condition:
     success_reward: float | None = None
     learnable_sensors: tuple[str, ...] = ("signal", "camera_obstacle")
     trainer: str | None = None
+    teacher: Imperfections = PERFECT
     kp: bool = False
     agent: str = "brain"
     extra_networks: tuple[str, ...] = ()
@@ -92,6 +98,16 @@ CONDITIONS: dict[str, Condition] = {
             "Direct programming: signal and six camera obstacle responses programmed and "
             "locked; R-L, R-M and R-R learned from the delayed reward.",
             network="dp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+        ),
+        Condition(
+            "dp-rare",
+            "Direct programming split as the paper split it: signal and the six left- and "
+            "middle-lane camera obstacle responses programmed and locked; R-L, R-M and R-R "
+            "learned from the delayed reward.",
+            network="dp-rare",
             learning=True,
             epsilon=0.1,
             success_reward=1.0,
@@ -230,6 +246,40 @@ CONDITIONS: dict[str, Condition] = {
         ),
     )
 }
+
+
+Start = Literal["", "table1", "design"]
+"""What a condition's robot starts from: its own start (""), Table I, or kp's design."""
+STARTS: tuple[Start, ...] = ("table1", "design")
+START_SETS: dict[str, str] = {"table1": "innate", "design": "kp"}
+"""The knowledge set of each start: Table I, or kp's design (Table I, lane keeping, sonar)."""
+PROGRAMMED_ON_TABLE_I = ("dp", "dp-rare")
+"""Knowledge sets that program responses on top of Table I (the S-R editor's)."""
+
+
+def with_start(condition: Condition, start: Start) -> Condition:
+    """`condition` with its robot starting from `start` instead of its own knowledge.
+
+    A condition starting from Table I or kp's design starts from the other when told; a
+    DP condition keeps its programmed responses and puts them on top of the start. A
+    condition whose knowledge is neither (the expert's, `unaware`'s) has no start to change.
+    """
+    if not start:
+        return condition
+    if start not in START_SETS:
+        raise UnknownNameError(f"unknown start {start!r} (known: {', '.join(START_SETS)})")
+    base = START_SETS[start]
+    if condition.network in START_SETS.values():
+        return replace(condition, network=base)
+    if condition.network in PROGRAMMED_ON_TABLE_I:
+        if base == START_SETS["table1"]:
+            return condition
+        extra = (condition.network, *condition.extra_networks)
+        return replace(condition, network=base, extra_networks=extra)
+    raise UnknownNameError(
+        f"condition {condition.name!r} starts from {condition.network!r}, which a start "
+        f"does not replace (a start replaces Table I and kp's design)"
+    )
 
 
 DEEP_AGENTS = ("dqn", "ppo")

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import traceback
-from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -26,7 +26,16 @@ from core.brain.network import BehaviourNetwork
 from core.conditions import DEEP_AGENTS, Condition, get_condition
 from core.errors import ExtraMissingError, UnknownNameError
 from core.events import Outcome
-from core.params import Params, baseline_params, configure, qlambda_config, tuned_params
+from core.params import (
+    Params,
+    ParamValue,
+    applicable,
+    baseline_params,
+    configure,
+    normalise,
+    qlambda_config,
+    tuned_params,
+)
 from core.qlambda import WatkinsQLambda, run_qlambda
 from core.runner import EpisodeSummary, run
 from core.setup import Setup
@@ -474,12 +483,15 @@ def run_experiment(
     setup: Setup | None = None,
     eval_episodes: int = 0,
     tuned: bool = False,
+    params: Mapping[str, ParamValue] | None = None,
 ) -> list[TaskResult]:
     """Run every (condition, seed) task on `backend` (default: `jobs` local processes).
 
     With `eval_episodes`, each task ends with a frozen, held-out evaluation of that many
     episodes and the camera-only transfer test (`core.evaluation`). With `tuned`, each
-    condition runs with its tuned parameters (`core/data/tuned.toml`, `srlab tune`).
+    condition runs with its tuned parameters (`core/data/tuned.toml`, `srlab tune`);
+    `params` are set, over those, on every condition that uses them (a teacher's
+    imperfections on rp's, say).
 
     Each task is a pure function of (condition, seed, episodes), so the results are the
     same whatever the backend and `jobs`; they are returned in (condition, seed) order.
@@ -490,12 +502,12 @@ def run_experiment(
         raise ValueError("at least one seed is needed")
     if jobs < 1:
         raise ValueError("jobs must be >= 1")
-    for c in conditions:
-        get_condition(c)
     setup = (setup or Setup()).resolved()
+    for c in conditions:
+        setup.condition(get_condition(c))  # an unknown name, or a start it cannot take
     if eval_episodes < 0:
         raise ValueError("eval_episodes must be >= 0")
-    tasks = experiment_tasks(conditions, seeds, episodes, setup, eval_episodes, tuned)
+    tasks = experiment_tasks(conditions, seeds, episodes, setup, eval_episodes, tuned, params)
     return run_tasks(tasks, backend or LocalBackend(jobs), on_result)
 
 
@@ -506,17 +518,20 @@ def experiment_tasks(
     setup: Setup,
     eval_episodes: int = 0,
     tuned: bool = False,
+    params: Mapping[str, ParamValue] | None = None,
 ) -> list[Task]:
     """The (condition, seed) tasks of an experiment, in that order (see `run_experiment`)."""
     setup = setup.resolved()
+
+    def params_of(c: str) -> Params:
+        base = dict(tuned_params(c)) if tuned else {}
+        return normalise({**base, **dict(applicable(get_condition(c), params or {}))})
+
     return [
-        Task(
-            c, s, episodes, tuned_params(c) if tuned else (), setup=setup,
-            eval_episodes=eval_episodes,
-        )
+        Task(c, s, episodes, params_of(c), setup=setup, eval_episodes=eval_episodes)
         for c in conditions
         for s in seeds
-    ]  # fmt: skip
+    ]
 
 
 __all__ = [

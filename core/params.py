@@ -2,8 +2,10 @@
 
 The brain's conditions take the runs API's learning parameters (eta, epsilon, synthesize)
 and a few more of the memory, selection and KP modules; the Q(lambda) baseline takes its
-own. Each parameter says which conditions it applies to, so a sweep over `eta` runs the
-Q(lambda) condition once instead of once per value.
+own; a condition with a reinforcement program takes its teacher's imperfections
+(``teacher_mistake``..., `core.trainer.Imperfections`). Each parameter says which conditions
+it applies to, so a sweep over `eta` runs the Q(lambda) condition once instead of once per
+value.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from core.brain.brain import BrainConfig
 from core.brain.catalog import data_dir
 from core.conditions import Condition, get_condition
 from core.errors import CatalogError, CoreError, UnknownNameError
+from core.trainer import MAX_DELAY_CV, MAX_DELAY_S, Imperfections
 
 if TYPE_CHECKING:
     from core.qlambda import QLambdaConfig
@@ -58,6 +61,10 @@ def _brain(c: Condition) -> bool:
 
 def _kp(c: Condition) -> bool:
     return c.agent == "brain" and c.kp
+
+
+def _taught(c: Condition) -> bool:
+    return c.agent == "brain" and c.learning and c.trainer is not None
 
 
 def _qlambda(c: Condition) -> bool:
@@ -189,6 +196,36 @@ PARAMETERS: dict[str, Parameter] = {
             "float", 0.0, 1.0, True, _kp, "kp",
         ),
         Parameter(
+            "teacher_mistake",
+            "probability a teacher's judgement has the wrong sign (default 0)",
+            "float", 0.0, 1.0, True, _taught, "rp",
+        ),
+        Parameter(
+            "teacher_skip",
+            "probability a teacher gives no judgement (default 0)",
+            "float", 0.0, 1.0, True, _taught, "rp",
+        ),
+        Parameter(
+            "teacher_delay_s",
+            "a teacher's mean reaction delay in seconds (default 0)",
+            "float", 0.0, MAX_DELAY_S, True, _taught, "rp",
+        ),
+        Parameter(
+            "teacher_delay_cv",
+            "the spread of the delay, its coefficient of variation (default 0.7; 0: fixed)",
+            "float", 0.0, MAX_DELAY_CV, True, _taught, "rp",
+        ),
+        Parameter(
+            "teacher_bias",
+            "probability a deserved penalty is given as a reward (default 0)",
+            "float", 0.0, 1.0, True, _taught, "rp",
+        ),
+        Parameter(
+            "teacher_fatigue",
+            "share of a teacher's feedback rate lost per episode (default 0)",
+            "float", 0.0, 1.0, True, _taught, "rp",
+        ),
+        Parameter(
             "alpha",
             "Q(lambda)'s step size (default 0.3)",
             "float", 0.0, 1.0, True, _qlambda, "qlambda",
@@ -290,7 +327,23 @@ def configure(
     if "kp_failure_penalty" in values:
         penalty = float(values["kp_failure_penalty"])
         config = replace(config, kp=replace(config.kp, failure_penalty=penalty))
+    teacher = {
+        n.removeprefix(TEACHER_PREFIX): float(v)
+        for n, v in values.items()
+        if n.startswith(TEACHER_PREFIX)
+    }
+    if teacher:
+        condition = replace(condition, teacher=replace(condition.teacher, **teacher))
     return condition, config
+
+
+TEACHER_PREFIX = "teacher_"
+"""The teacher's imperfections as parameters: ``teacher_`` and the imperfection's name."""
+
+
+def teacher_params(teacher: Imperfections) -> dict[str, ParamValue]:
+    """A teacher's imperfections as the parameters that set them (none for the perfect one)."""
+    return {f"{TEACHER_PREFIX}{n}": v for n, v in teacher.changed().items()}
 
 
 def qlambda_config(

@@ -14,7 +14,7 @@ from typing import Literal
 
 from core.brain.catalog import AssociationSpec, Catalog, load_catalog, sensor_definitions
 from core.brain.network import BehaviourNetwork
-from core.conditions import Condition
+from core.conditions import START_SETS, Condition, Start, with_start
 from core.errors import UnknownNameError
 from core.sim.world import WorldConfig
 from core.worlds import WorldSettings, default_world, load_world, with_settings
@@ -52,12 +52,16 @@ class Setup:
             success measures the obstacle alone.
         world_settings: settings changed over the world preset, by dotted path (a phase
             diagram's point, `core.phase`); none by default.
+        start: what every condition's robot starts from: its own knowledge ("", the
+            default), ``table1`` or ``design`` (kp's; `core.conditions.with_start`), so
+            that methods are compared from equal starting knowledge.
     """
 
     world: str = ""
     sensors: str = ""
     signal: SignalMode = "learned"
     world_settings: WorldSettings = ()
+    start: Start = ""
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNAL_MODES:
@@ -69,6 +73,9 @@ class Setup:
         if self.sensors and self.sensors not in sensor_definitions():
             known = ", ".join(sensor_definitions())
             raise UnknownNameError(f"unknown sensor definition {self.sensors!r} (known: {known})")
+        if self.start and self.start not in START_SETS:
+            known = ", ".join(START_SETS)
+            raise UnknownNameError(f"unknown start {self.start!r} (known: {known})")
 
     @property
     def world_name(self) -> str:
@@ -94,6 +101,7 @@ class Setup:
 
     def condition(self, condition: Condition) -> Condition:
         """`condition` as it runs in this setup."""
+        condition = with_start(condition, self.start)
         if self.signal == "given":
             return replace(
                 condition,

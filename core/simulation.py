@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import heapq
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -19,7 +20,7 @@ from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied, Rewa
 from core.setup import condition_network
 from core.sim.channels import Channel
 from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
-from core.trainer import ReinforcementProgram, load_trainer
+from core.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)
@@ -111,7 +112,15 @@ class Simulation:
         self.trainer: ReinforcementProgram | None = (
             load_trainer(self.catalog, condition.trainer) if condition.trainer else None
         )
+        self.teacher: Teacher | None = (
+            Teacher(self.trainer, condition.teacher, seed, self.world.config.dt_s)
+            if self.trainer is not None
+            else None
+        )
         self._pending: list[InjectReward] = []
+        self._in_flight: list[tuple[int, int, InjectReward]] = []
+        """The teacher's rewards on their way, a heap by (due boundary, order judged)."""
+        self._judged = 0
         self.end_on_failure = end_on_failure
         self.defer_rewards = defer_rewards
         self.episode = -1
@@ -153,6 +162,7 @@ class Simulation:
         self._cause = None
         self._done = False
         self._pending.clear()
+        self._in_flight.clear()
         self._was_active = frozenset()
         self.met_this_episode = set()
         self._channels = frame.channels.tolist()
@@ -223,17 +233,14 @@ class Simulation:
                 met[s] += 1
                 self.met_this_episode.add(s)
         self._was_active = frozenset(active)
-        if self.trainer is not None:
-            judged = self.trainer.judge(brain.last)
+        if self.teacher is not None:
+            judged = self.teacher.judge(brain.last, self.tick_count, self.episode)
             if judged is not None:
-                r = InjectReward(judged, note=self.trainer.name, source=RewardSource.PROGRAM)
-                if self.defer_rewards:
-                    # Due at the next boundary: the engine's reward task applies it there.
-                    events.append(
-                        RewardDue(self.tick_count + 1, self.episode, r.value, r.source, r.note)
-                    )
-                else:
-                    self._pending.append(r)
+                r = InjectReward(judged.value, note=judged.note, source=RewardSource.PROGRAM)
+                heapq.heappush(self._in_flight, (judged.due, self._judged, r))
+                self._judged += 1
+        if self._in_flight:
+            self._arrive(self.tick_count + 1, events)
         self.world.apply(command)
         frame = self.world.step()
         channels = frame.channels.tolist()
@@ -287,6 +294,10 @@ class Simulation:
         self._snapshot = snap
         if outcome is not None:
             self._done = True
+            if self._in_flight:
+                # Rewards still on their way arrive as the episode ends: the robot stands
+                # still from here, and STM keeps the episode's records until the next one.
+                self._arrive(None, events)
             if self._pending:
                 self._apply_rewards(self._pending, events)
                 self._pending = []
@@ -299,6 +310,22 @@ class Simulation:
                     [InjectReward(reward, note="lap completed", source=RewardSource.TASK)], events
                 )
         return TickResult(snap, tuple(events))
+
+    def _arrive(self, boundary: int | None, events: list[Event]) -> None:
+        """The teacher's rewards due by `boundary` (None: all) arrive at the next boundary.
+
+        Each credits the STM records before the boundary it arrives at, not the tick it
+        judged: a late reward credits what the robot did since as well.
+        """
+        flight = self._in_flight
+        while flight and (boundary is None or flight[0][0] <= boundary):
+            r = heapq.heappop(flight)[2]
+            if self.defer_rewards:
+                # Due at the next boundary: the engine's reward task applies it there.
+                due = RewardDue(self.tick_count + 1, self.episode, r.value, r.source, r.note)
+                events.append(due)
+            else:
+                self._pending.append(r)
 
     def _apply_rewards(self, rewards: Iterable[InjectReward], events: list[Event]) -> None:
         stamp = self.tick_count + 1

@@ -60,6 +60,7 @@ _PPO: Axes = (
 GRIDS: dict[str, Axes] = {
     "delayed": _BRAIN,
     "dp": _BRAIN,
+    "dp-rare": _BRAIN,
     "rp": _BRAIN,
     "sonar": _BRAIN,
     "kp": _KP,

@@ -9,8 +9,8 @@ and no learning anywhere:
 - (c) the expert's camera responses on top of them (`expert`) succeed: >= 95%;
 
 and, as the paper's Table II, (d) Table I's innate knowledge alone, the signal not given
-(`innate`), succeeds in <= 10%. Each figure is a mean over seeds with a 95% bootstrap
-interval; a property holds when its mean is within its bounds.
+(`innate`), succeeds in <= 10%. Each figure is a mean over seeds with its 95% interval
+(`core.stats.mean_interval`); a property holds when its mean is within its bounds.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from core.events import Outcome
 from core.experiment import Backend, LocalBackend, Task, TaskResult, run_tasks
 from core.setup import Setup
-from core.stats import Estimate, bootstrap_mean
+from core.stats import Estimate, mean_interval
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,5 +98,5 @@ def world_check(
                     causes[e.cause.value] = causes.get(e.cause.value, 0.0) + 1.0 / len(
                         r.episodes
                     ) / len(rs)
-        out.append(PropertyResult(p, bootstrap_mean([float(x) for x in rates]), causes))
+        out.append(PropertyResult(p, mean_interval([float(x) for x in rates]), causes))
     return out

@@ -2,9 +2,9 @@
 
 Each learner trains on the same seeds (so on the same obstacles and lamp cycles) for the
 same number of episodes, counted the same way; the curve is the rolling success over the
-last `--window` episodes, the mean over seeds with its 95% bootstrap band
-(`core.stats.bootstrap_mean`). Needs the srlab[baselines] extra (``make
-install-baselines``):
+last `--window` episodes, the mean over seeds with its 95% band (`core.stats.mean_interval`,
+Student's t, clipped to the seeds' range: with 3 seeds that is often the range itself).
+Needs the srlab[baselines] extra (``make install-baselines``):
 
     .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 1000 --seeds 3 \
         --signal given
@@ -37,7 +37,7 @@ from core.events import Outcome
 from core.experiment import Task, parse_conditions, run_task
 from core.params import tuned_params
 from core.setup import SIGNAL_MODES, Setup
-from core.stats import bootstrap_mean
+from core.stats import mean_interval
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # after choosing the headless backend
@@ -86,7 +86,7 @@ def plot(runs: dict[str, list[list[bool]]], window: int, title: str, path: Path)
     fig, ax = plt.subplots(figsize=(9, 5))
     for learner, per_seed in runs.items():
         curves = np.array([rolling(s, window) for s in per_seed])
-        estimates = [bootstrap_mean(curves[:, i].tolist()) for i in range(curves.shape[1])]
+        estimates = [mean_interval(curves[:, i].tolist()) for i in range(curves.shape[1])]
         x = np.arange(1, curves.shape[1] + 1)
         colour = COLOURS.get(learner)
         ax.plot(x, [e.mean for e in estimates], color=colour, label=learner)
@@ -143,7 +143,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     late = min(LATE, args.episodes)
     summary = {}
     for n in learners:
-        est = bootstrap_mean([float(np.mean(s[-late:])) for s in runs[n]])
+        est = mean_interval([float(np.mean(s[-late:])) for s in runs[n]])
         summary[n] = {f"success_last{late}": est.as_dict(), "seconds_per_seed": seconds[n]}
     report = {
         "episodes": args.episodes,

@@ -105,6 +105,7 @@ async def service(
                 limiter=limiter,
                 writable=not settings.writes_need_token,
                 policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
+                max_viewers=settings.viser_max_viewers,
             )
             stack.push_async_callback(viewer.stop)
         yield AppState(

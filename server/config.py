@@ -42,6 +42,9 @@ class Settings(BaseSettings):
         allowed_hosts: Host headers accepted besides loopback names and `host`.
         viser: serve the 3D view (viser) beside the API; false runs without it.
         viser_port: port of the 3D view (on `host`).
+        viser_max_viewers: 3D views open at once (each has a renderer of its own, which
+            the service's process pays for); past it, a new one is refused with 503 and
+            `Retry-After`.
         forwarded_allow_ips: reverse proxies (addresses or networks, "*" for any) trusted to
             name the client in X-Forwarded-For and X-Forwarded-Proto; empty (the default)
             ignores those headers. Behind a proxy, this is what keeps each trainer's reward
@@ -87,6 +90,7 @@ class Settings(BaseSettings):
     allowed_hosts: Annotated[list[str], NoDecode] = Field(default_factory=list)
     viser: bool = True
     viser_port: int = Field(8080, ge=1, le=65535)
+    viser_max_viewers: int = Field(16, ge=1)
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
     store_process: bool = False
     engine_thread: bool = False

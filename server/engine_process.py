@@ -34,6 +34,10 @@ starts a new child (after `RESPAWN_FIRST_S`, then twice as long, at least a seco
 each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and the failed ones
 can be started again from their checkpoints. The new child is started by the service's
 process, so it shares the service's lowered priority (`server.tuning.step_back`).
+
+The child's own store process is started again by its supervisor when it dies
+(`server.persistence.process`); the child tells the service each time it goes down and
+serves again, so `outage` (and `/api/health`) says so without asking the child.
 """
 
 from __future__ import annotations
@@ -50,7 +54,8 @@ import struct
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from functools import partial
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from core.brain.catalog import Catalog
 from core.commands import EditAssociation, RewardSource
@@ -65,6 +70,9 @@ from server.engines import (
     StreamBook,
     create_run,
 )
+
+if TYPE_CHECKING:
+    from server.persistence.process import StoreProcess
 
 log = logging.getLogger("srlab.engines")
 T = TypeVar("T")
@@ -238,6 +246,8 @@ class ProcessEngines:
         and been let go by then)."""
         self._config: dict[str, Any] = {}
         self._respawner: asyncio.Task[None] | None = None
+        self._store_down: str | None = None
+        """Why the child's store process is down, as the child last said (None: it serves)."""
 
     # --- the child ------------------------------------------------------------------
 
@@ -269,6 +279,7 @@ class ProcessEngines:
         if ready != "ready":
             raise EngineProcessError(f"the engines' process did not start: {ready}")
         self._gone = None
+        self._store_down = None  # a new child's store process serves: it said ready
         self._pump = asyncio.create_task(self._receive(proc.stdout), name="engines' process")
 
     @property
@@ -352,6 +363,8 @@ class ProcessEngines:
             case ("closed", sub_id):
                 if (sub := self._subs.get(sub_id)) is not None:
                     sub.close()
+            case ("storage", down):
+                self._store_down = down
             case ("ended", run_id, state, let_go):
                 if (run := self._runs.get(run_id)) is not None:
                     run.update(state)
@@ -432,6 +445,16 @@ class ProcessEngines:
     def running(self) -> int:
         """How many runs are ticking, paused or starting."""
         return len(self._starting) + sum(1 for r in self._runs.values() if not r.done.is_set())
+
+    def outage(self) -> str | None:
+        """The engines' process or its store process down (None: both serve).
+
+        Read from what is known here, without asking the child: its death is seen on the
+        pipe, and the child says when its store process goes down and comes back.
+        """
+        if self._gone is not None:
+            return str(self._gone)
+        return self._store_down
 
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
         """Store a new run (`create_run`; blocking: call in a thread)."""
@@ -532,6 +555,17 @@ class _Host:
 
     def send(self, message: object) -> None:
         self.writer.write(_frame(message))
+
+    def watch_storage(self, process: StoreProcess) -> None:
+        """Tell the service each time the store process goes down or serves again."""
+        loop = asyncio.get_running_loop()
+
+        def changed(down: StorageError | None) -> None:  # on the supervisor's thread
+            with contextlib.suppress(RuntimeError):  # the loop closed: we are stopping
+                said = None if down is None else str(down)
+                loop.call_soon_threadsafe(self.send, ("storage", said))
+
+        process.watch(changed)
 
     def sync(self, run_id: int) -> None:
         """Send the run's state if it changed since it was last sent."""
@@ -725,7 +759,9 @@ async def _child(read_fd: int, write_fd: int) -> None:
     config = await _read(reader)
     try:
         settings = Settings(**config)
-        storage = await asyncio.to_thread(open_storage, settings)
+        storage = await asyncio.to_thread(
+            partial(open_storage, settings, name="the engines' store process")
+        )
     except Exception as e:
         writer.write(_frame(f"{type(e).__name__}: {e}"))
         await writer.drain()
@@ -745,6 +781,8 @@ async def _child(read_fd: int, write_fd: int) -> None:
         await warm_up()
         host = _Host(manager, writer)
         host.send("ready")
+        if storage.process is not None:
+            host.watch_storage(storage.process)
         try:
             await host.serve(reader)
         finally:

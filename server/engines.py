@@ -137,6 +137,14 @@ class Engines(Protocol):
         """How many runs are ticking, paused or starting."""
         ...
 
+    def outage(self) -> str | None:
+        """What keeps runs from starting or storing, in a sentence (None: nothing).
+
+        Beyond the service's own storage, which /api/health reads itself. Cheap: health asks
+        at every poll.
+        """
+        ...
+
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
         """Store a new run (`create_run`; blocking: call in a thread)."""
         ...
@@ -332,6 +340,10 @@ class EngineManager:
     def running(self) -> int:
         """How many runs are ticking, paused or starting."""
         return len(self._starting) + sum(1 for t in self._tasks.values() if not t.done())
+
+    def outage(self) -> str | None:
+        """None: the runs here store through the service's storage, which health checks."""
+        return None
 
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
         """Store a new run (`create_run`; blocking: call in a thread)."""

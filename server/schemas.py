@@ -21,9 +21,19 @@ from core.engine import HZ_MAX, HZ_MIN
 from core.worlds import world_names
 
 EngineCondition = Literal[
-    "innate", "delayed", "dp", "rp", "trainer", "kp", "kp-punished", "sonar", "expert",
-    "reflexes", "unaware",
-]  # fmt: skip
+    "innate",
+    "delayed",
+    "dp",
+    "dp-rare",
+    "rp",
+    "trainer",
+    "kp",
+    "kp-punished",
+    "sonar",
+    "expert",
+    "reflexes",
+    "unaware",
+]
 assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
     n for n, c in CONDITIONS.items() if c.agent == "brain"
 }

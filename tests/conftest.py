@@ -291,8 +291,10 @@ SLOW_MODULES = frozenset(
         "reliability/test_serve_kill.py",
         "reliability/test_sigterm.py",
         "reliability/test_storage_errors.py",
+        "reliability/test_store_restart.py",
         "server/test_benches.py",  # each bench in a subprocess
         "server/test_e2e_serve.py",
+        "server/test_listening_sockets.py",
         "server/test_engine_process.py",  # each test starts an engines' process
         "server/test_proxy.py",
         "server/test_ray_backend.py",

@@ -1,11 +1,11 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
-`simulate`, `experiment`, `sweep` and `phase` have a module each; `tune` holds `tune` and
-`qlambda-sweep`, `world` holds `probe` and `world-check`, `run` holds `run` and `runs`,
-`db` and `serve` the database and the service. `common` has what they share: argument
-types and groups, the backend choice, progress bars and tables. Each module adds its
-parsers with a `handler`, and imports what only its handler needs (storage, the service,
-the report writers) when it runs, so that a command starts without the others'
+`simulate`, `experiment`, `sweep`, `phase`, `teachers` and `equal-start` have a module
+each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`, `run`
+holds `run` and `runs`, `db` and `serve` the database and the service. `common` has what
+they share: argument types and groups, the backend choice, progress bars and tables. Each
+module adds its parsers with a `handler`, and imports what only its handler needs (storage,
+the service, the report writers) when it runs, so that a command starts without the others'
 dependencies.
 """
 
@@ -18,7 +18,19 @@ from collections.abc import Sequence
 
 from core.errors import CoreError
 from server.backends import BackendError
-from server.cli import db, experiment, phase, run, serve, simulate, sweep, tune, world
+from server.cli import (
+    db,
+    equal_start,
+    experiment,
+    phase,
+    run,
+    serve,
+    simulate,
+    sweep,
+    teachers,
+    tune,
+    world,
+)
 from server.cli.common import Handler, UsageError
 
 
@@ -38,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_tune_parser(sub)
     world.add_probe_parser(sub)
     world.add_world_check_parser(sub)
+    teachers.add_parser(sub)
+    equal_start.add_parser(sub)
     tune.add_qlambda_sweep_parser(sub)
     db.add_parser(sub)
     run.add_run_parser(sub)

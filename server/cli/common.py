@@ -30,6 +30,7 @@ from core.setup import Setup
 from server.reports.base import first_line
 
 if TYPE_CHECKING:
+    from core.cells import Cell
     from core.experiment import Backend, TaskResult
 
 Handler = Callable[[argparse.Namespace, IO[str], IO[str]], int]
@@ -87,8 +88,10 @@ def engine_condition(text: str) -> str:
     )
 
 
-def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True) -> None:
-    """--world, --sensors and (unless `signal` is False) --signal: where a condition runs."""
+def add_setup_arguments(
+    parser: argparse.ArgumentParser, *, signal: bool = True, start: bool = False
+) -> None:
+    """--world, --sensors, --signal (unless `signal` is False) and, with `start`, --start."""
     from core.brain.catalog import sensor_definitions
     from core.setup import SIGNAL_MODES
     from core.worlds import default_world, world_names
@@ -99,13 +102,13 @@ def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True)
         default="",
         help=f"world preset (default {default_world()}; see `srlab world-check`)",
     )
-    definitions = list(sensor_definitions())
+    definitions = sensor_definitions()  # default first, each with its description
+    described = "; ".join(f"{n}: {d.rstrip('.')}" for n, d in definitions.items())
     parser.add_argument(
         "--sensors",
-        choices=definitions,
+        choices=list(definitions),
         default="",
-        help=f"camera obstacle stimuli: {', '.join(definitions)} (default {definitions[0]}: "
-        "the paper's Fig. 10)",
+        help=f"camera obstacle stimuli (default {next(iter(definitions))}). {described}",
     )
     if signal:
         parser.add_argument(
@@ -115,11 +118,27 @@ def add_setup_arguments(parser: argparse.ArgumentParser, *, signal: bool = True)
             help="learned: as the condition has it (default); given: the signal's correct "
             "responses added, so success measures the obstacle alone",
         )
+    if start:
+        from core.conditions import STARTS
+
+        parser.add_argument(
+            "--start",
+            choices=STARTS,
+            default="",
+            help="what every condition's robot starts from (default: its own knowledge): "
+            "table1, Table I's innate knowledge; design, kp's (Table I, lane keeping and the "
+            "sonar's obstacle responses); a DP condition keeps its programmed responses on top",
+        )
 
 
 def setup_of(args: argparse.Namespace) -> Setup:
     """The setup the --world, --sensors and --signal arguments name, defaults named."""
-    return Setup(args.world, args.sensors, getattr(args, "signal", "learned")).resolved()
+    return Setup(
+        args.world,
+        args.sensors,
+        getattr(args, "signal", "learned"),
+        start=getattr(args, "start", ""),
+    ).resolved()
 
 
 def add_batch_arguments(
@@ -153,7 +172,7 @@ def add_batch_arguments(
 def add_task_arguments(parser: argparse.ArgumentParser, out: Path) -> None:
     """What `experiment` and `sweep` share: seeds, episodes, jobs, backend, setup, --out."""
     add_batch_arguments(parser, jobs_help="local processes, or CPUs of a private Ray instance")
-    add_setup_arguments(parser)
+    add_setup_arguments(parser, start=True)
     parser.add_argument("--out", type=Path, default=out, help="output folder")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
 
@@ -298,3 +317,54 @@ def print_table(out: IO[str], table: Table) -> Console:
         console = Console(file=out, width=wide)
     console.print(table)
     return console
+
+
+def add_study_arguments(parser: argparse.ArgumentParser) -> None:
+    """What a study adds to its batch: --eval-episodes (10 by default) and --untuned."""
+    parser.add_argument(
+        "--eval-episodes",
+        type=non_negative_int,
+        default=10,
+        metavar="N",
+        help="after training, N episodes of frozen evaluation on held-out seeds, and N of "
+        "the camera-only transfer test (default 10)",
+    )
+    parser.add_argument(
+        "--untuned",
+        action="store_true",
+        help="run every condition with its default parameters, not the tuned ones "
+        "(core/data/tuned.toml, written by srlab tune)",
+    )
+
+
+def run_cells(
+    args: argparse.Namespace, err: Console, title: str, cells: Sequence[Cell]
+) -> tuple[list[TaskResult], dict[str, Any]]:
+    """Run a study's cells on the arguments' seeds, with a progress bar titled `title`.
+
+    Returns the results and the parameters every study's report starts with: the command,
+    the seeds and episodes, the tasks, where they ran and how long they took.
+    """
+    from core.cells import run_study, study_tasks
+
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    tasks = study_tasks(cells, seeds, args.episodes, args.eval_episodes)
+    with open_backend(args, err) as (backend, where):
+        progress, on_result = task_progress(err, title, len(tasks), args.quiet)
+        started = time.perf_counter()
+        with progress:
+            results = run_study(cells, seeds, args.episodes, args.eval_episodes, backend, on_result)
+        elapsed = time.perf_counter() - started
+    return results, {
+        "command": command_line(args),
+        "seeds": len(seeds),
+        "seed_base": args.seed_base,
+        "episodes": args.episodes,
+        "eval_episodes": args.eval_episodes,
+        "tasks": len(tasks),
+        "jobs": args.jobs,
+        "backend": args.backend,
+        "where": where,
+        "elapsed_s": elapsed,
+        "ticks": sum(r.ticks for r in results),
+    }

@@ -13,6 +13,7 @@ from rich.table import Table
 
 from core.conditions import CONDITIONS
 from server.cli.common import (
+    UsageError,
     add_task_arguments,
     command_line,
     non_negative_int,
@@ -50,10 +51,26 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "the camera-only transfer test (default 0: none)",
     )
     exp.add_argument(
+        "--teacher",
+        metavar="TEACHER",
+        help="who gives rp's judgements: a preset of core/data/trainers/teachers.toml "
+        "(perfect, the default; mistaken, distracted, slow, lenient, tiring, human), "
+        "imperfections as NAME=VALUE (mistake, skip, delay_s, delay_cv, bias, fatigue), or "
+        "a preset then changes: human,skip=0 (see srlab teachers)",
+    )
+    exp.add_argument(
         "--untuned",
         action="store_true",
         help="run every condition with its default parameters, not the tuned ones "
         "(core/data/tuned.toml, written by srlab tune)",
+    )
+    exp.add_argument(
+        "--declare",
+        metavar="A-B,...",
+        help="the comparisons the conclusions rest on, declared before running: pairs of "
+        "conditions (kp-sonar), each tested on all episodes and held out, Holm-corrected "
+        "together in the summary; every other comparison is marked exploratory (default: "
+        "kp-sonar,kp-rp,kp-qlambda-hybrid,kp-dp, those whose conditions run)",
     )
     exp.add_argument(
         "--no-probe",
@@ -65,12 +82,27 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab experiment`."""
+    from core.analysis import DECLARED, parse_pairs
     from core.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
-    from core.params import tuned_params
+    from core.params import teacher_params, tuned_params
     from core.stats import Estimate, pct
+    from core.trainer import parse_teacher
     from server.reports.experiment import write_report
 
     conditions = parse_conditions(args.conditions)
+    if args.declare is None:
+        declared = [p for p in DECLARED if set(p) <= set(conditions)]
+    else:
+        declared = parse_pairs(args.declare)
+        missing = sorted({c for p in declared for c in p} - set(conditions))
+        if missing:
+            raise UsageError(
+                f"--declare: {', '.join(missing)} not among --conditions; a declared "
+                "comparison needs both its conditions run"
+            )
+    teacher = parse_teacher(args.teacher) if args.teacher else None
+    if teacher is not None and not any(CONDITIONS[c].trainer for c in conditions):
+        raise UsageError(f"--teacher: none of {', '.join(conditions)} has a teacher (rp has)")
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     setup = setup_of(args)
     catalog = setup.catalog()
@@ -90,6 +122,7 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
                 setup,
                 args.eval_episodes,
                 tuned=not args.untuned,
+                params=teacher_params(teacher) if teacher else None,
             )
         elapsed = time.perf_counter() - started
     probed = None
@@ -122,6 +155,9 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
             c: dict(tuned_params(c)) for c in conditions if not args.untuned and tuned_params(c)
         },
         "probe": probed.as_dict() if probed is not None else None,
+        "declared": [list(p) for p in declared],
+        "declared_given": args.declare is not None,
+        **({"teacher": teacher.changed()} if teacher and not teacher.perfect else {}),
     }
     paths = write_report(args.out, results, summary, catalog, params)
     table = Table(

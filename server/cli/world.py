@@ -78,7 +78,7 @@ def add_world_check_parser(sub: argparse._SubParsersAction[argparse.ArgumentPars
         description="With the signal's responses given and no learning anywhere: (a) no "
         "obstacle knowledge succeeds <= 20%%, (b) the sonar reflexes alone 40-80%%, (c) the "
         "expert's camera responses >= 95%%; and (d) innate knowledge alone <= 10%% (Table "
-        "II). Prints each with its 95%% bootstrap interval over seeds.",
+        "II). Prints each with its 95%% Student's t interval over seeds.",
     )
     check.add_argument(
         "--world",

@@ -36,17 +36,22 @@ class Storage:
     database: DatabaseProbe
     close: Callable[[], None]
     """Blocking: called once, after the last write."""
+    process: StoreProcess | None = None
+    """The store process, when storage runs in one (its supervisor says when it is down)."""
 
 
 StorageFactory = Callable[[Settings], Storage]
 """Blocking: opens the storage `settings` name (called in a thread)."""
 
 
-def open_storage(settings: Settings) -> Storage:
-    """SQLAlchemy on `settings.database_url`, in a store process if `store_process`."""
+def open_storage(settings: Settings, *, name: str = "the service's store process") -> Storage:
+    """SQLAlchemy on `settings.database_url`, in a store process if `store_process`.
+
+    `name` is what the store process's errors and log lines call it.
+    """
     if settings.store_process:
-        process = StoreProcess(settings.database_url)
-        return Storage(process.runs, process.networks, process.database, process.stop)
+        process = StoreProcess(settings.database_url, name=name)
+        return Storage(process.runs, process.networks, process.database, process.stop, process)
     engine = make_engine(settings.database_url)
     sessions = make_sessionmaker(engine)
     return Storage(

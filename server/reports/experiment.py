@@ -10,11 +10,19 @@ from typing import Any
 import matplotlib.patches
 import numpy as np
 
-from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
+from core.analysis import (
+    CRITERION_RATE,
+    CRITERION_WINDOW,
+    DECLARED,
+    HELD_OUT,
+    HORIZONS,
+    declared_comparisons,
+    paired_table,
+)
 from core.brain.catalog import Catalog
 from core.experiment import CAMERA_SENSOR, TaskResult
-from core.stats import bootstrap_mean
-from server.reports.base import diff, failed_lines, head, row, write_summary
+from core.stats import interval_name, mean_interval, p_text, wilson
+from server.reports.base import diff, failed_lines, head, interval_line, row, write_summary
 from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 
 # The paper's Table II and the non-zero cells of its Table III (reliability of LTM after
@@ -56,16 +64,16 @@ OUTSIDE_LEARNERS = ("qlambda", "qlambda-hybrid", "dqn", "ppo")
 
 
 def _rolling_curve(success_by_seed: list[list[int]]) -> tuple[Any, Any, Any]:
-    """Per episode: the mean over seeds of the rolling success, and its bootstrap band."""
+    """Per episode: the mean over seeds of the rolling success, and its 95% band."""
     rolled = rolling_success(success_by_seed)
-    band = [bootstrap_mean(rolled[:, i].tolist()) for i in range(rolled.shape[1])]
+    band = [mean_interval(rolled[:, i].tolist()) for i in range(rolled.shape[1])]
     low = np.array([b.low if not math.isnan(b.low) else b.mean for b in band])
     high = np.array([b.high if not math.isnan(b.high) else b.mean for b in band])
     return rolled.mean(axis=0), low, high
 
 
 def plot_learning_curves(path: Path, summary: dict[str, Any]) -> None:
-    """Success per episode (rolling mean over 5 episodes) over seeds, with a 95% bootstrap band.
+    """Success per episode (rolling mean over 5 episodes) over seeds, with its 95% band.
 
     With outside learners among the conditions, two panels: the architecture's conditions,
     and the baselines beside kp and its ablation.
@@ -90,7 +98,7 @@ def plot_learning_curves(path: Path, summary: dict[str, Any]) -> None:
         if len(panels) > 1:
             ax.set_title(title, fontsize=10)
     axes[0][0].set_ylabel(f"success rate (rolling {ROLLING} episodes)")
-    fig.suptitle("Learning curves: mean over seeds, band = 95% bootstrap interval")
+    fig.suptitle(f"Learning curves: mean over seeds, band = {interval_name()}")
     save(fig, path)
 
 
@@ -187,7 +195,7 @@ def _origin_table(summary: dict[str, Any]) -> list[str]:
 
 
 def _ci(stat: dict[str, float] | None, pct: bool = True, digits: int = 0) -> str:
-    """A mean with its 95% bootstrap interval: ``52% [40, 63]`` (or ``0.25 [0.20, 0.31]``)."""
+    """A mean with its 95% interval: ``52% [40, 63]`` (or ``0.25 [0.20, 0.31]``)."""
     if not stat:
         return "-"
     mean = stat.get("mean", math.nan)
@@ -214,6 +222,8 @@ def _points(stat: dict[str, float] | None) -> str:
 
 
 def _setup_line(params: dict[str, Any]) -> str:
+    start = {"table1": "Table I", "design": "kp's design"}.get(params.get("start", ""))
+    teacher = params.get("teacher")
     return (
         f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
         f"signal {params.get('signal', 'learned')}"
@@ -221,6 +231,12 @@ def _setup_line(params: dict[str, Any]) -> str:
             " (its correct responses given to every condition, so success measures the obstacle)."
             if params.get("signal") == "given"
             else " (learned as each condition learns)."
+        )
+        + (f" Every condition's robot starts from {start} (--start)." if start else "")
+        + (
+            " rp's teacher: " + ", ".join(f"{k} {v:g}" for k, v in teacher.items()) + "."
+            if teacher
+            else ""
         )
     )
 
@@ -238,7 +254,7 @@ def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]
     lines = [
         "## Success",
         "",
-        "Mean over seeds of each seed's success rate, with its 95% bootstrap interval. The "
+        "Mean over seeds of each seed's success rate, with its 95% interval. The "
         "trend is the per-seed least-squares slope of success against the episode, in points "
         "per 10 episodes."
         + (
@@ -274,7 +290,7 @@ def _failure_lines(summary: dict[str, Any]) -> list[str]:
     lines = [
         "## Failures by cause",
         "",
-        "Failed episodes per episode, by cause: mean over seeds [95% bootstrap interval].",
+        "Failed episodes per episode, by cause: mean over seeds [95% interval].",
         "",
         *head(["condition", *(c for c, _ in causes)]),
     ]
@@ -292,21 +308,23 @@ def _horizon(label: str) -> str:
 
 
 def _paired_lines(summary: dict[str, Any]) -> list[str]:
-    """Every pair of conditions, paired by seed, per horizon."""
+    """Every pair of conditions, paired by seed, per horizon: exploratory."""
     table = paired_table(summary)
     if not table:
         return []
     labels = [label for label, _ in (*HORIZONS, *HELD_OUT)]
     horizons = [label for label in labels if any(label in r for r in table.values())]
     lines = [
-        "## Paired by seed",
+        "## Paired by seed (exploratory)",
         "",
         "Every pair of conditions: the first's success minus the second's, seed by seed "
         "(every condition meets the same obstacles and lamp cycles on a seed), in points, "
-        "with its 95% bootstrap interval and the sign-flip test's two-sided p of no "
-        "difference; the held-out columns compare the frozen evaluations, which every "
-        "condition runs on the same held-out seed per training seed. `kp - sonar` is what "
-        "propagation adds (`sonar` is kp without it).",
+        "with its 95% interval and the sign-flip test's two-sided p of no difference; the "
+        "held-out columns compare the frozen evaluations, which every condition runs on the "
+        "same held-out seed per training seed. `kp - sonar` is what propagation adds "
+        "(`sonar` is kp without it). These are exploratory: the p-values are not corrected "
+        "for the many comparisons, so a small one is a lead to test, not a finding; the "
+        "findings are the pre-declared comparisons above.",
         "",
         *head(["pair", *(_horizon(h) for h in horizons)]),
     ]
@@ -456,7 +474,7 @@ def _reliability_lines(
     lines = [
         "## Reliability of the camera obstacle S-R pairs (Table III)",
         "",
-        "Mean reliability over seeds [95% bootstrap interval] of every camera obstacle pair "
+        "Mean reliability over seeds [95% interval] of every camera obstacle pair "
         "that reached 0.01 in some condition: LTM for delayed, DP and RP, RLTM for KP; DP's "
         "programmed pairs count as 1, as in the paper. Reliability is Eq. (1)'s V, not "
         "correctness: KP's RLTM credits each success at d_k = 1, LTM at d_k of hundreds of "
@@ -512,25 +530,101 @@ def _met_cell(m: dict[str, float]) -> str:
     return f"{m['encounters_per_seed']:.1f} ({won})"
 
 
+def _table2_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]:
+    """The paper's Table II beside srlab's innate condition, each rate with its interval."""
+    lines = [
+        "### Table II (innate knowledge only)",
+        "",
+        "The paper's counts with their 95% Wilson interval (one run of episodes); srlab's "
+        "rate is the mean over seeds of each seed's rate, with its interval over seeds"
+        + (
+            ", the signal not given, as in the paper."
+            if params.get("signal") != "given"
+            else "; here the signal's responses are given, so it is not the paper's setting."
+        ),
+        "",
+        "| | successes | episodes | rate [95% CI] |",
+        "|---|---|---|---|",
+    ]
+    for where, (won, played) in PAPER_TABLE_II.items():
+        low, high = wilson(won, played)
+        rate = f"{won / played:.1%} [{100 * low:.1f}, {100 * high:.1f}]"
+        lines.append(f"| paper, {where} | {won} | {played} | {rate} |")
+    s = summary.get("innate", {})
+    if s.get("seeds"):
+        total = s["seeds"] * s["episodes"]
+        ok = round(s["success_rate"]["mean"] * total)
+        who = f"srlab, {s['seeds']} seeds x {s['episodes']} episodes"
+        lines.append(f"| {who} | {ok} | {total} | {_ci(s['success_rate'], digits=1)} |")
+    return [*lines, ""]
+
+
+def _declared_lines(declared: Sequence[dict[str, Any]], params: dict[str, Any]) -> list[str]:
+    """The pre-declared comparisons with their raw and Holm-adjusted p."""
+    if not declared:
+        return []
+    named = params.get("declared")
+    how = (
+        "named in the command (`--declare`)"
+        if params.get("declared_given")
+        else "srlab's default declaration (`--declare`: kp against sonar, rp, qlambda-hybrid "
+        "and dp, those that ran)"
+    )
+    lines = [
+        "## Pre-declared comparisons (Holm-corrected)",
+        "",
+        f"The comparisons this experiment's conclusions rest on, {how}"
+        + (f": {', '.join(f'{a} - {b}' for a, b in named)}" if named else "")
+        + ". Each is tested on all training episodes and held out (frozen), "
+        f"{len(declared)} tests in one family; Holm's step-down correction keeps the chance "
+        "of any false finding among them below 5%. A difference holds where its Holm p is "
+        "below 0.05. Every other comparison in this summary is exploratory.",
+        "",
+        *head(["comparison", "on", "difference, points [95% CI]", "p", "Holm p", "holds"]),
+    ]
+    for d in declared:
+        lines.append(
+            row(
+                [
+                    d["pair"],
+                    _horizon(d["on"]),
+                    _points(d),
+                    p_text(d["p"]).removeprefix("p "),
+                    p_text(d["p_holm"]).removeprefix("p "),
+                    "yes" if d["p_holm"] < 0.05 else "no",
+                ]
+            )
+        )
+    return [*lines, ""]
+
+
 def summary_markdown(
     summary: dict[str, Any],
     catalog: Catalog,
     params: dict[str, Any],
     failed: Sequence[TaskResult],
+    declared: Sequence[dict[str, Any]] = (),
+    title: str = "srlab experiment",
 ) -> str:
-    """The experiment's summary as readable tables."""
+    """The experiment's summary as readable tables, under `title`.
+
+    `declared` holds the pre-declared comparisons (`core.analysis.declared_comparisons`).
+    """
     lines = [
-        "# srlab experiment",
+        f"# {title}",
         "",
         f"`{params['command']}`",
         "",
         f"{params['seeds']} seeds x {params['episodes']} episodes per condition; "
         f"{params['ticks']:,} ticks in {params['elapsed_s']:.1f} s.",
         "",
+        interval_line(),
+        "",
         _setup_line(params),
         "",
         *_success_lines(summary, params),
         *_failure_lines(summary),
+        *_declared_lines(declared, params),
         *_paired_lines(summary),
         *_correctness_lines(summary, params),
         "## What ran",
@@ -545,19 +639,10 @@ def summary_markdown(
         *_reliability_lines(summary, catalog, params),
         "## Side by side with the paper",
         "",
-        "### Table II (innate knowledge only)",
+        *_table2_lines(summary, params),
+        *_table3_lines(summary, catalog, params),
         "",
-        "| | successes | episodes | rate |",
-        "|---|---|---|---|",
     ]
-    for where, (won, played) in PAPER_TABLE_II.items():
-        lines.append(f"| paper, {where} | {won} | {played} | {won / played:.0%} |")
-    if summary.get("innate", {}).get("seeds"):
-        s = summary["innate"]
-        total = s["seeds"] * s["episodes"]
-        ok = round(s["success_rate"]["mean"] * total)
-        lines.append(f"| srlab | {ok} | {total} | {ok / total:.0%} |")
-    lines += ["", *_table3_lines(summary, catalog, params), ""]
     lines += _criterion_lines(summary)
     lines += _met_lines(summary, catalog)
     if failed:
@@ -571,8 +656,9 @@ def write_report(
     summary: dict[str, Any],
     catalog: Catalog,
     params: dict[str, Any],
+    title: str = "srlab experiment",
 ) -> list[Path]:
-    """Write every output file into `out`; returns their paths."""
+    """Write every output file into `out` (summary.md under `title`); returns their paths."""
     failed = [r for r in results if not r.ok]
     doc = {
         "params": params,
@@ -589,7 +675,11 @@ def write_report(
         ],
     }
     doc["paired"] = paired_table(summary)
-    paths = write_summary(out, doc, summary_markdown(summary, catalog, params, failed), results)
+    pairs = [(str(a), str(b)) for a, b in params.get("declared") or DECLARED]
+    declared = declared_comparisons(summary, pairs)
+    doc["declared"] = declared
+    markdown = summary_markdown(summary, catalog, params, failed, declared, title)
+    paths = write_summary(out, doc, markdown, results)
     curves = out / "learning_curves.png"
     plot_learning_curves(curves, summary)
     reliability = out / "reliability.png"

@@ -11,7 +11,7 @@ import numpy as np
 from core.experiment import TaskResult
 from core.params import Params, ParamValue, format_value, point_label
 from core.sweep import Sweep
-from server.reports.base import diff, failed_lines, fmt, head, row, write_summary
+from server.reports.base import diff, failed_lines, fmt, head, interval_line, row, write_summary
 from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 
 
@@ -125,6 +125,8 @@ def sweep_markdown(
         f"not use); {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
         f"{params['where']}.",
         "",
+        interval_line(),
+        "",
         *head(["parameter", "values", "used by", "ignored by"]),
     ]
     for name, values in sweep.axes:
@@ -140,7 +142,8 @@ def sweep_markdown(
         "Per value: the mean over seeds (± 95% CI) of each seed's figures averaged over the "
         "grid points with that value, so the other swept parameters are averaged out; and "
         "its difference from the first value's success, seed by seed, in points with its 95% "
-        "bootstrap interval and sign-flip p.",
+        "interval and sign-flip p. Exploratory: a sweep compares many points, and these "
+        "p-values are not corrected for it.",
     ]
     for name in sweep.names:
         entry = summary["by_parameter"][name]

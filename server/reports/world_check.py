@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from server.reports.base import clean_json
+from server.reports.base import clean_json, interval_line
 
 
 def write_world_check(out: Path, report: dict[str, Any]) -> list[Path]:
@@ -28,7 +28,9 @@ def world_check_markdown(report: dict[str, Any]) -> str:
         "",
         f"{report['seeds']} seeds (from {report['seed_base']}) x {report['episodes']} episodes "
         "per property, no learning anywhere; success is the mean over seeds with its 95% "
-        "bootstrap interval.",
+        "interval.",
+        "",
+        interval_line(),
     ]
     described: set[str] = set()
     for check in report["checks"]:

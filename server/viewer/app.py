@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import viser
+from websockets.asyncio.server import ServerConnection
+from websockets.frames import CloseCode
 
 from core.brain.catalog import Catalog
 from core.ports import RunQueries
@@ -21,19 +23,19 @@ from server.engines import Engines
 from server.guard import SitePolicy
 from server.ratelimit import RateLimiter
 from server.viewer.control import Controller
-from server.viewer.gate import Gate, Peer
+from server.viewer.gate import MAX_VIEWERS, Gate, Peer
 from server.viewer.inbound import quiet_malformed
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
+from server.viewer.upstream import guard, quietly
 from server.viewer.wakeups import install as install_loop_safe_buffers
 
 log = logging.getLogger("srlab.viewer")
 
 
 CHOICE_TTL_S = 60.0
-"""How long a run chosen for the next viewer (POST /api/runs/{id}/view), or named by a
-socket that has not become a viewer yet (`/run/<id>`), waits for it."""
+"""How long a run chosen for the next viewer (POST /api/runs/{id}/view) waits for it."""
 
 
 @dataclass
@@ -54,6 +56,7 @@ class Viewer:
     each other. viser serves on its own thread and event loop. Its callbacks only post
     commands to a session's controller, which runs on the service's event loop; a
     session's renderer thread is the only caller of that client's scene and panel API.
+    Only a socket that came through the gate gets a session (its panel, its writes).
     """
 
     def __init__(
@@ -71,11 +74,7 @@ class Viewer:
         self._make = make
         self._lock = threading.Lock()
         self._choice: tuple[int, float] | None = None
-        self._named: dict[Peer, tuple[int, float]] = {}
-        """Runs named by the URL of a socket not yet a viewer, by the socket's address."""
         self._shared: Session | None = None
-        # A view URL that names its run (/run/<id>) chooses it for the socket it opens.
-        gate.on_run = self.name
 
     @property
     def port(self) -> int:
@@ -111,30 +110,6 @@ class Viewer:
         """
         with self._lock:
             self._choice = (run_id, time.monotonic())
-
-    def name(self, run_id: int, peer: Peer) -> None:
-        """Show `run_id` to the viewer whose websocket viser sees come from `peer`.
-
-        The gate calls it for a websocket on `/run/<id>`, just before viser gets the
-        handshake, so a page opened on such a URL gets its run back each time it
-        reconnects, after a restart of the service included. It is kept by socket, not in
-        `choose`'s one slot: viser makes a socket a viewer only at its first camera
-        message, and pages reconnecting together after a restart (their retry timers
-        started at the same moment) would otherwise take each other's runs. A socket
-        closed before it became a viewer leaves its entry, dropped after `CHOICE_TTL_S`.
-        """
-        now = time.monotonic()
-        with self._lock:
-            self._named = {p: c for p, c in self._named.items() if now - c[1] <= CHOICE_TTL_S}
-            self._named[peer] = (run_id, now)
-
-    def _named_run(self, client: viser.ClientHandle) -> int | None:
-        peer = _peer(self.server, client.client_id)
-        if peer is None:
-            return None
-        with self._lock:
-            named = self._named.pop(peer, None)
-        return None if named is None else named[0]
 
     def _take_choice(self, named: int | None = None) -> int | None:
         """The run a new viewer starts on: the one its URL `named`, else the chosen one.
@@ -175,8 +150,26 @@ class Viewer:
         session.renderer.stop(session.inbox)
 
     def connected(self, client: viser.ClientHandle) -> None:
-        """A browser connected (viser's thread pool): build and start its session."""
-        session = self.open(client, self._named_run(client))
+        """A browser connected (viser's thread pool): build and start its session.
+
+        Only for a socket viser sees come from one of the gate's relays (viser's server
+        refuses any other already: this holds should that check ever let one by). Another
+        gets no session, so no panel to write with, and is closed. The relay tells the run
+        its URL names (`/run/<id>`): kept by socket, not in `choose`'s one slot, since
+        pages reconnecting together after a restart (their retry timers started at the
+        same moment) would otherwise take each other's runs.
+        """
+        peer = _peer(self.server, client.client_id)
+        relay = None if peer is None else self.gate.relay(peer)
+        if relay is None or not relay.socket:
+            log.warning(
+                "the 3D view gave viewer %d no session: its socket is none of the gate's "
+                "(closed already, or not through the gate)",
+                client.client_id,
+            )
+            _drop(self.server, client.client_id)
+            return
+        session = self.open(client, relay.run)
         with self._lock:
             self.sessions[client.client_id] = session
 
@@ -200,13 +193,19 @@ class Viewer:
         writable: bool,
         policy: SitePolicy | None = None,
         world: WorldConfig | None = None,
+        max_viewers: int = MAX_VIEWERS,
     ) -> Viewer:
         """Listen on `host`:`port` and show the runs of `manager` and `store`.
 
         Each run is drawn in its own world preset; `world` replaces them all (tests).
         A busy port is an error here (viser itself would silently take the next one, and
         the editor's link would point at someone else's server). `policy` says which Host
-        names and origins the view accepts (default: loopback names, no other origin).
+        names and origins the view accepts (default: loopback names, no other origin);
+        `max_viewers` how many may watch at once.
+
+        Raises:
+            OSError: the port is taken.
+            UnguardedViewError: viser's own port cannot be kept to the gate.
         """
         policy = policy or SitePolicy.of(["127.0.0.1", "localhost", "[::1]", host], [])
         loop = asyncio.get_running_loop()
@@ -224,15 +223,17 @@ class Viewer:
             return Session(inbox, controller, renderer, task)
 
         server = await asyncio.to_thread(_listen)
-        quiet_malformed(server)
-        server.scene.world_axes.visible = False  # for every client
-        gate = Gate(host, port, server.get_port(), policy)
-        # Wired before the gate opens: a browser reconnecting after a restart may be the
-        # very first connection, and its /run/<id> must find the viewer to choose with.
-        viewer = cls(server, gate, loop, make)
-        server.on_client_connect(viewer.connected)
-        server.on_client_disconnect(viewer.disconnected)
         try:
+            quiet_malformed(server)
+            server.scene.world_axes.visible = False  # for every client
+            gate = Gate(host, port, server.get_port(), policy, max_viewers=max_viewers)
+            # Before the gate opens: from then on viser answers the gate's relays alone.
+            await guard(server, gate.relay, policy)
+            # Wired before the gate opens: a browser reconnecting after a restart may be
+            # the very first connection, and its /run/<id> must find its viewer.
+            viewer = cls(server, gate, loop, make)
+            server.on_client_connect(viewer.connected)
+            server.on_client_disconnect(viewer.disconnected)
             await asyncio.to_thread(_open, gate)
         except BaseException:
             await asyncio.to_thread(server.stop)
@@ -261,22 +262,38 @@ class Viewer:
 def _listen() -> viser.ViserServer:
     """The viser server, on an ephemeral loopback port reached only through the gate."""
     install_loop_safe_buffers()
-    return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
+    with quietly():  # its port is printed nowhere: the gate alone is to reach it
+        return viser.ViserServer(host="127.0.0.1", port=0, label="srlab", verbose=False)
 
 
-def _peer(server: viser.ViserServer, client_id: int) -> Peer | None:
-    """The address viser sees client `client_id`'s websocket come from, if it tells.
+def _connection(server: viser.ViserServer, client_id: int) -> ServerConnection | None:
+    """Client `client_id`'s websocket, if viser tells.
 
     viser (1.1) offers no public way to tell which connection a client is; its websocket
-    server's table of live connections does. Should another viser lack it, a URL's run is
-    lost (the viewer starts as on `/`) and tests/server/test_viewer_gate.py says so.
+    server's table of live connections does. Should another viser lack it, no socket gets
+    a session, and every test of a real viewer (tests/server/test_viewer_*.py) fails.
     """
     connections = getattr(getattr(server, "_websock_server", None), "_live_connections", None)
     connection = connections.get(client_id) if isinstance(connections, dict) else None
-    address = getattr(connection, "remote_address", None)
+    return connection if isinstance(connection, ServerConnection) else None
+
+
+def _peer(server: viser.ViserServer, client_id: int) -> Peer | None:
+    """The address viser sees client `client_id`'s websocket come from, if it tells."""
+    address = getattr(_connection(server, client_id), "remote_address", None)
     if not isinstance(address, tuple) or len(address) < 2:
         return None
     return str(address[0]), int(address[1])
+
+
+def _drop(server: viser.ViserServer, client_id: int) -> None:
+    """Close client `client_id`'s websocket (policy violation), if it is still open."""
+    connection = _connection(server, client_id)
+    if connection is not None:
+        asyncio.run_coroutine_threadsafe(
+            connection.close(CloseCode.POLICY_VIOLATION, "not through the 3D view's gate"),
+            server.get_event_loop(),
+        )
 
 
 def _open(gate: Gate) -> None:

@@ -6,20 +6,31 @@ ephemeral loopback port and this gate listens on the view's public port. The gat
 each connection's request head, refuses a Host the service does not answer to (DNS
 rebinding) and a websocket handshake from another site (the API's rule, `SitePolicy`),
 then relays the bytes both ways. The panel's writes travel over that socket, so this is
-what keeps a foreign page from rewarding or re-pacing runs through it.
+what keeps a foreign page from rewarding or re-pacing runs through it. viser's own port
+answers only the gate's relays (`server/viewer/upstream.py`): the gate keeps the address
+each of its connections to viser comes from (`relay`) from before its first byte until
+it ends, and viser's server refuses any other.
+
+Each connection carries one request. The gate answers what viser's server cannot take
+itself (a method but GET, a body, another HTTP version, a head its parser refuses: viser
+logged a traceback and answered nothing), so viser sees only heads it parses. A page's
+request is relayed alone and the connection closed after viser's answer (viser's server
+answers one plain request per connection; a second one sent behind the first reached it
+before its answer and failed it with a traceback); a websocket is a connection of its own.
 
 The gate also gives the view URLs that name a run, `/run/<id>` (the console's link). viser's
 page opens its websocket on its own URL's path (its client drops the query and a trailing
 slash), so the socket of a page opened on `/run/7` asks for `/run/7`, the first time and on
-every automatic reconnect, a restart of the service included. The gate hands such a
-socket's run to `on_run`, with the address viser sees the socket come from (the gate's own
-end of the relay: the viewer starts that socket's session on the run, and no other's, even
-when several pages reconnect at once), and rewrites the path to `/`, which is all viser
-serves (its page, one self-contained index.html, and its socket). Only a connection's first
-request head is read
-(later keep-alive requests are relayed raw); that is enough, since the page needs nothing
-but index.html, viser's server answers one plain HTTP request per connection and closes
-it, and the websocket is a connection of its own.
+every automatic reconnect, a restart of the service included. The gate keeps that run with
+the socket's relay (`Relay.run`, found by the address viser sees the socket come from: the
+viewer starts that socket's session on the run, and no other's, even when several pages
+reconnect at once) and rewrites the path to `/`, which is all viser serves (its page, one
+self-contained index.html, and its socket).
+
+At most `max_viewers` websockets are relayed at once: each is a viewer with a renderer
+thread of its own, on the service's process (100 of them slowed `/api/health` from 8 to
+616 ms). Past it a handshake gets 503 with `Retry-After`, and a page request a short
+page that says so and reloads itself, before viser builds anything.
 
 The gate answers a websocket handshake itself (`handshake_answer`: the 101 viser would
 send, which depends on the request alone), then hands the request to viser and drops
@@ -40,9 +51,13 @@ import json
 import logging
 import re
 import threading
-from collections.abc import Callable
+from collections.abc import Iterator
+from dataclasses import dataclass
 from http import HTTPStatus
 
+from websockets.exceptions import SecurityError
+from websockets.http11 import Request
+from websockets.streams import StreamReader
 from websockets.utils import accept_key
 
 from server.guard import SitePolicy
@@ -57,11 +72,32 @@ CHUNK = 64 * 1024
 VISER_ANSWER_S = 30.0
 """How long the gate waits for viser's own answer to a handshake it answered already; then
 it closes the page's socket, and the page tries again."""
+LINGER_S = 2.0
+"""After answering a page's request, how long the gate reads (and drops) what the client
+still sends before it closes: closing on unread bytes would reset the connection, and the
+client could lose the answer."""
+MAX_VIEWERS = 16
+"""Websockets (viewers) relayed at once, by default (SRLAB_VISER_MAX_VIEWERS)."""
+FULL_RETRY_AFTER_S = 5
+"""The `Retry-After` of a refusal past `max_viewers` (the API's full streams say the same)."""
 Peer = tuple[str, int]
 """A TCP address as viser sees a connection's far end: (host, port)."""
 RUN_PATH = re.compile(r"/run/([0-9]{1,18})/?")
 """A view URL's path that names a run. At most 18 digits: run ids stay below 2**62 (the
 API's bound), and a longer or non-digit id is no run but a plain path (viser's 404)."""
+
+
+@dataclass(frozen=True)
+class Relay:
+    """One of the gate's live connections to viser, as viser sees it come in.
+
+    Attributes:
+        run: the run its URL names (`/run/<id>`), for a websocket; else None.
+        socket: a websocket (a viewer to be), not a page's request.
+    """
+
+    run: int | None
+    socket: bool
 
 
 def run_path(head: bytes) -> tuple[bytes, int | None]:
@@ -82,28 +118,54 @@ def run_path(head: bytes) -> tuple[bytes, int | None]:
     return b" ".join((method, b"/" + query + params, version)) + sep + rest, int(found[1])
 
 
-def _parse_head(head: bytes) -> tuple[str, dict[str, str]]:
-    """The request line's method and the headers (names lower-case, last one wins)."""
-    lines = head.decode("latin-1").split("\r\n")
-    method = lines[0].split(" ", 1)[0]
-    headers: dict[str, str] = {}
-    for line in lines[1:]:
-        name, sep, value = line.partition(":")
-        if sep:
-            headers[name.strip().lower()] = value.strip()
-    return method, headers
+Refusal = tuple[HTTPStatus, str]
 
 
-def refusal(headers: dict[str, str], policy: SitePolicy) -> tuple[HTTPStatus, str] | None:
+def parse_head(head: bytes) -> tuple[dict[str, str], Refusal | None]:
+    """A request head's headers (names lower-case, last one wins), or why viser cannot take it.
+
+    viser's server (websockets) takes a GET in HTTP/1.1 with no body and headers within its
+    parser's limits, and logs a traceback for anything else; its own parser says which. The
+    method and the version get their own statuses (405, 505).
+    """
+    parts = head.split(b"\r\n", 1)[0].split(b" ")
+    if len(parts) == 3 and parts[0] != b"GET":
+        method = parts[0].decode("latin-1")
+        return {}, (HTTPStatus.METHOD_NOT_ALLOWED, f"the 3D view takes GET only, not {method}")
+    if len(parts) == 3 and parts[2] != b"HTTP/1.1":
+        version = parts[2].decode("latin-1")
+        return {}, (
+            HTTPStatus.HTTP_VERSION_NOT_SUPPORTED,
+            f"the 3D view takes HTTP/1.1, not {version}",
+        )
+    stream = StreamReader()
+    stream.feed_data(head)
+    stream.feed_eof()
+    parser = Request.parse(stream.read_line)
+    try:
+        next(parser)
+    except StopIteration as done:
+        request: Request = done.value
+        return {k.lower(): v for k, v in request.headers.raw_items()}, None
+    except (EOFError, SecurityError, ValueError, NotImplementedError) as e:
+        return {}, (HTTPStatus.BAD_REQUEST, f"not a request the 3D view takes: {e}")
+    return {}, (HTTPStatus.BAD_REQUEST, "not a request the 3D view takes: it is incomplete")
+
+
+def refusal(headers: dict[str, str], policy: SitePolicy) -> Refusal | None:
     """Why the gate refuses a request with these headers, or None to let it through."""
     problem = policy.host_problem(headers.get("host"))
     if problem is not None:
         return HTTPStatus.BAD_REQUEST, problem
-    if headers.get("upgrade", "").lower() == "websocket":
+    if _upgrade(headers):
         problem = policy.origin_problem(headers, "http")
         if problem is not None:
             return HTTPStatus.FORBIDDEN, problem
     return None
+
+
+def _upgrade(headers: dict[str, str]) -> bool:
+    return headers.get("upgrade", "").lower() == "websocket"
 
 
 def handshake_answer(headers: dict[str, str]) -> bytes | None:
@@ -112,7 +174,7 @@ def handshake_answer(headers: dict[str, str]) -> bytes | None:
     viser's server (1.1) negotiates no extension (`compression=None`) and picks the first
     subprotocol offered that starts with `viser-v` (its client's version, checked after the
     handshake); so the answer depends on the request's headers alone. A request without
-    a well-formed key or version 13 gets None: viser answers it (with its error).
+    a well-formed key or version 13 gets None: the gate refuses it.
     """
     key = headers.get("sec-websocket-key", "")
     if headers.get("sec-websocket-version") != "13":
@@ -135,23 +197,67 @@ def handshake_answer(headers: dict[str, str]) -> bytes | None:
     return ("\r\n".join(lines) + "\r\n\r\n").encode()
 
 
-def _response(status: HTTPStatus, detail: str) -> bytes:
+BAD_HANDSHAKE = (
+    "a websocket handshake here needs Sec-WebSocket-Version: 13 and a Sec-WebSocket-Key "
+    "of 16 bytes in base64"
+)
+
+
+def response(
+    status: HTTPStatus,
+    body: bytes,
+    content_type: str = "application/json",
+    headers: tuple[str, ...] = (),
+    *,
+    head_only: bool = False,
+) -> bytes:
+    """An HTTP/1.1 answer that closes its connection (no body for a HEAD request)."""
+    lines = [
+        f"HTTP/1.1 {status.value} {status.phrase}",
+        f"Content-Type: {content_type}",
+        f"Content-Length: {len(body)}",
+        *headers,
+        "Connection: close",
+    ]
+    return ("\r\n".join(lines) + "\r\n\r\n").encode() + (b"" if head_only else body)
+
+
+def refused(status: HTTPStatus, detail: str, *, head_only: bool = False) -> bytes:
+    """An answer with a JSON `detail`, as the API's errors have."""
+    extra = ("Allow: GET",) if status is HTTPStatus.METHOD_NOT_ALLOWED else ()
     body = json.dumps({"detail": detail}).encode()
+    return response(status, body, headers=extra, head_only=head_only)
+
+
+def full_detail(limit: int) -> str:
+    """Why a viewer is turned away when `limit` are open."""
     return (
-        f"HTTP/1.1 {status.value} {status.phrase}\r\n"
-        "Content-Type: application/json\r\n"
-        f"Content-Length: {len(body)}\r\n"
-        "Connection: close\r\n\r\n"
-    ).encode() + body
+        f"the 3D view has {limit} viewers open, as many as it takes (SRLAB_VISER_MAX_VIEWERS): "
+        "close one, or try again in a moment"
+    )
+
+
+def full_page(limit: int) -> bytes:
+    """The page a browser gets in place of the view when it is full.
+
+    It says so, and reloads itself after `FULL_RETRY_AFTER_S`.
+    """
+    return (
+        "<!doctype html><html lang=en><head><meta charset=utf-8>"
+        f'<meta http-equiv="refresh" content="{FULL_RETRY_AFTER_S}">'
+        "<title>srlab 3D view: full</title></head>"
+        '<body style="font-family: sans-serif; margin: 2em">'
+        f"<h1>The 3D view is full</h1><p id=full>{full_detail(limit)}.</p>"
+        f"<p>This page tries again every {FULL_RETRY_AFTER_S} seconds.</p></body></html>"
+    ).encode()
 
 
 class Gate:
     """Listens on `host`:`port` on a thread of its own and relays accepted connections.
 
-    `on_run` is called (on the gate's thread) with the run of each accepted websocket
-    handshake on `/run/<id>` and the address of the gate's connection to viser that will
-    carry it, before viser gets it. `start` raises OSError when the port is taken; `stop`
-    closes it and every relay.
+    `relay` tells, from any thread, which of its connections to viser an address is (and
+    the run its URL names). At most `max_viewers` websockets are relayed at once. `start`
+    raises OSError when the port is taken; `stop` closes it and every relay.
     """
 
     def __init__(
@@ -160,19 +266,47 @@ class Gate:
         port: int,
         upstream_port: int,
         policy: SitePolicy,
-        on_run: Callable[[int, Peer], None] | None = None,
+        max_viewers: int = MAX_VIEWERS,
     ) -> None:
         self.host = host
         self.port = port
         self.upstream_port = upstream_port
         self.policy = policy
-        self.on_run = on_run
+        self.max_viewers = max_viewers
         self.refused = 0
         """Requests refused so far (tests and the reliability suite read it)."""
+        self.turned_away = 0
+        """Viewers and pages turned away so far because the view was full."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: asyncio.Server | None = None
         self._thread: threading.Thread | None = None
         self._relays: set[asyncio.Task[None]] = set()
+        self._sockets = 0
+        """Websockets relayed now (counted on the gate's loop alone)."""
+        self._full_said = False
+        self._lock = threading.Lock()
+        self._upstreams: dict[Peer, Relay] = {}
+        """The gate's live connections to viser, by the address viser sees them come from."""
+
+    @property
+    def viewers(self) -> int:
+        """Websockets relayed now (each a viewer, or one to be)."""
+        return self._sockets
+
+    def relay(self, peer: Peer) -> Relay | None:
+        """The gate's live connection to viser from `peer`, if it is one (any thread)."""
+        with self._lock:
+            return self._upstreams.get(peer)
+
+    @contextlib.contextmanager
+    def _upstream(self, peer: Peer, relay: Relay) -> Iterator[None]:
+        with self._lock:
+            self._upstreams[peer] = relay
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._upstreams.pop(peer, None)
 
     def start(self) -> None:
         """Bind and serve (blocking until bound)."""
@@ -244,34 +378,111 @@ class Gate:
     async def _serve(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         async with asyncio.timeout(HEAD_TIMEOUT_S):
             head = await reader.readuntil(b"\r\n\r\n")
-        _, headers = _parse_head(head)
-        refused = refusal(headers, self.policy)
-        if refused is not None:
+        headers, problem = parse_head(head)
+        problem = problem or refusal(headers, self.policy)
+        upgrade = _upgrade(headers)
+        answer = handshake_answer(headers) if upgrade else None
+        if problem is None and upgrade and answer is None:
+            problem = HTTPStatus.BAD_REQUEST, BAD_HANDSHAKE
+        head_only = head.startswith(b"HEAD ")
+        if problem is not None:
             self.refused += 1
-            status, detail = refused
+            status, detail = problem
             log.warning("the 3D view refused a request: %s", detail)
-            writer.write(_response(status, detail))
+            writer.write(refused(status, detail, head_only=head_only))
             await writer.drain()
             return
+        if self._sockets >= self.max_viewers:
+            await self._turn_away(writer, upgrade, head_only)
+            return
         head, run_id = run_path(head)
-        upgrade = headers.get("upgrade", "").lower() == "websocket"
-        answer = handshake_answer(headers) if upgrade else None
-        if answer is not None:
-            # The page's socket opens now, not when viser (on the service's process, which
-            # steps back for the runs) gets to it: viser's client retries every second and
-            # closes a handshake still under way, so a busy machine kept a page from ever
-            # reconnecting (tests/web/test_viewer.py beside busy processes).
-            writer.write(answer)
-        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
+        if answer is None:
+            await self._page(reader, writer, head)
+            return
+        self._sockets += 1  # no await since the check: the count holds
         try:
-            # Past the guard (a foreign page chooses nothing) and before viser sees the
-            # handshake, so the choice is there when viser opens the session.
-            if run_id is not None and upgrade:
-                self._chose(run_id, up_writer.get_extra_info("sockname"))
-            up_writer.write(head)
-            if answer is not None:
+            await self._socket(reader, writer, head, answer, run_id)
+        finally:
+            self._sockets -= 1
+            if self._sockets < self.max_viewers:
+                self._full_said = False
+
+    async def _turn_away(
+        self, writer: asyncio.StreamWriter, upgrade: bool, head_only: bool
+    ) -> None:
+        self.turned_away += 1
+        if not self._full_said:
+            self._full_said = True
+            log.warning(
+                "the 3D view is full (%d viewers): new ones get 503 until one leaves",
+                self.max_viewers,
+            )
+        retry = (f"Retry-After: {FULL_RETRY_AFTER_S}",)
+        status = HTTPStatus.SERVICE_UNAVAILABLE
+        if upgrade:
+            body = json.dumps({"detail": full_detail(self.max_viewers)}).encode()
+            writer.write(response(status, body, headers=retry))
+        else:
+            page = full_page(self.max_viewers)
+            html = "text/html; charset=utf-8"
+            writer.write(response(status, page, html, retry, head_only=head_only))
+        await writer.drain()
+
+    async def _open_upstream(
+        self,
+    ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter, Peer]:
+        up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
+        host, port = up_writer.get_extra_info("sockname")[:2]
+        return up_reader, up_writer, (str(host), int(port))
+
+    async def _page(
+        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, head: bytes
+    ) -> None:
+        """Relay one page request and viser's answer; then close (once the client has)."""
+        up_reader, up_writer, peer = await self._open_upstream()
+        try:
+            with self._upstream(peer, Relay(run=None, socket=False)):
+                up_writer.write(head)
+                async with asyncio.timeout(VISER_ANSWER_S):
+                    reply = await up_reader.readuntil(b"\r\n\r\n")
+                writer.write(_closing(reply))
+                with contextlib.suppress(ConnectionError):
+                    # viser's server resets its end once it has answered.
+                    while chunk := await up_reader.read(CHUNK):
+                        writer.write(chunk)
+                        await writer.drain()
+        finally:
+            up_writer.close()
+        await writer.drain()
+        if writer.can_write_eof():
+            writer.write_eof()
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(LINGER_S):
+                while await reader.read(CHUNK):
+                    pass
+
+    async def _socket(
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        head: bytes,
+        answer: bytes,
+        run_id: int | None,
+    ) -> None:
+        # The page's socket opens now, not when viser (on the service's process, which
+        # steps back for the runs) gets to it: viser's client retries every second and
+        # closes a handshake still under way, so a busy machine kept a page from ever
+        # reconnecting (tests/web/test_viewer.py beside busy processes).
+        writer.write(answer)
+        up_reader, up_writer, peer = await self._open_upstream()
+        try:
+            # Known before viser sees a byte of it: viser's server answers only the gate's
+            # own connections, and the viewer starts this one on the run its URL names.
+            with self._upstream(peer, Relay(run=run_id, socket=True)):
+                up_writer.write(head)
                 # viser's own 101 (the same one) was answered already; anything else ends
-                # the socket, as viser would have.
+                # the socket, as viser would have. What the page sends meanwhile waits:
+                # it reaches viser only once viser has answered.
                 async with asyncio.timeout(VISER_ANSWER_S):
                     reply = await up_reader.readuntil(b"\r\n\r\n")
                 if reply.split(b" ", 2)[1:2] != [b"101"]:
@@ -280,20 +491,18 @@ class Gate:
                         reply.split(b"\r\n", 1)[0].decode("latin-1"),
                     )
                     return
-            await asyncio.gather(
-                _pipe(reader, up_writer), _pipe(up_reader, writer), return_exceptions=True
-            )
+                await asyncio.gather(
+                    _pipe(reader, up_writer), _pipe(up_reader, writer), return_exceptions=True
+                )
         finally:
             up_writer.close()
 
-    def _chose(self, run_id: int, sockname: object) -> None:
-        if self.on_run is None or not isinstance(sockname, tuple):
-            return
-        try:
-            self.on_run(run_id, (str(sockname[0]), int(sockname[1])))
-        except Exception:
-            # The view still opens, on the run it would show without the URL's.
-            log.exception("the 3D view could not choose run %d", run_id)
+
+def _closing(reply: bytes) -> bytes:
+    """The head of viser's answer, saying that the connection closes after it."""
+    if b"\r\nconnection:" in reply.lower():
+        return reply
+    return reply[:-2] + b"Connection: close\r\n\r\n"
 
 
 async def _pipe(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

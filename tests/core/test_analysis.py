@@ -10,10 +10,14 @@ import pytest
 from core.analysis import (
     correctness,
     criterion_null,
+    declared_comparisons,
     episodes_to_criterion,
     paired_table,
+    parse_pairs,
     trend_per_10,
 )
+from core.errors import UnknownNameError
+from core.stats import holm
 
 
 def test_trend_per_10_is_the_least_squares_slope() -> None:
@@ -93,3 +97,50 @@ def test_episodes_to_criterion_by_hand() -> None:
     assert episodes_to_criterion([True] * 8 + [False] * 2) == 10
     assert episodes_to_criterion([False] * 5 + [True] * 9) == 13
     assert episodes_to_criterion([True, False] * 10) is None
+
+
+def test_parse_pairs_reads_condition_names_that_hold_hyphens() -> None:
+    got = parse_pairs("kp-sonar, kp-qlambda-hybrid,qlambda-hybrid-kp,,kp-sonar")
+    assert got == [("kp", "sonar"), ("kp", "qlambda-hybrid"), ("qlambda-hybrid", "kp")]
+    for bad, message in [
+        ("kp-bogus", "no way to read it"),
+        ("kp", "no way to read it"),
+        ("kp-kp", "with itself"),
+        (" , ", "no comparison given"),
+    ]:
+        with pytest.raises(UnknownNameError, match=message):
+            parse_pairs(bad)
+
+
+def _condition(training: list[float], held_out: list[float]) -> dict[str, object]:
+    """A condition's summary as `paired` reads it: 10 episodes per seed, and held out."""
+    rows = [[1] * round(10 * r) + [0] * (10 - round(10 * r)) for r in training]
+    return {
+        "seeds": len(rows), "episodes": 10, "seed_ids": list(range(len(rows))),
+        "success_by_seed": rows, "evaluation": {"frozen_by_seed": held_out},
+    }  # fmt: skip
+
+
+def test_the_declared_comparisons_are_one_holm_family_on_training_and_held_out() -> None:
+    summary = {
+        "kp": _condition([0.9, 0.8, 0.9, 0.7, 0.8, 0.9], [1.0, 0.9, 1.0, 0.8, 0.9, 1.0]),
+        "sonar": _condition([0.6, 0.7, 0.6, 0.6, 0.7, 0.5], [0.7, 0.6, 0.7, 0.5, 0.6, 0.7]),
+        "rp": _condition([0.9, 0.9, 0.8, 0.8, 0.9, 0.8], [1.0, 1.0, 0.9, 0.9, 1.0, 1.0]),
+    }
+    rows = declared_comparisons(summary)  # the default: dp and qlambda-hybrid did not run
+    assert [(r["pair"], r["on"]) for r in rows] == [
+        ("kp - sonar", "all"),
+        ("kp - sonar", "held-out"),
+        ("kp - rp", "all"),
+        ("kp - rp", "held-out"),
+    ]
+    # kp leads sonar on all 6 seeds, both ways: exact sign-flip p = 2 / 2**6, and Holm
+    # multiplies the smallest of the 4 tests by 4.
+    assert rows[0]["p"] == pytest.approx(2 / 64)
+    assert rows[0]["p_holm"] == pytest.approx(4 * 2 / 64)
+    assert rows[0]["mean"] == pytest.approx((0.3 + 0.1 + 0.3 + 0.1 + 0.1 + 0.4) / 6)
+    assert rows[1]["mean"] == pytest.approx(0.3)
+    assert [r["p_holm"] for r in rows] == pytest.approx(holm([r["p"] for r in rows]))
+    assert all(r["p_holm"] >= r["p"] for r in rows)
+    only = declared_comparisons(summary, [("rp", "sonar")])
+    assert [r["pair"] for r in only] == ["rp - sonar", "rp - sonar"]

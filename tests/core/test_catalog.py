@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
@@ -338,3 +339,18 @@ def test_sensor_definitions_are_read_again_when_the_file_changes_and_answered_as
     file.unlink()
     with pytest.raises(CatalogError, match=r"sensors\.toml"):
         sensor_definitions(root)
+
+
+def test_the_behaviours_file_says_what_its_data_are() -> None:
+    """The header's figures for the turns and the cruise speeds are the rows' own."""
+    text = (data_dir() / "behaviours.toml").read_text()
+    turns = re.search(r"Turns are arcs at ([\d.]+) m/s turning at ([\d.]+) deg/s", text)
+    cruise = re.search(r"five cruise speeds ([\d., and]+) m/s", text.replace("\n# ", " "))
+    assert turns is not None and cruise is not None
+    catalog = load_catalog()
+    turning = [b for b in catalog.behaviours if b.family == "turn"]
+    assert turning
+    assert {b.speed_mps for b in turning} == {float(turns[1])}
+    assert {abs(b.turn_dps) for b in turning} == {float(turns[2])}
+    forward = sorted(b.speed_mps for b in catalog.behaviours if b.family == "forward")
+    assert forward == [float(v) for v in re.findall(r"[\d.]+\d", cruise[1])]

@@ -19,6 +19,7 @@ from core.params import (
     qlambda_config,
 )
 from core.qlambda import QLambdaConfig
+from core.trainer import IMPERFECTIONS
 
 
 @pytest.mark.parametrize("name", sorted(CONDITIONS))
@@ -79,7 +80,12 @@ def test_each_qlambda_parameter_sets_its_field() -> None:
         ("expert", {"threshold"}),
         ("delayed", {"eta", "epsilon", "threshold", "insert_threshold"}),
         ("dp", {"eta", "epsilon", "threshold", "insert_threshold"}),
-        ("rp", {"eta", "epsilon", "threshold", "insert_threshold"}),
+        (
+            "rp",
+            {"eta", "epsilon", "threshold", "insert_threshold"}
+            | {f"teacher_{n}" for n in IMPERFECTIONS},
+        ),
+        ("trainer", {"eta", "epsilon", "threshold", "insert_threshold"}),
         (
             "kp",
             {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"}

@@ -151,4 +151,4 @@ def test_make_run_says_where_the_cli_is() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert "CLI: .venv/bin/srlab" in done.stdout
-    assert "uv run srlab" in done.stdout and "source .venv/bin/activate" in done.stdout
+    assert "uv run --no-dev srlab" in done.stdout and "source .venv/bin/activate" in done.stdout

@@ -23,7 +23,7 @@ import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
 from fakes import InMemoryRunStore
 
-from bench.liveserver import live_server, wait_status
+from bench.liveserver import children, live_server, wait_status
 from core.engine import RunView, StatusChanged
 from server import engine_process
 from server.config import Settings
@@ -194,7 +194,9 @@ async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_proce
         started = await client.post(f"/api/runs/{other['id']}/start")
         assert started.status_code == 503, started.text
         assert "engines' process is gone" in started.json()["detail"]
-        assert (await client.get("/api/health")).status_code in (200, 503)
+        health = await client.get("/api/health")
+        assert health.status_code == 503, health.text  # no run can start
+        assert "engines' process is gone" in health.json()["detail"]
 
 
 async def test_a_new_engines_process_is_started_and_a_failed_run_resumes_there(
@@ -216,6 +218,7 @@ async def test_a_new_engines_process_is_started_and_a_failed_run_resumes_there(
                 await asyncio.sleep(0.05)
         assert started.status_code == 200, started.text
         assert engines.pid not in (None, dead)
+        assert (await client.get("/api/health")).status_code == 200
         live = engines.get(run_id)
         assert live is not None
         assert await live.read(_pid) == engines.pid
@@ -298,22 +301,6 @@ def _loads_numba(pid: int) -> bool:
     return "/numba/" in Path(f"/proc/{pid}/maps").read_text()
 
 
-def _children(pid: int) -> dict[int, str]:
-    """The processes whose parent is `pid`, with their command lines."""
-    found = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-            command = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            found[int(entry)] = command.decode(errors="replace")
-    return found
-
-
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
 def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
     """The service's threads and its store process yield to the ticks; the ticks' side not.
@@ -326,15 +313,15 @@ def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
     env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
     with live_server(tmp_path / "nice.db", env=env) as server:
         service = server.process.pid
-        children = _children(service)
-        (engines,) = [pid for pid, cmd in children.items() if "server.engine_process" in cmd]
-        stores = [pid for pid, cmd in children.items() if "spawn_main" in cmd]
-        assert stores, f"the service's store process, among {children}"
+        found = children(service)
+        (engines,) = [pid for pid, cmd in found.items() if "server.engine_process" in cmd]
+        stores = [pid for pid, cmd in found.items() if "spawn_main" in cmd]
+        assert stores, f"the service's store process, among {found}"
         assert _nices(service) == {min(19, base + 10)}
         for store in stores:
             assert _nices(store) == {min(19, base + 10)}
         assert _nices(engines) == {base}
-        engines_stores = [p for p, cmd in _children(engines).items() if "spawn_main" in cmd]
+        engines_stores = [p for p, cmd in children(engines).items() if "spawn_main" in cmd]
         assert engines_stores, "the engines' own store process"
         for store in engines_stores:
             assert _nices(store) == {base}
@@ -350,12 +337,10 @@ def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path:
     env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
     with live_server(tmp_path / "slices.db", env=env) as server:
         service = server.process.pid
-        children = _children(service)
-        (engines,) = [pid for pid, cmd in children.items() if "server.engine_process" in cmd]
-        stores = [
-            pid for pid, cmd in {**children, **_children(engines)}.items() if "spawn_main" in cmd
-        ]
-        assert len(stores) == 2, f"the service's and the engines' store processes: {children}"
+        found = children(service)
+        (engines,) = [pid for pid, cmd in found.items() if "server.engine_process" in cmd]
+        stores = [pid for pid, cmd in {**found, **children(engines)}.items() if "spawn_main" in cmd]
+        assert len(stores) == 2, f"the service's and the engines' store processes: {found}"
         for pid in (service, engines, *stores):
             assert _slices(pid) == {SHORT_SLICE_NS}, f"process {pid}"
 
@@ -369,12 +354,12 @@ def test_srlab_serve_ticks_runs_in_the_engines_process_unless_told_otherwise(
     tmp_path: Path, env: dict[str, str], in_process: bool
 ) -> None:
     with live_server(tmp_path / "placement.db", env={"SRLAB_VISER": "false", **env}) as server:
-        children = _children(server.process.pid).values()
-        assert any("server.engine_process" in cmd for cmd in children) is in_process, children
+        found = children(server.process.pid).values()
+        assert any("server.engine_process" in cmd for cmd in found) is in_process, found
         run = server.client.post("/api/runs", json={"condition": "rp", "episodes": 1}).json()
         assert server.client.post(f"/api/runs/{run['id']}/start").status_code == 200
         assert wait_status(server.client, run["id"], "finished")["episodes_done"] == 1
         # Numba (the sensing kernel) is loaded where runs tick, and only there.
         assert _loads_numba(server.process.pid) is not in_process
-        engines = [p for p, cmd in _children(server.process.pid).items() if "engine_process" in cmd]
+        engines = [p for p, cmd in children(server.process.pid).items() if "engine_process" in cmd]
         assert [_loads_numba(p) for p in engines] == ([True] if in_process else [])

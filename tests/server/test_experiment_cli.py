@@ -10,6 +10,7 @@ import matplotlib.image
 import pytest
 from clihelpers import PNG_SIGNATURE, exits_2
 
+from core.stats import holm
 from server.cli import main
 
 
@@ -17,6 +18,7 @@ from server.cli import main
 def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("report")
     argv = ["experiment", "--conditions", "innate,kp", "--seeds", "2", "--episodes", "3"]
+    argv += ["--declare", "kp-innate"]
     assert main([*argv, "--eval-episodes", "2", "--jobs", "1", "--out", str(out), "--quiet"]) == 0
     return out
 
@@ -112,13 +114,55 @@ def test_experiment_summary_md(report: Path) -> None:
     assert "| innate |" in md
     assert "| kp |" in md
     assert "## Failed tasks" not in md
+    # Table II: the paper's count with its interval beside srlab's rate over seeds.
+    assert "| paper, simulation | 5 | 250 | 2.0% [0.9, 4.6] |" in md
+    assert "| srlab, 2 seeds x 3 episodes |" in md
     assert "World `soft-obstacle`, camera stimuli `path`, signal learned" in md
     assert "| innate - kp |" in md  # every pair, first minus second
-    sections = ("## Paired by seed", "## Failures by cause", "## What ran", "## Camera obstacle")
-    for section in (*sections, "## What was learned, judged by the placement probe"):
+    sections = ["## Paired by seed (exploratory)", "## Failures by cause", "## What ran"]
+    sections += ["## Camera obstacle", "## What was learned, judged by the placement probe"]
+    for section in sections:
         assert section in md
     met = md[md.index("## Camera obstacle") :]
     assert "%)" in met  # encounters per seed (success rate of the episodes they were met in)
+
+
+@pytest.mark.slow
+def test_experiment_summary_states_its_interval_and_holm_corrects_the_declared(
+    report: Path,
+) -> None:
+    md = (report / "summary.md").read_text()
+    lines = md.splitlines()
+    assert lines[0] == "# srlab experiment"
+    assert lines[2].startswith("`srlab experiment --conditions innate,kp ")  # the command
+    header = md[: md.index("## Success")]
+    assert "Intervals: the 95% Student's t interval over seeds" in header
+    declared = md.index("## Pre-declared comparisons (Holm-corrected)")
+    assert declared < md.index("## Paired by seed (exploratory)")
+    assert "named in the command (`--declare`): kp - innate." in md
+    assert "| kp - innate | all episodes |" in md[declared:]
+    assert "| kp - innate | held-out, frozen |" in md[declared:]
+    doc = json.loads((report / "summary.json").read_text())
+    assert doc["params"]["declared"] == [["kp", "innate"]]
+    tests = doc["declared"]
+    assert [(t["pair"], t["on"]) for t in tests] == [
+        ("kp - innate", "all"),
+        ("kp - innate", "held-out"),
+    ]
+    assert [t["p_holm"] for t in tests] == pytest.approx(holm([t["p"] for t in tests]))
+
+
+def test_the_sensors_help_says_which_definition_is_the_papers(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit):
+        main(["experiment", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    start = text.index("camera obstacle stimuli")
+    sensors = text[start : text.index("--signal {", start)]
+    assert "(default path)" in sensors
+    assert "paper: Fig. 10" in sensors
+    assert "Fig. 10" not in sensors[: sensors.index("paper: ")]  # path is srlab's, not Fig. 10
 
 
 @pytest.mark.slow
@@ -164,6 +208,11 @@ def test_experiment_unknown_condition_exits_2(
         (["--jobs", "0"], "argument --jobs: must be at least 1, got 0"),
         (["--seed-base", "-3"], "argument --seed-base: must be 0 or more, got -3"),
         (["--conditions", " , "], "srlab: error: no condition given"),
+        (["--declare", "kp-bogus"], "srlab: error: comparison 'kp-bogus': no way to read it"),
+        (
+            ["--conditions", "kp,innate", "--declare", "kp-sonar"],
+            "--declare: sonar not among --conditions",
+        ),
     ],
 )
 def test_experiment_bad_arguments_exit_2(

@@ -1,9 +1,13 @@
-"""The 3D view's URLs that name a run (`/run/<id>`): the gate's rewrite and its choice.
+"""The 3D view's gate: what it lets through to viser, and how; viser's port behind it.
 
-A page opened on `/run/<id>` opens its websocket on that path again at every reconnect (a
-restart of the service included): the gate rewrites it to viser's `/` and chooses the run
-for the session viser opens. The real page across a real restart is
-tests/web/test_viewer.py.
+The gate relays a page's request alone and answers itself what viser's server cannot take;
+it keeps at most `max_viewers` sockets. A page opened on `/run/<id>` opens its websocket
+on that path again at every reconnect (a restart of the service included): the gate
+rewrites it to viser's `/` and keeps the run with the socket's relay, for the session
+viser opens. viser's own port answers the gate's relays alone, and a socket that got past
+that still gets no session. The real page across a real restart is
+tests/web/test_viewer.py; every listening socket of a live `srlab serve`,
+tests/server/test_listening_sockets.py.
 """
 
 from __future__ import annotations
@@ -11,9 +15,11 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import json
 import os
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
@@ -23,15 +29,16 @@ from apphelpers import client_for, settings_for
 from fastapi import FastAPI
 from viserpage import camera_message
 from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed
-from websockets.typing import Subprotocol
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.typing import Origin, Subprotocol
 
 from bench.liveserver import free_port
 from server.guard import SitePolicy
-from server.viewer import Viewer
+from server.viewer import Viewer, upstream
 from server.viewer import gate as gate_module
 from server.viewer.app import Session
-from server.viewer.gate import Gate, Peer, handshake_answer, run_path
+from server.viewer.gate import MAX_VIEWERS, Gate, Peer, Relay, handshake_answer, run_path
+from server.viewer.upstream import Checked, UnguardedViewError, websocket_servers
 
 pytestmark = pytest.mark.anyio
 WAIT_S = 60.0
@@ -106,21 +113,35 @@ def test_a_malformed_request_line_passes_unchanged() -> None:
 def handshake(target: str, origin: str | None = None) -> bytes:
     """A websocket handshake's head for `target`, from `origin` if given."""
     key = base64.b64encode(os.urandom(16)).decode()
-    lines = ["Upgrade: websocket", "Connection: Upgrade", f"Sec-WebSocket-Key: {key}"]
+    lines = [
+        "Upgrade: websocket",
+        "Connection: Upgrade",
+        f"Sec-WebSocket-Key: {key}",
+        "Sec-WebSocket-Version: 13",
+    ]
     if origin is not None:
         lines.append(f"Origin: {origin}")
     return head(target, *lines)
 
 
+Upstream = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+
+
 @asynccontextmanager
 async def gate_before(
-    upstream: Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]],
-    on_run: Callable[[int, Peer], None] | None = None,
+    upstream: Callable[[Gate], Upstream], max_viewers: int = MAX_VIEWERS
 ) -> AsyncIterator[Gate]:
-    """A gate on loopback in front of a server that handles each connection with `upstream`."""
-    fake = await asyncio.start_server(upstream, "127.0.0.1", 0)
+    """A gate on loopback in front of a server that handles each connection with `upstream`
+    (made for the gate, which it may ask about its relays)."""
+    gates: list[Gate] = []
+
+    async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await upstream(gates[0])(reader, writer)
+
+    fake = await asyncio.start_server(handle, "127.0.0.1", 0)
     policy = SitePolicy.of(["127.0.0.1"], [])
-    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy, on_run=on_run)
+    gate = Gate("127.0.0.1", 0, fake.sockets[0].getsockname()[1], policy, max_viewers=max_viewers)
+    gates.append(gate)
     await asyncio.to_thread(gate.start)
     try:
         yield gate
@@ -129,68 +150,160 @@ async def gate_before(
         fake.close()
 
 
+@dataclass
+class Seen:
+    """A request as a fake viser got it: its head, its sender, what the gate said of the
+    sender then, and whatever came after the head."""
+
+    head: bytes
+    sender: Peer
+    relay: Relay | None
+    rest: bytes = b""
+    ended: bool = False
+    """The gate closed this connection (`rest` is all it sent)."""
+
+
+SWITCH = b"HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\r\n"
+
+
 @asynccontextmanager
 async def gate_on_a_fake_viser(
-    on_run: Callable[[int, Peer], None],
-) -> AsyncIterator[tuple[Gate, list[tuple[bytes, Peer]]]]:
-    """A gate in front of a server that records each request head and its sender, then 200."""
-    heads: list[tuple[bytes, Peer]] = []
+    max_viewers: int = MAX_VIEWERS,
+) -> AsyncIterator[tuple[Gate, list[Seen]]]:
+    """A gate in front of a server that records each request, then answers as viser does:
+    a handshake with 101 (then holds the socket until the gate closes it), a page with 200
+    and the end of its side."""
+    seen: list[Seen] = []
 
-    async def upstream(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        host, port = writer.get_extra_info("peername")[:2]
-        heads.append((await reader.readuntil(b"\r\n\r\n"), (host, port)))
-        writer.write(b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\nConnection: close\r\n\r\n")
-        await writer.drain()
-        writer.close()
+    def upstream(gate: Gate) -> Upstream:
+        async def answer(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            host, port = writer.get_extra_info("peername")[:2]
+            request = await reader.readuntil(b"\r\n\r\n")
+            seen.append(Seen(request, (host, port), gate.relay((host, port))))
+            if b"\r\nUpgrade: websocket" in request:
+                writer.write(SWITCH)
+            else:
+                writer.write(b"HTTP/1.1 200 OK\r\nContent-Length: 2\r\n\r\nok")
+                writer.write_eof()
+            with contextlib.suppress(ConnectionError):
+                seen[-1].rest = await reader.read()  # until the gate closes
+            seen[-1].ended = True
+            writer.close()
 
-    async with gate_before(upstream, on_run) as gate:
-        yield gate, heads
+        return answer
+
+    async with gate_before(upstream, max_viewers) as gate:
+        yield gate, seen
 
 
-async def send(port: int, raw: bytes) -> bytes:
-    """The status line the gate answers `raw` with."""
+async def exchange(port: int, raw: bytes) -> bytes:
+    """All the gate answers `raw` with, until it closes (a socket opened: its 101)."""
     reader, writer = await asyncio.open_connection("127.0.0.1", port)
     try:
         writer.write(raw)
         await writer.drain()
         async with asyncio.timeout(WAIT_S):
-            return await reader.readline()
+            answer = await reader.readuntil(b"\r\n\r\n")
+            if answer.startswith(b"HTTP/1.1 101 "):
+                return answer
+            return answer + await reader.read()
     finally:
         writer.close()
 
 
-async def test_the_gate_names_a_websockets_run_and_relays_it_to_slash() -> None:
-    named: list[tuple[int, Peer]] = []
-    async with gate_on_a_fake_viser(lambda run_id, peer: named.append((run_id, peer))) as (
-        gate,
-        heads,
-    ):
-        assert b" 200 " in await send(gate.port, handshake("/run/7"))
-        relayed, sender = heads[-1]
-        assert relayed.startswith(b"GET / HTTP/1.1\r\n")
-        # With the address viser sees the socket come from: the viewer keys the run by it.
-        assert named == [(7, sender)]
-        # The page itself: viser's page at /, and no choice (only its socket chooses).
+async def send(port: int, raw: bytes) -> bytes:
+    """The status line the gate answers `raw` with."""
+    return (await exchange(port, raw)).split(b"\r\n", 1)[0] + b"\r\n"
+
+
+async def test_the_gate_keeps_a_websockets_run_with_its_relay_and_relays_it_to_slash() -> None:
+    async with gate_on_a_fake_viser() as (gate, seen):
+        assert b" 101 " in await send(gate.port, handshake("/run/7"))
+        await until(lambda: len(seen) == 1, "the socket to reach viser")
+        # The address viser sees the socket come from is the gate's, known with its run
+        # before viser got a byte: the viewer starts the session on it.
+        assert seen[-1].head.startswith(b"GET / HTTP/1.1\r\n")
+        assert seen[-1].relay == Relay(run=7, socket=True)
+        # The page itself: viser's page at /, and no run (only its socket chooses).
         assert b" 200 " in await send(gate.port, head("/run/8/"))
-        assert heads[-1][0].startswith(b"GET / HTTP/1.1\r\n") and len(named) == 1
-        # Other paths, and a bogus or huge id, pass as they are and choose nothing.
+        assert seen[-1].head.startswith(b"GET / HTTP/1.1\r\n")
+        assert seen[-1].relay == Relay(run=None, socket=False)
+
+        # Other paths, and a bogus or huge id, pass as they are and name no run.
+        def reached(line: bytes) -> Callable[[], bool]:
+            return lambda: seen[-1].head.startswith(line)
+
         for target in ("/editor", "/run/7x", "/run/" + "9" * 40):
-            assert b" 200 " in await send(gate.port, handshake(target))
-            assert heads[-1][0].startswith(f"GET {target} HTTP/1.1\r\n".encode())
-        assert len(named) == 1
-        # A socket the guard refuses chooses nothing, and reaches no viser.
-        count = len(heads)
+            assert b" 101 " in await send(gate.port, handshake(target))
+            await until(reached(f"GET {target} ".encode()), target)
+            assert seen[-1].relay == Relay(run=None, socket=True)
+        # A socket the guard refuses names nothing, and reaches no viser.
+        count = len(seen)
         assert b" 403 " in await send(gate.port, handshake("/run/9", "http://127.0.0.1:9999"))
-        assert len(heads) == count and len(named) == 1 and gate.refused == 1
+        assert len(seen) == count and gate.refused == 1
+        # A relay is known while it lasts, and no longer.
+        await until(lambda: gate.viewers == 0, "the sockets to end")
+        assert all(gate.relay(s.sender) is None for s in seen)
 
 
-async def test_a_failing_choice_still_opens_the_view() -> None:
-    def fail(run_id: int, peer: Peer) -> None:
-        raise RuntimeError(f"cannot choose {run_id}")
+async def test_a_page_request_goes_alone_and_its_connection_closes_after_the_answer() -> None:
+    async with gate_on_a_fake_viser() as (gate, seen):
+        page = head("/")
+        # Two requests back to back (pipelined), and more bytes: viser gets the first
+        # alone, and the client one answer that says the connection closes.
+        answer = await exchange(gate.port, page + page + b"x" * 100_000)
+        assert answer.count(b"HTTP/1.1") == 1 and answer.endswith(b"\r\n\r\nok")
+        assert b"\r\nConnection: close\r\n" in answer
+        await until(lambda: seen and seen[0].ended, "the gate to close its side")
+        assert [(s.head, s.rest) for s in seen] == [(page, b"")]
 
-    async with gate_on_a_fake_viser(fail) as (gate, heads):
-        assert b" 200 " in await send(gate.port, handshake("/run/3"))
-        assert heads[-1][0].startswith(b"GET / HTTP/1.1\r\n")
+
+@pytest.mark.parametrize(
+    ("raw", "status"),
+    [
+        (b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 2\r\n\r\nhi", b" 405 "),
+        (b"HEAD / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n", b" 405 "),
+        (b"GET / HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n", b" 505 "),
+        (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 2\r\n\r\nhi", b" 400 "),
+        (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nTransfer-Encoding: chunked\r\n\r\n", b" 400 "),
+        (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nno colon\r\n\r\n", b" 400 "),
+        (b"GET /\r\nHost: 127.0.0.1\r\n\r\n", b" 400 "),
+        (b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n\r\n", b" 400 "),
+        (
+            b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+            b"Sec-WebSocket-Version: 8\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n",
+            b" 400 ",
+        ),
+    ],
+)
+async def test_the_gate_answers_what_visers_server_cannot_take(raw: bytes, status: bytes) -> None:
+    # viser's server logged a traceback for each and answered nothing.
+    async with gate_on_a_fake_viser() as (gate, seen):
+        answer = await exchange(gate.port, raw)
+        assert status in answer.split(b"\r\n", 1)[0]
+        assert b'{"detail": ' in answer or raw.startswith(b"HEAD ")
+        assert not seen and gate.refused == 1
+
+
+async def test_past_max_viewers_a_socket_and_a_page_get_503_and_retry_after() -> None:
+    async with gate_on_a_fake_viser(max_viewers=2) as (gate, seen):
+        url = f"ws://127.0.0.1:{gate.port}/"
+        async with connect(url) as one, connect(url):
+            with pytest.raises(InvalidStatus) as refused:
+                await connect(url)
+            turned = refused.value.response
+            assert turned.status_code == 503 and turned.headers["Retry-After"] == "5"
+            assert "SRLAB_VISER_MAX_VIEWERS" in json.loads(turned.body)["detail"]
+            # A page opened now says so, and tries again by itself.
+            page = await exchange(gate.port, head("/run/3"))
+            assert page.startswith(b"HTTP/1.1 503 ") and b"\r\nRetry-After: 5\r\n" in page
+            assert b"The 3D view is full" in page and b'http-equiv="refresh"' in page
+            assert gate.turned_away == 2 and len(seen) == 2  # viser got neither
+            await one.close()
+            await until(lambda: gate.viewers < 2, "a viewer to leave")
+            async with connect(url):
+                assert gate.viewers == 2
+        await until(lambda: gate.viewers == 0, "the viewers to leave")
 
 
 def test_the_gate_answers_a_handshake_as_viser_would() -> None:
@@ -209,7 +322,7 @@ def test_the_gate_answers_a_handshake_as_viser_would() -> None:
     assert b"\r\nSec-WebSocket-Protocol: viser-v1.1.1\r\n" in answer
     plain = handshake_answer({**headers, "sec-websocket-protocol": "chat"})
     assert plain is not None and b"Sec-WebSocket-Protocol" not in plain
-    # Not a handshake the gate can answer: viser answers it (with its error).
+    # Not a handshake the gate can answer: the gate refuses it (400).
     for broken in (
         {"sec-websocket-version": "8"},
         {"sec-websocket-key": "not base64!"},
@@ -242,7 +355,7 @@ async def gate_on_a_slow_viser(
             await writer.drain()
         writer.close()
 
-    async with gate_before(upstream) as gate:
+    async with gate_before(lambda _: upstream) as gate:
         try:
             yield gate, answer_now
         finally:
@@ -421,3 +534,95 @@ async def test_pages_reconnecting_together_each_get_their_own_run(tmp_path: Path
             await until(lambda: shows(session, two), f"run {two}, chosen and named")
         async with watching(viewer, "/") as session:
             await until(lambda: shows(session, newest), f"run {newest}: nothing left chosen")
+
+
+async def test_past_max_viewers_a_new_socket_is_refused_before_viser_builds_anything(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port(), viser_max_viewers=1)
+    async with client_for(settings) as (_, app):
+        viewer = viewer_of(app)
+        async with watching(viewer, "/") as first:
+            with pytest.raises(InvalidStatus) as refused:
+                async with page_socket(viewer, "/"):
+                    pass
+            assert refused.value.response.status_code == 503
+            assert list(viewer.sessions.values()) == [first]
+        await until(lambda: viewer.gate.viewers == 0, "the first viewer to leave")
+        async with watching(viewer, "/"):
+            assert viewer.gate.turned_away == 1
+
+
+# --- viser's own port: only the gate's relays --------------------------------------------
+
+
+async def raw_status(port: int, *lines: str) -> bytes:
+    """The status line a GET / with these header lines gets on `port`."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    try:
+        writer.write(("\r\n".join(["GET / HTTP/1.1", *lines]) + "\r\n\r\n").encode())
+        await writer.drain()
+        async with asyncio.timeout(WAIT_S):
+            return await reader.readline()
+    finally:
+        writer.close()
+
+
+async def test_visers_own_port_refuses_what_did_not_come_through_the_gate(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port())
+    async with client_for(settings) as (client, app):
+        viewer = viewer_of(app)
+        run_id = await start_run(client, condition="delayed", mode="realtime", hz=20)
+        (server,) = await asyncio.to_thread(websocket_servers, viewer.server)
+        assert isinstance(server.process_request, Checked)
+        # viser's own page and socket, asked for with viser's own Host and Origin (as a
+        # page that found the port by scanning would): 403, and no viewer.
+        own = f"127.0.0.1:{viewer.gate.upstream_port}"
+        assert b" 403 " in await raw_status(viewer.gate.upstream_port, f"Host: {own}")
+        protocol = Subprotocol(f"viser-v{viser.__version__}")
+        with pytest.raises(InvalidStatus) as refused:
+            await connect(f"ws://{own}/", subprotocols=[protocol], origin=Origin(f"http://{own}"))
+        assert refused.value.response.status_code == 403
+        assert "gate" in json.loads(refused.value.response.body)["detail"]
+        # Through the gate, the same socket is a viewer, on the run its URL names.
+        async with watching(viewer, f"/run/{run_id}") as session:
+            await until(lambda: shows(session, run_id), f"run {run_id}")
+        assert server.process_request.refused == 2
+
+
+async def test_a_socket_that_got_past_visers_check_gets_no_session(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port())
+    async with client_for(settings) as (_, app):
+        viewer = viewer_of(app)
+        (server,) = await asyncio.to_thread(websocket_servers, viewer.server)
+        check = server.process_request
+        assert isinstance(check, Checked)
+        server.process_request = check.original  # as if viser's own check had let it by
+        try:
+            url = f"ws://127.0.0.1:{viewer.gate.upstream_port}/"
+            protocol = Subprotocol(f"viser-v{viser.__version__}")
+            async with connect(url, subprotocols=[protocol]) as socket:
+                await socket.send(camera_message())  # what makes viser call it a viewer
+                async with asyncio.timeout(WAIT_S):
+                    with pytest.raises(ConnectionClosed) as closed:
+                        while True:
+                            await socket.recv()
+            assert closed.value.rcvd is not None and closed.value.rcvd.code == 1008
+            assert not viewer.sessions  # so no panel, and nothing to write with
+        finally:
+            server.process_request = check
+
+
+async def test_a_viser_whose_server_cannot_be_guarded_is_not_served(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    class Elsewhere:
+        """What srlab looks for, where another viser keeps nothing of the kind."""
+
+    monkeypatch.setattr(upstream, "Server", Elsewhere)
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port())
+    with pytest.raises(UnguardedViewError, match="SRLAB_VISER=false"):
+        async with client_for(settings):
+            pass

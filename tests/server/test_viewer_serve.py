@@ -13,7 +13,7 @@ from pathlib import Path
 
 import httpx
 
-from bench.liveserver import ROOT, free_port, start_server, stop_server
+from bench.liveserver import ROOT, free_port, servers, start_server, stop_server
 
 
 def test_a_taken_view_port_stops_srlab_serve_with_a_clear_message(tmp_path: Path) -> None:
@@ -78,3 +78,36 @@ def test_open_event_streams_end_with_their_run_status_when_the_service_stops(
         assert statuses, seen[run["id"]]
     # The streams ended as the shutdown began, not cancelled after uvicorn's grace period.
     assert "timeout graceful shutdown exceeded" not in log
+
+
+def test_requests_viser_cannot_take_are_answered_by_the_gate_and_log_no_traceback(
+    tmp_path: Path,
+) -> None:
+    with servers() as start:  # killed should an assertion fail
+        server = start(tmp_path / "requests.db", log=tmp_path / "serve.log")
+        port = server.client.get("/api/health").json()["viser_port"]
+        page = f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode()
+        answers = {
+            raw: _answer(port, raw)
+            for raw in (
+                page + page,  # pipelined: viser got both, and logged a traceback
+                b"POST / HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 2\r\n\r\nhi",
+                b"HEAD / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n",
+                b"GET / HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n",
+                b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nTransfer-Encoding: chunked\r\n\r\n",
+            )
+        }
+        statuses = [answer.split(b"\r\n", 1)[0].split(b" ")[1:2] for answer in answers.values()]
+        assert statuses == [[b"200"], [b"405"], [b"405"], [b"505"], [b"400"]]
+        assert answers[page + page].count(b"HTTP/1.1 ") == 1  # one request, one answer
+        stop_server(server)  # no traceback in its log
+
+
+def _answer(port: int, raw: bytes) -> bytes:
+    """All a server answers `raw` with, until it closes the connection."""
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as s:
+        s.sendall(raw)
+        received = b""
+        while chunk := s.recv(65536):
+            received += chunk
+        return received

@@ -244,3 +244,29 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
             stop_server(second)
     finally:
         page.close()
+
+
+def test_a_view_past_max_viewers_says_it_is_full_then_opens_when_one_leaves(
+    browser: Browser, tmp_path: Path
+) -> None:
+    full = start_server(tmp_path / "full.db", env={"SRLAB_VISER_MAX_VIEWERS": "1"})
+    pages: list[Page] = []
+    try:
+        first = open_view(browser, full)
+        pages.append(first)
+        port = full.client.get("/api/health").json()["viser_port"]
+        second = browser.new_page(viewport=VIEWPORT)  # type: ignore[arg-type]
+        pages.append(second)
+        second.set_default_timeout(BROWSER_WAIT_MS)
+        answer = second.goto(f"http://127.0.0.1:{port}/")
+        assert answer is not None and answer.status == 503
+        second.get_by_text("The 3D view is full").wait_for()
+        assert "SRLAB_VISER_MAX_VIEWERS" in second.inner_text("body")
+        # The page tries again by itself: once the first viewer leaves, it is the view.
+        first.close()
+        second.get_by_text("srlab 3D view").wait_for(timeout=90_000)
+    finally:
+        for page in pages:
+            if not page.is_closed():
+                page.close()
+        stop_server(full)

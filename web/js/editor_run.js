@@ -229,7 +229,7 @@ function render() {
       el("span", { class: "diff-value", text: interval(d, true) }),
       el("span", { class: "muted small", text: d.mean === null ? " (no episode yet)"
         : d.low === null ? " a plain difference: one seed gives no interval, run 2 or more to get one"
-          : ` paired by seed (95% bootstrap CI), sign-flip p = ${stats.p === null ? "—" : stats.p.toFixed(2)}${stats.complete ? "" : "; so far"}` })));
+          : ` paired by seed (95% Student-t CI), sign-flip p = ${stats.p === null ? "—" : stats.p.toFixed(2)}${stats.complete ? "" : "; so far"}` })));
   }
   parts.push(curve(batch));
   out.replaceChildren(...parts);

@@ -1,9 +1,10 @@
-"""Liveness of the service and its database."""
+"""Whether runs can start and store: the database, the engines' process, the stores."""
 
 from __future__ import annotations
 
 from importlib.metadata import version
 
+from core.errors import StorageError
 from server.api.deps import StateDep
 from server.api.routing import resource_router
 from server.schemas import Health
@@ -13,12 +14,24 @@ router = resource_router(tag="health")
 
 @router.get("/health")
 def health(state: StateDep) -> Health:
-    """Whether the service answers and its database does (503 when it does not).
+    """Whether runs can start and store: 200 "ok", or 503 saying what is down.
 
-    A SQLite file deleted or replaced since the service opened it, or its WAL index cut,
-    is a 503 that says which: the runs fail with the same error, and no write is taken.
+    The service's database is read (through its store process when it has one: a store
+    process down, restarting, answers at once); the engines' process and its store process
+    are as last heard (`Engines.outage`), so a poll costs no trip to them. A SQLite file
+    deleted or replaced since the service opened it, or its WAL index cut, is a 503 that
+    says which: the runs fail with the same error, and no write is taken.
     """
-    dialect = state.database.check()
+    down = []
+    dialect = ""
+    try:
+        dialect = state.database.check()
+    except StorageError as e:
+        down.append(str(e))
+    if (outage := state.engines.outage()) is not None:
+        down.append(outage)
+    if down:
+        raise StorageError("; ".join(down))
     return Health(
         status="ok",
         version=version("srlab"),

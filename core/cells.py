@@ -1,0 +1,117 @@
+"""Studies made of cells: a condition in a setup with parameters, run on every seed.
+
+An experiment compares conditions; a study compares cells, so the same condition can stand
+in several (rp with a perfect teacher and with a mistaken one; kp from Table I and from
+its own design). Each cell is summarised as an experiment's condition is
+(`core.analysis.summarise`), and cells are compared seed by seed as conditions are: every
+cell meets the same obstacles and lamp cycles on a seed. Cells that run the same task
+share its result.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from core.analysis import paired, summarise
+from core.conditions import get_condition
+from core.experiment import Backend, Task, TaskResult, run_tasks
+from core.params import Params, ParamValue, normalise, tuned_params
+from core.setup import Setup
+
+HORIZONS = (("1-10", 10), ("all", None))
+"""The training horizons a study compares cells over."""
+HELD_OUT = "frozen_by_seed"
+"""The held-out figure a study compares cells on: what was learned, frozen."""
+
+
+@dataclass(frozen=True, slots=True)
+class Cell:
+    """A condition in a setup with parameters: one row of a study.
+
+    Attributes:
+        label: its name in the study's tables.
+        condition: the condition it runs.
+        params: the parameters it sets (its tuned ones included, when tuned).
+        setup: where it runs.
+    """
+
+    label: str
+    condition: str
+    params: Params = ()
+    setup: Setup = field(default_factory=Setup)
+
+    def task(self, seed: int, episodes: int, eval_episodes: int) -> Task:
+        """The cell's task on `seed`."""
+        return Task(self.condition, seed, episodes, self.params, self.setup, eval_episodes)
+
+
+def cell(
+    label: str,
+    condition: str,
+    setup: Setup,
+    *,
+    tuned: bool = True,
+    params: Mapping[str, ParamValue] | None = None,
+) -> Cell:
+    """A cell running `condition` with its tuned parameters (unless not `tuned`) and `params`."""
+    setup.condition(get_condition(condition))  # an unknown name, or a start it cannot take
+    base = dict(tuned_params(condition)) if tuned else {}
+    return Cell(label, condition, normalise({**base, **(params or {})}), setup.resolved())
+
+
+def study_tasks(
+    cells: Sequence[Cell], seeds: Sequence[int], episodes: int, eval_episodes: int
+) -> list[Task]:
+    """Every distinct task of the cells, in (cell, seed) order."""
+    if len({c.label for c in cells}) != len(cells):
+        raise ValueError("cell labels must be distinct")
+    return list(dict.fromkeys(c.task(s, episodes, eval_episodes) for c in cells for s in seeds))
+
+
+def run_study(
+    cells: Sequence[Cell],
+    seeds: Sequence[int],
+    episodes: int,
+    eval_episodes: int,
+    backend: Backend,
+    on_result: Callable[[TaskResult], None] | None = None,
+) -> list[TaskResult]:
+    """Run every distinct task of the cells on `backend`; results in `study_tasks` order."""
+    return run_tasks(study_tasks(cells, seeds, episodes, eval_episodes), backend, on_result)
+
+
+def summarise_cells(
+    cells: Sequence[Cell],
+    results: Sequence[TaskResult],
+    correct: Mapping[str, frozenset[str]] | None = None,
+    camera: Sequence[str] = (),
+) -> dict[str, dict[str, Any]]:
+    """Each cell's summary over its seeds, as an experiment's condition's, by label."""
+    out: dict[str, dict[str, Any]] = {}
+    for c in cells:
+        mine = [
+            r
+            for r in results
+            if (r.task.condition, r.task.params, r.task.setup) == (c.condition, c.params, c.setup)
+        ]
+        out[c.label] = summarise(mine, [c.condition], correct, camera)[c.condition]
+    return out
+
+
+def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, float]]:
+    """Cell `a`'s success minus cell `b`'s, seed by seed, per horizon and held out.
+
+    Each entry: the mean difference, its 95% bootstrap interval, the sign-flip p and the
+    seeds paired; a horizon the cells cannot be paired on is left out.
+    """
+    out: dict[str, dict[str, float]] = {}
+    for label, horizon in HORIZONS:
+        d = paired(summary, a, b, horizon)
+        if d is not None:
+            out[label] = d
+    d = paired(summary, a, b, held_out=HELD_OUT)
+    if d is not None:
+        out["held-out"] = d
+    return out
