@@ -25,7 +25,7 @@ from core.events import Outcome
 from core.runner import EpisodeSummary, run
 from core.setup import Setup
 from core.simulation import Simulation
-from core.stats import Estimate, bootstrap_mean
+from core.stats import Estimate, mean_interval
 
 CONDITION = "reflexes"
 """The sonar reflexes alone: the teacher, never taught."""
@@ -140,4 +140,4 @@ def copy_report(
         s: (n, ok, nr, okr, dict(sorted(behaviours[s].items(), key=lambda kv: -kv[1])))
         for s, (n, ok, nr, okr) in sorted(counts.items())
     }
-    return CopyReport(bootstrap_mean(shares), bootstrap_mean(rewarded), by_stimulus)
+    return CopyReport(mean_interval(shares), mean_interval(rewarded), by_stimulus)

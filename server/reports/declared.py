@@ -2,32 +2,18 @@
 
 Each is a difference between two conditions' per-seed figures, paired by seed, with its
 interval and sign-flip p (`core.stats.paired_difference`); the family of them is corrected
-for multiplicity with Holm's step-down method, so a conclusion drawn from any of them keeps
-the family's error rate at 5%. Every other figure in a summary is exploratory.
+for multiplicity with Holm's step-down method (`core.stats.holm`), so a conclusion drawn
+from any of them keeps the family's error rate at 5%. Every other figure in a summary is
+exploratory.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from core.stats import Paired, paired_difference
-
-
-def holm(p_values: Sequence[float]) -> list[float]:
-    """Holm's step-down adjustment of a family of p-values, in their order (NaN stays NaN).
-
-    The k-th smallest of the m known p-values is multiplied by m - k + 1, and each adjusted
-    p is at least the one before it, capped at 1.
-    """
-    known = sorted((p, i) for i, p in enumerate(p_values) if not math.isnan(p))
-    out = [math.nan] * len(p_values)
-    running = 0.0
-    for k, (p, i) in enumerate(known):
-        running = max(running, min(1.0, (len(known) - k) * p))
-        out[i] = running
-    return out
+from core.stats import Paired, holm, p_text, paired_difference
+from server.reports.base import diff
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,16 +52,10 @@ def compare_declared(comparisons: Sequence[Comparison]) -> list[Tested]:
 
 def paired_points(paired: Paired) -> str:
     """A paired difference of rates in points: ``+9.1 [+5.7, +12.3], p 0.004``."""
-    d = paired.diff
-    return f"{100 * d.mean:+.1f} [{100 * d.low:+.1f}, {100 * d.high:+.1f}], {_p(paired.p)}"
+    return diff({**paired.diff.as_dict(), "p": paired.p})
 
 
 def points(tested: Tested) -> str:
     """``+9.1 [+5.7, +12.3], p 0.004 (Holm 0.012)``, in points."""
-    return f"{paired_points(tested.paired)} (Holm {_p(tested.p_holm)[2:]})"
-
-
-def _p(p: float) -> str:
-    if math.isnan(p):
-        return "p -"
-    return "p < 0.001" if p < 0.001 else f"p {p:.3f}"
+    holm_p = p_text(tested.p_holm).removeprefix("p ")
+    return f"{paired_points(tested.paired)} (Holm {holm_p})"
