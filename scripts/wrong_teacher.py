@@ -12,8 +12,9 @@ the frozen held-out evaluation and what each variant answers each camera stimulu
 
     .venv/bin/python scripts/wrong_teacher.py docs/results/wrong-teacher --jobs 2
 
-(what ``scripts/results.sh`` runs). It writes ``summary.md`` (starting with that command),
-``summary.json`` and ``wrong-teacher.png`` into the folder.
+(what ``scripts/results.sh`` runs). ``--doses 0.1,0.3`` adds kp with smaller penalties
+(exploratory; each dose costs as much as another condition). It writes ``summary.md``
+(starting with that command), ``summary.json`` and ``wrong-teacher.png`` into the folder.
 """
 
 from __future__ import annotations
@@ -36,10 +37,10 @@ from core.events import Outcome
 from core.experiment import CAMERA_SENSOR, LocalBackend, Task, TaskResult, run_tasks
 from core.params import Params, normalise, tuned_params
 from core.setup import Setup
-from core.stats import Estimate, bootstrap_mean, paired_difference, pct
+from core.stats import Estimate, mean_interval, mean_intervals, paired_difference, pct
 from core.worlds import load_world
 from server.probe_cache import cached_probe
-from server.reports.base import clean_json, head, row
+from server.reports.base import clean_json, cpu_seconds, head, interval_line, row
 from server.reports.declared import (
     Comparison,
     Tested,
@@ -51,13 +52,20 @@ from server.reports.plots import colours, save, subplots, success_axes
 
 WORLDS = ("crossed-sonar", "soft-obstacle")
 CONDITIONS = ("kp", "kp-punished", "sonar")
-DOSES = (0.1, 0.3)
-"""Smaller penalties, kp's otherwise (exploratory: how the effect grows with the penalty)."""
-VARIANTS: dict[str, tuple[str, Params]] = {
-    **{c: (c, ()) for c in CONDITIONS},
-    **{f"penalty {d:g}": ("kp", (("kp_failure_penalty", d),)) for d in DOSES},
-}
-"""Each row's label: its condition and the parameters set over the tuned ones."""
+
+
+def variants(doses: Sequence[float]) -> dict[str, tuple[str, Params]]:
+    """Each row's label: its condition and the parameters set over the tuned ones.
+
+    `doses` are smaller penalties than kp-punished's, on kp otherwise (exploratory: how the
+    effect grows with the penalty; `--doses`).
+    """
+    return {
+        **{c: (c, ()) for c in CONDITIONS},
+        **{f"penalty {d:g}": ("kp", (("kp_failure_penalty", d),)) for d in doses},
+    }
+
+
 CHECKPOINTS = (10, 50)
 """Episodes after which what was learned is shown, besides the last."""
 WINDOW = 20
@@ -95,7 +103,7 @@ def held_out(r: TaskResult) -> float:
 
 def share(values: np.ndarray[Any, Any]) -> Estimate:
     """The share of seeds where `values` (booleans, one per seed) holds, with its interval."""
-    return bootstrap_mean(values.astype(float).tolist())
+    return mean_interval(values.astype(float).tolist())
 
 
 def ever_wrong(marks: dict[str, np.ndarray[Any, Any]], camera: Sequence[str]) -> list[str]:
@@ -139,9 +147,8 @@ def plot(
             rolled = np.array([np.convolve(x, kernel)[: rows.shape[1]] / counts for x in rows])
             x = np.arange(1, rows.shape[1] + 1)
             ax.plot(x, rolled.mean(axis=0), color=palette[c], label=condition)
-            sem = rolled.std(axis=0, ddof=1) / np.sqrt(len(rolled))
-            mean = rolled.mean(axis=0)
-            ax.fill_between(x, mean - 1.96 * sem, mean + 1.96 * sem, color=palette[c], alpha=0.15)
+            low, high = mean_intervals(rolled.T)  # each episode's interval over seeds
+            ax.fill_between(x, low, high, color=palette[c], alpha=0.15)
         success_axes(ax, criterion=False)
         ax.set_ylabel(f"success, last {WINDOW} episodes")
         ax.set_title(f"{world}: success while learning (95% band)")
@@ -157,7 +164,8 @@ def plot(
         success_axes(ax, criterion=False)
         ax.set_ylabel("share of seeds answering wrongly")
         ax.set_title(f"{world}: wrong answers (solid kp, dashed kp-punished)")
-        ax.legend(loc="upper left", fontsize="small", ncol=2)
+        if ax.get_legend_handles_labels()[0]:  # no seed answered wrongly: nothing to name
+            ax.legend(loc="upper left", fontsize="small", ncol=2)
     save(fig, path)
 
 
@@ -169,10 +177,24 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--copy-episodes", type=int, default=50)
+    parser.add_argument(
+        "--doses",
+        default="",
+        help="comma-separated smaller penalties to run on kp too, in (0, 1) (default: none)",
+    )
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args(argv)
-    if min(args.seeds, args.episodes, args.eval_episodes, args.copy_episodes) < 1:
-        parser.error("--seeds, --episodes, --eval-episodes and --copy-episodes must be >= 1")
+    if min(args.seeds, args.episodes, args.eval_episodes, args.copy_episodes, args.jobs) < 1:
+        parser.error(
+            "--seeds, --episodes, --eval-episodes, --copy-episodes and --jobs must be >= 1"
+        )
+    try:
+        args.doses = sorted({float(d) for d in args.doses.split(",") if d.strip()})
+    except ValueError:
+        parser.error(f"--doses needs numbers, not {args.doses!r}")
+    if any(not 0.0 < d < 1.0 for d in args.doses):
+        parser.error("--doses are penalties between 0 and 1 (kp-punished's is 1)")
+    rows = variants(args.doses)
     args.checkpoints = tuple(sorted({c for c in CHECKPOINTS if c <= args.episodes} |
                                     {args.episodes}))  # fmt: skip
     # The episode after which an answer counts as learned early: 50, or the last.
@@ -181,7 +203,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         sys.argv[1:] if argv is None else argv
     )
     seeds = list(range(args.seeds))
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), cpu_seconds()
 
     teachers: dict[str, CopyReport] = {}
     correct: dict[str, dict[str, frozenset[str]]] = {}
@@ -201,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> None:
                      eval_episodes=args.eval_episodes)
                 for seed in seeds
             ]
-            for label, (condition, extra) in VARIANTS.items()
+            for label, (condition, extra) in rows.items()
         }  # fmt: skip
         results = run_tasks([t for ts in tasks.values() for t in ts], LocalBackend(args.jobs))
         failed = [r for r in results if not r.ok]
@@ -209,10 +231,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             raise SystemExit(f"{failed[0].task}: {failed[0].error}")
         by_task = {r.task: r for r in results}
         runs[world] = {label: [by_task[t] for t in ts] for label, ts in tasks.items()}
-    elapsed = time.perf_counter() - started
+    elapsed, cpu = time.perf_counter() - started, cpu_seconds() - cpu
 
     camera = [s.name for s in Setup().catalog().stimuli_of_sensor(CAMERA_SENSOR)]
-    marks = {w: {c: verdicts(runs[w][c], camera, correct[w]) for c in VARIANTS} for w in WORLDS}
+    marks = {w: {c: verdicts(runs[w][c], camera, correct[w]) for c in rows} for w in WORLDS}
     cs = runs["crossed-sonar"]
     soft = runs["soft-obstacle"]
     span = f"episodes 1-{args.episodes}"
@@ -238,7 +260,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     )  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     plot(args.out / "wrong-teacher.png", runs, marks, camera)
-    study = Study(args, command, elapsed, teachers, correct, runs, marks, camera, declared)
+    study = Study(args, command, (elapsed, cpu), teachers, correct, runs, marks, camera, declared)
     doc = report_json(study)
     (args.out / "summary.json").write_text(
         json.dumps(clean_json(doc), indent=1, allow_nan=False) + "\n", encoding="utf-8"
@@ -248,7 +270,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         encoding="utf-8",
     )
     sys.stdout.write(
-        f"wrote {args.out}/summary.md, summary.json, wrong-teacher.png in {elapsed:.0f} s\n"
+        f"wrote {args.out}/summary.md, summary.json, wrong-teacher.png in {elapsed:.0f} s "
+        f"({cpu:.0f} s CPU)\n"
     )
 
 
@@ -270,7 +293,8 @@ class Study:
 
     args: argparse.Namespace
     command: str
-    elapsed: float
+    cost: tuple[float, float]
+    """Wall and CPU seconds."""
     teachers: dict[str, CopyReport]
     correct: dict[str, dict[str, frozenset[str]]]
     runs: dict[str, dict[str, list[TaskResult]]]
@@ -283,21 +307,21 @@ class Study:
 def report_json(study: Study) -> dict[str, Any]:
     """summary.json: every figure summary.md states, and the per-seed figures behind them."""
     args, runs, marks, camera = study.args, study.runs, study.marks, study.camera
-    command, elapsed, teachers, declared = (
-        study.command, study.elapsed, study.teachers, study.declared,
+    command, (elapsed, cpu), teachers, declared = (
+        study.command, study.cost, study.teachers, study.declared,
     )  # fmt: skip
     worlds: dict[str, Any] = {}
     for w in WORLDS:
         conds: dict[str, Any] = {}
-        for c in VARIANTS:
+        for c in runs[w]:
             rs = runs[w][c]
             conds[c] = {
-                "success_all": bootstrap_mean([success(r) for r in rs]).as_dict(),
-                "success_1_50": bootstrap_mean([success(r, 1, 50) for r in rs]).as_dict(),
-                "success_last_50": bootstrap_mean(
+                "success_all": mean_interval([success(r) for r in rs]).as_dict(),
+                "success_1_50": mean_interval([success(r, 1, 50) for r in rs]).as_dict(),
+                "success_last_50": mean_interval(
                     [success(r, max(1, args.episodes - 49)) for r in rs]
                 ).as_dict(),
-                "held_out": bootstrap_mean([held_out(r) for r in rs]).as_dict(),
+                "held_out": mean_interval([held_out(r) for r in rs]).as_dict(),
                 "success_by_seed": [
                     [int(e.outcome is Outcome.SUCCESS) for e in r.episodes] for r in rs
                 ],
@@ -320,7 +344,9 @@ def report_json(study: Study) -> dict[str, Any]:
         "eval_episodes": args.eval_episodes,
         "copy_episodes": args.copy_episodes,
         "elapsed_s": elapsed,
+        "cpu_s": cpu,
         "jobs": args.jobs,
+        "doses": args.doses,
         "declared": [t.as_dict() for t in declared],
         "worlds": worlds,
     }
@@ -339,8 +365,8 @@ def _origins(rs: Sequence[TaskResult]) -> dict[str, float]:
 def markdown(study: Study) -> str:
     """summary.md."""
     args, runs, marks, camera = study.args, study.runs, study.marks, study.camera
-    command, elapsed, teachers, declared, correct = (
-        study.command, study.elapsed, study.teachers, study.declared, study.correct,
+    command, (elapsed, cpu), teachers, declared, correct = (
+        study.command, study.cost, study.teachers, study.declared, study.correct,
     )  # fmt: skip
     n, e = args.seeds, args.episodes
     lines = [
@@ -351,8 +377,10 @@ def markdown(study: Study) -> str:
         f"{n} seeds (0-{n - 1}) x {e} episodes per condition and world, signal given (success "
         "measures the obstacle), each condition with its tuned parameters "
         f"(`core/data/tuned.toml`); held out: {args.eval_episodes} frozen episodes on a seed no "
-        f"training used. {elapsed:.0f} s on {args.jobs} processes. Intervals are 95% "
-        "bootstrap intervals over seeds; differences are paired by seed.",
+        f"training used. {elapsed:.0f} s wall, {cpu:.0f} s CPU on {args.jobs} processes. "
+        "Differences are paired by seed.",
+        "",
+        interval_line(),
         "",
         "`kp-punished` is `kp` whose RLTM a failed episode also punishes "
         "(`kp_failure_penalty` 1: a reward of -1 to what the RSTM would teach and to the "
@@ -387,7 +415,7 @@ def markdown(study: Study) -> str:
                               good]))  # fmt: skip
     lines += [
         "",
-        "## Pre-declared comparisons",
+        "## Pre-declared comparisons (Holm-corrected)",
         "",
         "Declared before the run; p corrected with Holm's method over these four. Every other "
         "figure below is exploratory.",
@@ -408,10 +436,10 @@ def markdown(study: Study) -> str:
             lines.append(
                 row([
                     f"`{w}`", f"`{c}`",
-                    pct(bootstrap_mean([success(r, 1, 50) for r in rs])),
-                    pct(bootstrap_mean([success(r) for r in rs])),
-                    pct(bootstrap_mean([success(r, max(1, e - 49)) for r in rs])),
-                    pct(bootstrap_mean([held_out(r) for r in rs])),
+                    pct(mean_interval([success(r, 1, 50) for r in rs])),
+                    pct(mean_interval([success(r) for r in rs])),
+                    pct(mean_interval([success(r, max(1, e - 49)) for r in rs])),
+                    pct(mean_interval([held_out(r) for r in rs])),
                 ])
             )  # fmt: skip
     lines += [
@@ -455,17 +483,26 @@ def markdown(study: Study) -> str:
                 cells.append(f"{per_seed:.1f}, {won:.0%}" if per_seed else "-")
             lines.append(row([stim[9:], *cells]))
         lines.append("")
-    lines += [
+    if args.doses:
+        lines += _doses(args, runs)
+    lines.append("")
+    return "\n".join(lines)
+
+
+def _doses(args: argparse.Namespace, runs: dict[str, dict[str, list[TaskResult]]]) -> list[str]:
+    """The smaller penalties' section: each minus kp, paired by seed (exploratory)."""
+    e = args.episodes
+    lines = [
         "## Smaller penalties (exploratory)",
         "",
-        f"`kp` with `kp_failure_penalty` {', '.join(f'{d:g}' for d in DOSES)} over its tuned "
-        "parameters (kp-punished's is 1), minus `kp`, paired by seed, in points:",
+        f"`kp` with `kp_failure_penalty` {', '.join(f'{d:g}' for d in args.doses)} over its "
+        "tuned parameters (kp-punished's is 1), minus `kp`, paired by seed, in points:",
         "",
         *head(["world", "penalty", f"episodes 1-{e}", "held out", f"minus kp, 1-{e}",
                "minus kp, held out"]),
     ]  # fmt: skip
     for w in WORLDS:
-        for label in [f"penalty {d:g}" for d in DOSES] + ["kp-punished"]:
+        for label in [f"penalty {d:g}" for d in args.doses] + ["kp-punished"]:
             rs, base = runs[w][label], runs[w]["kp"]
             trained = paired_difference([success(r) for r in rs], [success(r) for r in base])
             frozen = paired_difference([held_out(r) for r in rs], [held_out(r) for r in base])
@@ -473,13 +510,12 @@ def markdown(study: Study) -> str:
             lines.append(
                 row([
                     f"`{w}`", penalty,
-                    pct(bootstrap_mean([success(r) for r in rs])),
-                    pct(bootstrap_mean([held_out(r) for r in rs])),
+                    pct(mean_interval([success(r) for r in rs])),
+                    pct(mean_interval([held_out(r) for r in rs])),
                     paired_points(trained), paired_points(frozen),
                 ])
             )  # fmt: skip
-    lines.append("")
-    return "\n".join(lines)
+    return [*lines, ""]
 
 
 if __name__ == "__main__":
