@@ -66,7 +66,7 @@ run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qla
 SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py docs/results/wrong-teacher \
     --jobs "$JOBS"
 # Exploration on equal terms: frozen after 50, 200 and 1,000 episodes (kp and both
-# qlambda-hybrids to 1,000, the others to 200; dqn and ppo are in deep-curve).
+# qlambda-hybrids to 1,000, qlambda and qlambda-decay to 200; dqn and ppo are in deep-curve).
 SRLAB=.venv/bin/python run exploration scripts/frozen_budgets.py docs/results/exploration \
     --jobs "$JOBS"
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then

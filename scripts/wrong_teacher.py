@@ -205,32 +205,35 @@ def main(argv: Sequence[str] | None = None) -> None:
     seeds = list(range(args.seeds))
     started, cpu = time.perf_counter(), cpu_seconds()
 
-    teachers: dict[str, CopyReport] = {}
-    correct: dict[str, dict[str, frozenset[str]]] = {}
-    for world in WORLDS:
-        correct[world] = cached_probe(Setup(world, signal="given"))[0].correct()
-        with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-            per_seed = list(pool.map(_copies, [(world, s, args.copy_episodes) for s in seeds]))
-        teachers[world] = copy_report(per_seed, correct[world])
-
-    runs: dict[str, dict[str, list[TaskResult]]] = {}
-    for world in WORLDS:
-        setup = Setup(world, signal="given").resolved()
-        tasks = {
-            label: [
-                Task(condition, seed, args.episodes,
-                     normalise(dict(tuned_params(condition)) | dict(extra)), setup=setup,
-                     eval_episodes=args.eval_episodes)
-                for seed in seeds
-            ]
-            for label, (condition, extra) in rows.items()
-        }  # fmt: skip
-        results = run_tasks([t for ts in tasks.values() for t in ts], LocalBackend(args.jobs))
-        failed = [r for r in results if not r.ok]
-        if failed:
-            raise SystemExit(f"{failed[0].task}: {failed[0].error}")
-        by_task = {r.task: r for r in results}
-        runs[world] = {label: [by_task[t] for t in ts] for label, ts in tasks.items()}
+    # Every world's copies in one pool and every world's training in one run, so that the
+    # two workers stay busy to the end.
+    correct = {w: cached_probe(Setup(w, signal="given"))[0].correct() for w in WORLDS}
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        copies = list(
+            pool.map(_copies, [(w, s, args.copy_episodes) for w in WORLDS for s in seeds])
+        )
+    teachers = {
+        w: copy_report(copies[i * len(seeds) : (i + 1) * len(seeds)], correct[w])
+        for i, w in enumerate(WORLDS)
+    }
+    tasks = {
+        (world, label): [
+            Task(condition, seed, args.episodes,
+                 normalise(dict(tuned_params(condition)) | dict(extra)),
+                 setup=Setup(world, signal="given").resolved(), eval_episodes=args.eval_episodes)
+            for seed in seeds
+        ]
+        for world in WORLDS
+        for label, (condition, extra) in rows.items()
+    }  # fmt: skip
+    results = run_tasks([t for ts in tasks.values() for t in ts], LocalBackend(args.jobs))
+    failed = [r for r in results if not r.ok]
+    if failed:
+        raise SystemExit(f"{failed[0].task}: {failed[0].error}")
+    by_task = {r.task: r for r in results}
+    runs: dict[str, dict[str, list[TaskResult]]] = {w: {} for w in WORLDS}
+    for (world, label), ts in tasks.items():
+        runs[world][label] = [by_task[t] for t in ts]
     elapsed, cpu = time.perf_counter() - started, cpu_seconds() - cpu
 
     camera = [s.name for s in Setup().catalog().stimuli_of_sensor(CAMERA_SENSOR)]
