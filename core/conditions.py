@@ -38,6 +38,10 @@ class Condition:
             designed reflexes it starts from are kept until it has learned better.
         interactive: meant for a person giving rewards at the keyboard (the runs API):
             not one of the experiments' conditions, so never tuned or compared.
+        kp_failure_penalty: with `kp`, the punishment a failed episode gives KP's RLTM
+            (`core.brain.propagation.KpConfig.failure_penalty`; 0: none).
+        epsilon_half_life: for Q(lambda), episodes over which `epsilon` halves
+            (`core.qlambda.epsilon_at`; 0: it stays constant).
     """
 
     name: str
@@ -54,6 +58,8 @@ class Condition:
     extra_networks: tuple[str, ...] = ()
     hybrid: bool = False
     interactive: bool = False
+    kp_failure_penalty: float = 0.0
+    epsilon_half_life: float = 0.0
 
     def brain_config(self, eta: float = 0.1, synthesize: bool = False) -> BrainConfig:
         """The brain parameters of this condition."""
@@ -62,7 +68,12 @@ class Condition:
             learning=LearningConfig(
                 enabled=self.learning, eta=eta, learnable_sensors=self.learnable_sensors
             ),
-            kp=KpConfig(enabled=self.kp, eta=eta, synthesize=synthesize),
+            kp=KpConfig(
+                enabled=self.kp,
+                eta=eta,
+                synthesize=synthesize,
+                failure_penalty=self.kp_failure_penalty,
+            ),
         )
 
 
@@ -132,6 +143,17 @@ CONDITIONS: dict[str, Condition] = {
             kp=True,
         ),
         Condition(
+            "kp-punished",
+            "The kp condition whose RLTM is also punished when an episode fails (a reward of "
+            "-1 to what KP taught and would teach), so a wrong copy can be unlearned.",
+            network="kp",
+            learning=True,
+            epsilon=0.1,
+            success_reward=1.0,
+            kp=True,
+            kp_failure_penalty=1.0,
+        ),
+        Condition(
             "sonar",
             "The kp condition with propagation off (its ablation): the same design, camera "
             "and signal responses learned from the delayed reward alone.",
@@ -161,6 +183,28 @@ CONDITIONS: dict[str, Condition] = {
             success_reward=1.0,
             agent="qlambda",
             hybrid=True,
+        ),
+        Condition(
+            "qlambda-decay",
+            "qlambda whose exploration decays: it starts at 0.2 and halves every "
+            "epsilon_half_life episodes, so it stops exploring as KP does once confident.",
+            network="kp",
+            learning=True,
+            epsilon=0.2,
+            success_reward=1.0,
+            agent="qlambda",
+            epsilon_half_life=50.0,
+        ),
+        Condition(
+            "qlambda-hybrid-decay",
+            "qlambda-hybrid whose exploration decays as qlambda-decay's.",
+            network="kp",
+            learning=True,
+            epsilon=0.2,
+            success_reward=1.0,
+            agent="qlambda",
+            hybrid=True,
+            epsilon_half_life=50.0,
         ),
         Condition(
             "dqn",

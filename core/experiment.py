@@ -62,6 +62,26 @@ class Task:
     setup: Setup = DEFAULT_SETUP
     eval_episodes: int = 0
     """Episodes of frozen, held-out evaluation after training (0: none)."""
+    eval_after: tuple[int, ...] = ()
+    """Training episodes after which the learner is also evaluated frozen, as after the
+    last (`eval_episodes` each, into `TaskResult.checkpoints`): a learner frozen at
+    several budgets from one run. Evaluating changes nothing the learner learns, so each
+    checkpoint is what a task trained for that many episodes would report."""
+
+    def __post_init__(self) -> None:
+        if any(not 1 <= n < self.episodes for n in self.eval_after):
+            raise ValueError("eval_after needs episode counts between 1 and episodes - 1")
+        if self.eval_after and not self.eval_episodes:
+            raise ValueError("eval_after needs eval_episodes")
+
+
+@dataclass(frozen=True, slots=True)
+class Checkpoint:
+    """A learner frozen after `episodes` training episodes, and evaluated held out."""
+
+    episodes: int
+    evaluation: tuple[EpisodeSummary, ...]
+    transfer: tuple[EpisodeSummary, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -94,6 +114,17 @@ class TaskResult:
     transfer: tuple[EpisodeSummary, ...] = ()
     """The camera-only transfer test's episodes: frozen, the sonar's obstacle responses
     removed."""
+    checkpoints: tuple[Checkpoint, ...] = ()
+    """The frozen evaluations after `Task.eval_after`'s episode counts, in their order."""
+
+    def frozen_after(self, episodes: int) -> Checkpoint:
+        """The held-out evaluation after `episodes` training episodes (a checkpoint or the end)."""
+        if episodes == self.task.episodes:
+            return Checkpoint(episodes, self.evaluation, self.transfer)
+        for c in self.checkpoints:
+            if c.episodes == episodes:
+                return c
+        raise KeyError(f"no frozen evaluation after {episodes} episodes")
 
     @property
     def ok(self) -> bool:
@@ -166,6 +197,18 @@ def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskR
     met_in = dict.fromkeys(camera, 0)
     won_in = dict.fromkeys(camera, 0)
     answers: list[tuple[str | None, ...]] = []
+    checkpoints: list[Checkpoint] = []
+
+    def held_out(network: BehaviourNetwork) -> tuple[EpisodeSummary, ...]:
+        return evaluate(
+            condition, sim.brain.catalog, network, task.seed, task.eval_episodes,
+            world_config=world, brain_config=sim.brain.config,
+        )  # fmt: skip
+
+    def frozen_now(episodes: int) -> Checkpoint:
+        network = sim.brain.network
+        transfer = held_out(without_sonar(sim.brain.catalog, network))
+        return Checkpoint(episodes, held_out(network), transfer)
 
     def after_episode(e: EpisodeSummary) -> None:
         won = e.outcome is Outcome.SUCCESS
@@ -175,6 +218,8 @@ def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskR
                 won_in[s] += won
         names = sim.brain.catalog.behaviours
         answers.append(tuple(_name(names, sim.brain.answer(s)) for s in camera))
+        if len(answers) in task.eval_after:
+            checkpoints.append(frozen_now(len(answers)))
 
     summary = run(condition, task.seed, task.episodes, simulation=sim, on_episode=after_episode)
     brain = sim.brain
@@ -188,15 +233,8 @@ def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskR
     evaluation: tuple[EpisodeSummary, ...] = ()
     transfer: tuple[EpisodeSummary, ...] = ()
     if task.eval_episodes:
-
-        def held_out(network: BehaviourNetwork) -> tuple[EpisodeSummary, ...]:
-            return evaluate(
-                condition, brain.catalog, network, task.seed, task.eval_episodes,
-                world_config=world, brain_config=brain.config,
-            )  # fmt: skip
-
-        evaluation = held_out(brain.network)
-        transfer = held_out(without_sonar(brain.catalog, brain.network))
+        last = frozen_now(task.episodes)
+        evaluation, transfer = last.evaluation, last.transfer
     return TaskResult(
         task,
         summary.episodes,
@@ -218,6 +256,7 @@ def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskR
         answers=tuple(answers),
         evaluation=evaluation,
         transfer=transfer,
+        checkpoints=tuple(checkpoints),
     )
 
 
@@ -242,8 +281,17 @@ def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> Tas
     camera = [st for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
     answers: list[tuple[str | None, ...]] = []
     agent_ref: list[WatkinsQLambda] = []
+    checkpoints: list[Checkpoint] = []
+    done = [0]
+
+    def frozen_now(agent: WatkinsQLambda, episodes: int) -> Checkpoint:
+        seed, n = eval_seed(task.seed), task.eval_episodes
+        evaluation = tuple(evaluate_qlambda(agent, env_for(config.prior), seed, n))
+        without = env_for(_without_sonar_set(config.prior))
+        return Checkpoint(episodes, evaluation, tuple(evaluate_qlambda(agent, without, seed, n)))
 
     def after_episode(_: EpisodeSummary) -> None:
+        done[0] += 1
         if agent_ref:
             agent = agent_ref[0]
             answers.append(
@@ -251,25 +299,20 @@ def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> Tas
                     _name(catalog.behaviours, answer(agent, _alone(catalog, st))) for st in camera
                 )
             )
+            if done[0] in task.eval_after:
+                checkpoints.append(frozen_now(agent, done[0]))
 
     env = env_for(config.prior)
     episodes, agent, ticks = run_qlambda(
         task.seed, task.episodes, config, env=env, on_agent=agent_ref.append,
         on_episode=after_episode,
     )  # fmt: skip
-    evaluation: tuple[EpisodeSummary, ...] = ()
-    transfer: tuple[EpisodeSummary, ...] = ()
-    if task.eval_episodes:
-        seed = eval_seed(task.seed)
-        evaluation = tuple(evaluate_qlambda(agent, env_for(config.prior), seed, task.eval_episodes))
-        transfer = tuple(
-            evaluate_qlambda(agent, env_for(_without_sonar_set(config.prior)), seed,
-                             task.eval_episodes)
-        )  # fmt: skip
+    last = frozen_now(agent, task.episodes) if task.eval_episodes else Checkpoint(0, (), ())
     sim = env.simulation
     return TaskResult(
-        task, tuple(episodes), ticks, answers=tuple(answers), evaluation=evaluation,
-        transfer=transfer, ticks_by_origin=dict(sim.ticks_by_origin),
+        task, tuple(episodes), ticks, answers=tuple(answers), evaluation=last.evaluation,
+        transfer=last.transfer, checkpoints=tuple(checkpoints),
+        ticks_by_origin=dict(sim.ticks_by_origin),
         camera_met={
             st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id], 0, 0)
             for st in camera
@@ -297,6 +340,15 @@ def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskRe
     answers: list[tuple[str | None, ...]] = []
     model_ref: list[BaseAlgorithm] = []
 
+    checkpoints: list[Checkpoint] = []
+
+    def frozen_now(model: BaseAlgorithm, episodes: int) -> Checkpoint:
+        seeds, n = (eval_seed(task.seed),), task.eval_episodes
+        evaluation = baselines.evaluate(model, lambda: env_for(condition.network), seeds, n)
+        without = _without_sonar_set(condition.network)
+        transfer = baselines.evaluate(model, lambda: env_for(without), seeds, n)
+        return Checkpoint(episodes, tuple(evaluation), tuple(transfer))
+
     def after_episode(_: EpisodeSummary) -> None:
         model = model_ref[0]
         answers.append(
@@ -305,27 +357,19 @@ def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskRe
                 for obs in alone
             )
         )
+        if len(answers) in task.eval_after:
+            checkpoints.append(frozen_now(model, len(answers)))
 
     episodes, model, ticks = baselines.learn(
         algo, task.seed, task.episodes, config, env=env, on_episode=after_episode,
         on_model=model_ref.append,
     )  # fmt: skip
-    evaluation: tuple[EpisodeSummary, ...] = ()
-    transfer: tuple[EpisodeSummary, ...] = ()
-    if task.eval_episodes:
-        seeds = (eval_seed(task.seed),)
-        evaluation = tuple(
-            baselines.evaluate(model, lambda: env_for(condition.network), seeds,
-                               task.eval_episodes)
-        )  # fmt: skip
-        transfer = tuple(
-            baselines.evaluate(model, lambda: env_for(_without_sonar_set(condition.network)),
-                               seeds, task.eval_episodes)
-        )  # fmt: skip
+    last = frozen_now(model, task.episodes) if task.eval_episodes else Checkpoint(0, (), ())
     sim = env.simulation
     return TaskResult(
         task, tuple(episodes), ticks, answers=tuple(answers[: task.episodes]),
-        evaluation=evaluation, transfer=transfer, ticks_by_origin=dict(sim.ticks_by_origin),
+        evaluation=last.evaluation, transfer=last.transfer, checkpoints=tuple(checkpoints),
+        ticks_by_origin=dict(sim.ticks_by_origin),
         camera_met={
             st.name: (sim.stimulus_ticks[st.id], sim.encounters[st.id], 0, 0)
             for st in camera
@@ -419,7 +463,7 @@ def expected_cost(task: Task) -> float:
     """A task's expected run time, in brain episodes: for ordering work, never for results."""
     agent = get_condition(task.condition).agent
     per_episode = _AGENT_COST.get(agent, _DEEP_COST if agent in DEEP_AGENTS else 1.0)
-    return per_episode * (task.episodes + 2 * task.eval_episodes)
+    return per_episode * (task.episodes + 2 * task.eval_episodes * (1 + len(task.eval_after)))
 
 
 def _in_pool(

@@ -191,6 +191,11 @@ PARAMETERS: dict[str, Parameter] = {
             "bool", 0.0, 1.0, True, _kp, "kp",
         ),
         Parameter(
+            "kp_failure_penalty",
+            "a failed episode punishes KP's RLTM by this reward's size (default 0: never)",
+            "float", 0.0, 1.0, True, _kp, "kp",
+        ),
+        Parameter(
             "teacher_mistake",
             "probability a teacher's judgement has the wrong sign (default 0)",
             "float", 0.0, 1.0, True, _taught, "rp",
@@ -234,6 +239,11 @@ PARAMETERS: dict[str, Parameter] = {
             "lambda",
             "Q(lambda)'s trace decay (default 0.5)",
             "float", 0.0, 1.0, True, _qlambda, "qlambda",
+        ),
+        Parameter(
+            "epsilon_half_life",
+            "episodes over which Q(lambda)'s exploration rate halves (default 0: constant)",
+            "float", 0.0, 1e6, True, _qlambda, "qlambda",
         ),
         Parameter(
             "learning_rate",
@@ -314,6 +324,9 @@ def configure(
         )
     if "kp_window" in values:
         config = replace(config, kp=replace(config.kp, window_ticks=int(values["kp_window"])))
+    if "kp_failure_penalty" in values:
+        penalty = float(values["kp_failure_penalty"])
+        config = replace(config, kp=replace(config.kp, failure_penalty=penalty))
     teacher = {
         n.removeprefix(TEACHER_PREFIX): float(v)
         for n, v in values.items()
@@ -348,10 +361,11 @@ def qlambda_config(
         alpha=float(values.get("alpha", base.alpha)),
         gamma=float(values.get("gamma", base.gamma)),
         lam=float(values.get("lambda", base.lam)),
-        epsilon=float(values.get("epsilon", base.epsilon)),
+        epsilon=float(values.get("epsilon", condition.epsilon)),
         prior=condition.network,
         defer=condition.hybrid,
         per_encounter=condition.hybrid,
+        epsilon_half_life=float(values.get("epsilon_half_life", condition.epsilon_half_life)),
     )
 
 

@@ -7,6 +7,7 @@ gets the same delayed reward as the architecture's conditions.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -38,6 +39,8 @@ class QLambdaConfig:
         per_encounter: draw exploration once per encounter (a stimulus becoming the open
             one), as the architecture does, and keep the choice while the same stimulus
             stays open; otherwise at every decision.
+        epsilon_half_life: episodes over which the exploration rate halves
+            (`epsilon_at`); 0 (the default) keeps it at `epsilon` for ever.
     """
 
     alpha: float = 0.3
@@ -48,11 +51,28 @@ class QLambdaConfig:
     defer: bool = False
     defer_prior: float = 1e-3
     per_encounter: bool = False
+    epsilon_half_life: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("alpha", "gamma", "lam", "epsilon"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1]")
+        if not (math.isfinite(self.epsilon_half_life) and self.epsilon_half_life >= 0.0):
+            raise ValueError("epsilon_half_life must be 0 or more")
+
+
+def epsilon_at(config: QLambdaConfig, episode: int) -> float:
+    """The exploration rate in episode `episode` (0 is the first) of a learner's training.
+
+    ``epsilon * 0.5 ** (episode / epsilon_half_life)``: it halves every
+    `epsilon_half_life` episodes, so the learner stops exploring as KP's robot does once
+    its responses are confident; constant at `epsilon` when the half-life is 0.
+    """
+    if episode < 0:
+        raise ValueError("episode must be >= 0")
+    if config.epsilon_half_life == 0.0:
+        return config.epsilon
+    return config.epsilon * math.pow(0.5, episode / config.epsilon_half_life)
 
 
 class WatkinsQLambda:
@@ -73,6 +93,10 @@ class WatkinsQLambda:
         self._rng = rng
         self._encounter: tuple[int, int] = (-1, -1)
         """(open stimulus, action) of the current encounter, for per-encounter exploration."""
+        self.episodes = 0
+        """Episodes started so far."""
+        self.epsilon = config.epsilon
+        """The exploration rate of the current episode (`epsilon_at`)."""
 
     def values(self, state: bytes) -> np.ndarray[tuple[int], np.dtype[np.float64]]:
         """Q(state, .), created at 0 (the defer action at `defer_prior`)."""
@@ -104,20 +128,26 @@ class WatkinsQLambda:
             current, explored = self._encounter
             if stimulus >= 0 and stimulus == current:
                 return explored if explored >= 0 else self.greedy(state)
-            if self._rng.random() < self.config.epsilon:
+            if self._rng.random() < self.epsilon:
                 action = int(self._rng.integers(self.n_actions))
                 self._encounter = (stimulus, action)
                 return action
             self._encounter = (stimulus, -1)
             return self.greedy(state)
-        if self._rng.random() < self.config.epsilon:
+        if self._rng.random() < self.epsilon:
             return int(self._rng.integers(self.n_actions))
         return self.greedy(state)
 
-    def start_episode(self) -> None:
-        """Clear the eligibility traces (and the current encounter)."""
+    def start_episode(self, episode: int | None = None) -> None:
+        """Clear the eligibility traces and the encounter; set episode `episode`'s epsilon.
+
+        `episode` counts the training's episodes from 0, those the learner had no decision
+        in too (None: the episodes this agent started before).
+        """
         self._traces.clear()
         self._encounter = (-1, -1)
+        self.epsilon = epsilon_at(self.config, self.episodes if episode is None else episode)
+        self.episodes += 1
 
     def update(self, s: bytes, a: int, reward: float, s2: bytes, a2: int, terminal: bool) -> None:
         """One Watkins Q(lambda) backup with replacing traces."""
@@ -186,7 +216,7 @@ def run_qlambda(
             record(e)
         if len(done_episodes) >= episodes:
             break
-        agent.start_episode()
+        agent.start_episode(len(done_episodes))
         s = _key(obs)
         a = agent.act(s, info["stimulus"])
         while True:

@@ -301,6 +301,8 @@ class Simulation:
             if self._pending:
                 self._apply_rewards(self._pending, events)
                 self._pending = []
+            if outcome is Outcome.FAILURE:
+                events.extend(brain.episode_failed().changes)
             events.append(EpisodeEnded(self.episode, outcome, cause, self._episode_tick))
             reward = self.condition.success_reward
             if outcome is Outcome.SUCCESS and reward is not None:

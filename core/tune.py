@@ -40,6 +40,13 @@ _QLAMBDA: Axes = (
     ("lambda", (0.5, 0.8, 0.95)),
     ("epsilon", (0.05, 0.1, 0.2)),
 )
+_QLAMBDA_DECAY: Axes = (
+    ("alpha", (0.1, 0.3, 0.5)),
+    ("lambda", (0.5, 0.8, 0.95)),
+    ("epsilon_half_life", (10.0, 50.0, 200.0)),
+)
+"""The decaying variants start at epsilon 0.2, where both constant ones were tuned to
+stay, and tune how fast it decays instead."""
 _DQN: Axes = (
     ("learning_rate", (2.5e-4, 5e-4, 1e-3)),
     ("target_update_interval", (100, 250, 1000)),
@@ -57,8 +64,11 @@ GRIDS: dict[str, Axes] = {
     "rp": _BRAIN,
     "sonar": _BRAIN,
     "kp": _KP,
+    "kp-punished": _KP,
     "qlambda": _QLAMBDA,
     "qlambda-hybrid": _QLAMBDA,
+    "qlambda-decay": _QLAMBDA_DECAY,
+    "qlambda-hybrid-decay": _QLAMBDA_DECAY,
     "dqn": _DQN,
     "ppo": _PPO,
 }

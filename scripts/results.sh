@@ -61,6 +61,14 @@ run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid -
     --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
 run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \
     --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out docs/results/phase
+# Two studies written by scripts, run by `run` as the CLI's are (SRLAB set for the call).
+# A teacher that is wrong: kp, kp-punished and sonar, 20 seeds x 200 episodes, two worlds.
+SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py docs/results/wrong-teacher \
+    --jobs "$JOBS"
+# Exploration on equal terms: frozen after 50, 200 and 1,000 episodes (kp and both
+# qlambda-hybrids to 1,000, qlambda and qlambda-decay to 200; dqn and ppo are in deep-curve).
+SRLAB=.venv/bin/python run exploration scripts/frozen_budgets.py docs/results/exploration \
+    --jobs "$JOBS"
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then
     echo "results: deep-curve" >&2
     started=$SECONDS

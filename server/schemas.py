@@ -28,6 +28,7 @@ EngineCondition = Literal[
     "rp",
     "trainer",
     "kp",
+    "kp-punished",
     "sonar",
     "expert",
     "reflexes",

@@ -237,3 +237,16 @@ class Brain:
             propagated, promoted = self.kp.reward(value)
             changes.extend(promoted)
         return RewardOutcome(tuple(credits), tuple(changes), tuple(propagated))
+
+    def episode_failed(self) -> RewardOutcome:
+        """An episode failed: KP's RLTM is punished by `KpConfig.failure_penalty`.
+
+        Nothing happens with no KP module, learning off or no penalty (the default): then
+        a failure teaches nothing, as the paper's delayed reward has it. LTM and STM are
+        left alone; the punishment is KP's own (`KnowledgePropagation.punish`).
+        """
+        kp = self.kp
+        if kp is None or not self.config.learning.enabled or kp.config.failure_penalty <= 0.0:
+            return RewardOutcome((), ())
+        propagated, changes = kp.punish(kp.config.failure_penalty)
+        return RewardOutcome((), tuple(changes), tuple(propagated))

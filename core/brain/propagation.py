@@ -7,6 +7,10 @@ B1, B2...) are recorded in the RSTM of S1's logical sensor. On a reward, `reason
 updateKPMMemory) applies the Eq. (1) rule to S1 -> B in RLTM with d_k = 1: the RSTM knows
 which behaviour deserved the reward, so a delayed reward acts as an immediate one. Over the
 threshold, S1 -> B joins the behaviour network as a ``kp`` association.
+
+What KP learns only grows from the lap's reward unless `KpConfig.failure_penalty` is set:
+then a failed episode punishes RLTM by the mirrored rule (`punish`), so a copy that leads
+to failures is weakened and, below the threshold, leaves the network.
 """
 
 from __future__ import annotations
@@ -40,6 +44,8 @@ class KpConfig:
         snap_tolerance_deg: how close a primitive must be to stand for B when synthesising.
         rstm_capacity: bound of each RSTM.
         log_capacity: bound of each pair's inspection log (`KnowledgePropagation.log`).
+        failure_penalty: the size of the punishment a failed episode gives RLTM, in
+            [0, 1]; 0 (the default) never punishes, so RLTM learns only from rewards.
     """
 
     enabled: bool = False
@@ -50,6 +56,11 @@ class KpConfig:
     snap_tolerance_deg: float = 1.0
     rstm_capacity: int = 256
     log_capacity: int = 256
+    failure_penalty: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.failure_penalty <= 1.0:
+            raise ValueError("failure_penalty must be in [0, 1]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -246,6 +257,8 @@ class KnowledgePropagation:
         self.now = -1
         """The latest tick `percept` saw."""
         self._running: tuple[int, int] | None = None
+        self._ran: dict[tuple[int, int], None] = {}
+        """The KP-made pairs that ran since the episode started or the last reward, in order."""
 
     @property
     def dt_s(self) -> float:
@@ -260,6 +273,7 @@ class KnowledgePropagation:
         """Forget what was perceived and recorded (a new episode, a new approach)."""
         self._last_high.clear()
         self._running = None
+        self._ran.clear()
         for r in self.rstm.values():
             r.clear()
 
@@ -292,6 +306,7 @@ class KnowledgePropagation:
             self._running = None
             return
         log.ran_ticks += 1
+        self._ran[pair] = None
         runs = log.runs
         # One span per stretch of consecutive ticks: a two-tick turn released again and
         # again while the camera keeps seeing the obstacle reads as one run, not many.
@@ -347,7 +362,7 @@ class KnowledgePropagation:
         """updateKPMMemory: reason over every RSTM and apply Eq. (1) to RLTM (d_k = 1)."""
         learned: list[Propagated] = []
         promoted: list[AssociationPromoted | AssociationDemoted] = []
-        cfg = self.config
+        self._ran.clear()
         for records in self.rstm.values():
             by_high: dict[int, list[RstmRecord]] = defaultdict(list)
             for r in records:
@@ -355,35 +370,64 @@ class KnowledgePropagation:
             records.clear()
             for s1, recs in sorted(by_high.items()):
                 b, how, (sx, sy), angle, speed, nearest = self._reason([r.behaviour for r in recs])
-                before = self.rltm.get((s1, b.id), 0.0)
-                after = reinforce(before, value, cfg.eta, 1)
-                self.rltm[(s1, b.id)] = after
                 provenance = KpProvenance(
                     s1, tuple(recs), sx, sy, angle, speed, nearest.id,
                     steer_angle(nearest, self._dt), b.id, how, self.now,
                 )  # fmt: skip
-                log = self.log.get((s1, b.id))
-                if log is None:
-                    log = self.log[(s1, b.id)] = KpLog(cfg.log_capacity)
-                log.provenances.append(provenance)
-                log.history.append(RltmPoint(self.now, value, before, after))
-                log.reasoned += 1
                 learned.append(
-                    Propagated(
-                        s1,
-                        b.id,
-                        tuple(r.behaviour for r in recs),
-                        before,
-                        after,
-                        how == "synthesized",
-                        provenance,
-                    )
-                )
-                old = self.network.get(s1, b.id)
-                if after >= cfg.insert_threshold:
-                    if self.network.learn(s1, b.id, after, "kp") and old is None:
-                        promoted.append(AssociationPromoted(s1, b.id, after, "kp"))
-                elif old is not None and old.source == "kp" and not old.locked:
-                    self.network.remove(s1, b.id)
-                    promoted.append(AssociationDemoted(s1, b.id, after))
+                    self._update(s1, b.id, value, tuple(r.behaviour for r in recs), provenance,
+                                 promoted)
+                )  # fmt: skip
         return learned, promoted
+
+    def punish(
+        self, penalty: float
+    ) -> tuple[list[Propagated], list[AssociationPromoted | AssociationDemoted]]:
+        """A failed episode: apply a reward of ``-penalty`` to what KP taught and would teach.
+
+        Two kinds of RLTM pair take the blame, each once: the pairs the RSTM reasons to now,
+        as a reward would (what the low-level responses of this episode would teach), and
+        the KP-made pairs that ran during the episode (what KP taught and the robot did).
+        The second matters when a copy runs and the episode fails before any low-level
+        response fires: the RSTM is then empty, and the copy is what failed.
+        """
+        if not 0.0 <= penalty <= 1.0:
+            raise ValueError("penalty must be in [0, 1]")
+        ran = list(self._ran)
+        learned, promoted = self.reward(-penalty)
+        done = {(p.stimulus, p.behaviour) for p in learned}
+        for s1, b in ran:
+            if (s1, b) not in done:
+                learned.append(self._update(s1, b, -penalty, (), None, promoted))
+        return learned, promoted
+
+    def _update(
+        self,
+        s1: int,
+        b: int,
+        value: float,
+        sources: tuple[int, ...],
+        provenance: KpProvenance | None,
+        promoted: list[AssociationPromoted | AssociationDemoted],
+    ) -> Propagated:
+        """Eq. (1) on RLTM's S1 -> B with d_k = 1, logged; promote or demote it."""
+        cfg = self.config
+        before = self.rltm.get((s1, b), 0.0)
+        after = reinforce(before, value, cfg.eta, 1)
+        self.rltm[(s1, b)] = after
+        log = self.log.get((s1, b))
+        if log is None:
+            log = self.log[(s1, b)] = KpLog(cfg.log_capacity)
+        if provenance is not None:
+            log.provenances.append(provenance)
+            log.reasoned += 1
+        log.history.append(RltmPoint(self.now, value, before, after))
+        old = self.network.get(s1, b)
+        if after >= cfg.insert_threshold:
+            if self.network.learn(s1, b, after, "kp") and old is None:
+                promoted.append(AssociationPromoted(s1, b, after, "kp"))
+        elif old is not None and old.source == "kp" and not old.locked:
+            self.network.remove(s1, b)
+            promoted.append(AssociationDemoted(s1, b, after))
+        synthesized = provenance is not None and provenance.resolution == "synthesized"
+        return Propagated(s1, b, sources, before, after, synthesized, provenance)

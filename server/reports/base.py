@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import resource
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -47,6 +48,16 @@ def interval_line() -> str:
         "40 seeds, where the percentile bootstrap covers 92-93% at 20 "
         "(`tests/core/test_stats.py`)."
     )
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and its waited-for children (a study's workers), in seconds.
+
+    A study's cost beside its wall time: on a shared machine the wall time depends on
+    what else runs, the CPU time much less.
+    """
+    own, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def diff(d: dict[str, float] | None) -> str:

@@ -33,6 +33,18 @@ def test_a_deep_condition_trains_answers_and_is_evaluated_frozen(name: str) -> N
     assert all(e.outcome in (Outcome.SUCCESS, Outcome.FAILURE) for e in result.evaluation)
 
 
+@pytest.mark.parametrize("name", ["dqn", "ppo"])
+def test_a_deep_checkpoint_is_what_a_task_trained_that_long_reports(name: str) -> None:
+    setup = Setup(signal="given").resolved()
+    long = run_task(Task(name, 3, 2 * EPISODES, setup=setup, eval_episodes=2,
+                         eval_after=(EPISODES,)))  # fmt: skip
+    short = run_task(Task(name, 3, EPISODES, setup=setup, eval_episodes=2))
+    assert long.ok and short.ok, (long.error, short.error)
+    assert long.episodes[:EPISODES] == short.episodes
+    at = long.frozen_after(EPISODES)
+    assert (at.evaluation, at.transfer) == (short.evaluation, short.transfer)
+
+
 def test_deep_conditions_are_the_same_in_one_process_and_in_two() -> None:
     seeds = [0, 1]
     one = run_experiment(["dqn", "ppo"], seeds, 3, backend=LocalBackend(1), eval_episodes=1)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from core.brain.selection import How
 from core.conditions import get_condition
@@ -105,3 +106,33 @@ def test_evaluation_runs_for_q_lambda_tasks_too() -> None:
     assert len(result.episodes) == 6
     assert len(result.evaluation) == len(result.transfer) == 3
     assert len(result.answers) >= 1 and all(len(a) == 9 for a in result.answers)
+
+
+@pytest.mark.parametrize("condition", ["kp", "qlambda-hybrid-decay"])
+def test_a_checkpoint_is_what_a_task_trained_that_long_reports(condition: str) -> None:
+    # Frozen after 4 and 9 of 14 episodes: the same held-out and camera-only episodes as
+    # tasks trained for 4 and for 9, and the training itself as if nobody had looked.
+    long = run_task(Task(condition, 3, 14, setup=SETUP, eval_episodes=3, eval_after=(4, 9)))
+    plain = run_task(Task(condition, 3, 14, setup=SETUP, eval_episodes=3))
+    assert long.ok and plain.ok, (long.error, plain.error)
+    assert long.episodes == plain.episodes and long.answers == plain.answers
+    assert (long.evaluation, long.transfer) == (plain.evaluation, plain.transfer)
+    assert [c.episodes for c in long.checkpoints] == [4, 9]
+    for n in (4, 9):
+        short = run_task(Task(condition, 3, n, setup=SETUP, eval_episodes=3))
+        assert long.episodes[:n] == short.episodes
+        at = long.frozen_after(n)
+        assert (at.evaluation, at.transfer) == (short.evaluation, short.transfer)
+        assert len(at.evaluation) == len(at.transfer) == 3
+    assert long.frozen_after(14).evaluation == long.evaluation
+    with pytest.raises(KeyError, match="after 5 episodes"):
+        long.frozen_after(5)
+
+
+def test_checkpoints_must_fall_inside_training_and_need_evaluation_episodes() -> None:
+    with pytest.raises(ValueError, match="eval_after"):
+        Task("kp", 0, 10, eval_episodes=2, eval_after=(10,))
+    with pytest.raises(ValueError, match="eval_after"):
+        Task("kp", 0, 10, eval_episodes=2, eval_after=(0,))
+    with pytest.raises(ValueError, match="eval_episodes"):
+        Task("kp", 0, 10, eval_after=(5,))

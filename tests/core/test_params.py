@@ -27,7 +27,13 @@ def test_no_parameters_configure_exactly_the_conditions_defaults(name: str) -> N
     condition = get_condition(name)
     if condition.agent == "qlambda":
         hybrid = condition.hybrid  # defers to kp's design and explores per encounter
-        assert qlambda_config(condition) == QLambdaConfig(defer=hybrid, per_encounter=hybrid)
+        assert qlambda_config(condition) == QLambdaConfig(
+            epsilon=condition.epsilon,
+            defer=hybrid,
+            per_encounter=hybrid,
+            epsilon_half_life=condition.epsilon_half_life,
+        )
+        assert condition.epsilon_half_life == 0.0 or condition.name.endswith("-decay")
     else:
         assert configure(condition) == (condition, condition.brain_config())
 
@@ -43,6 +49,7 @@ def test_each_brain_parameter_sets_its_field() -> None:
             "insert_threshold": 0.7,
             "kp_window": 35,
             "synthesize": True,
+            "kp_failure_penalty": 0.5,
         },
     )
     assert condition.epsilon == 0.2
@@ -52,7 +59,9 @@ def test_each_brain_parameter_sets_its_field() -> None:
     assert config.learning.insert_threshold == config.kp.insert_threshold == 0.7
     assert config.kp.window_ticks == 35
     assert config.kp.synthesize is True
+    assert config.kp.failure_penalty == 0.5
     default = kp.brain_config()
+    assert default.kp.failure_penalty == 0.0, "a failure punishes nothing unless asked"
     assert config.selection.hysteresis == default.selection.hysteresis
     assert config.learning.stm_capacity == default.learning.stm_capacity
 
@@ -79,9 +88,10 @@ def test_each_qlambda_parameter_sets_its_field() -> None:
         ("trainer", {"eta", "epsilon", "threshold", "insert_threshold"}),
         (
             "kp",
-            {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"},
+            {"eta", "epsilon", "threshold", "insert_threshold", "kp_window", "synthesize"}
+            | {"kp_failure_penalty"},
         ),
-        ("qlambda", {"epsilon", "alpha", "gamma", "lambda"}),
+        ("qlambda", {"epsilon", "alpha", "gamma", "lambda", "epsilon_half_life"}),
     ],
 )
 def test_which_parameters_each_condition_uses(condition: str, uses: set[str]) -> None:

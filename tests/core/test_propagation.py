@@ -320,6 +320,69 @@ def test_negative_reward_lowers_rltm_and_removes_the_kp_association_below_thresh
     assert h.network.get(mm, rt15) is None
 
 
+def _taught(h: Harness) -> tuple[int, int, float]:
+    """M_M -> rightturn30 taught by two successful approaches: (s1, b, its reliability)."""
+    for start in (1, 20):
+        h.approach(start)
+        h.kp.reward(1.0)
+    mm, rt30 = h.s("Obstacle_M_M"), h.b("rightturn30")
+    assert h.network.get(mm, rt30) is not None
+    return mm, rt30, ETA + ETA * (1 - ETA)
+
+
+def test_a_failed_episode_punishes_the_pair_that_ran_and_demotes_it() -> None:
+    h = Harness(kp_config())
+    mm, rt30, v = _taught(h)
+    # The copy runs for two ticks; the episode then fails before any sonar response fires,
+    # so the RSTM holds nothing: only the pair that ran can take the blame.
+    ran = Decision(rt30, mm, v, How.RELEASED, "kp")
+    h.kp.percept(40, [mm], ran)
+    h.kp.percept(41, [mm], ran._replace(how=How.CONTINUED))
+    assert not h.kp.rstm["camera_obstacle"]
+    learned, changes = h.kp.punish(1.0)
+    assert [(p.stimulus, p.behaviour, p.sources) for p in learned] == [(mm, rt30, ())]
+    assert learned[0].before == pytest.approx(v)
+    assert learned[0].after == pytest.approx(v - ETA * v)
+    assert learned[0].after < v
+    assert h.kp.rltm[(mm, rt30)] == pytest.approx(v - ETA * v)
+    assert changes == [AssociationDemoted(mm, rt30, learned[0].after)]
+    assert h.network.get(mm, rt30) is None
+    point = h.kp.log[(mm, rt30)].history[-1]
+    assert (point.reward, point.before, point.after) == (-1.0, learned[0].before, learned[0].after)
+
+
+def test_a_failed_episode_punishes_what_the_rstm_would_teach_once_with_what_ran() -> None:
+    h = Harness(kp_config())
+    mm, rt30, v = _taught(h)
+    h.kp.percept(40, [mm], Decision(rt30, mm, v, How.RELEASED, "kp"))
+    h.approach(start=41)  # the sonar's responses, which reason to rightturn30 too
+    learned, _ = h.kp.punish(0.5)
+    assert [(p.stimulus, p.behaviour) for p in learned] == [(mm, rt30)], "punished once"
+    assert learned[0].sources == (h.b("rightturn45"), h.b("rightturn30"))
+    assert learned[0].after == pytest.approx(v - 0.5 * ETA * v)
+    assert not h.kp.rstm["camera_obstacle"], "a punishment empties the RSTM as a reward does"
+
+
+def test_a_reward_settles_what_ran_before_it() -> None:
+    h = Harness(kp_config())
+    mm, rt30, v = _taught(h)
+    h.kp.percept(40, [mm], Decision(rt30, mm, v, How.RELEASED, "kp"))
+    h.kp.reward(1.0)  # the lap's reward credits the run; a later failure does not undo it
+    after_reward = h.kp.rltm[(mm, rt30)]
+    assert h.kp.punish(1.0) == ([], [])
+    assert h.kp.rltm[(mm, rt30)] == after_reward
+    h.kp.percept(60, [mm], Decision(rt30, mm, v, How.RELEASED, "kp"))
+    h.kp.reset_episode()  # a new episode: what ran in the last one is not blamed now
+    assert h.kp.punish(1.0) == ([], [])
+
+
+def test_failure_penalty_must_be_a_reward_size() -> None:
+    with pytest.raises(ValueError, match="failure_penalty"):
+        KpConfig(failure_penalty=1.5)
+    with pytest.raises(ValueError, match="penalty"):
+        Harness(kp_config()).kp.punish(-0.1)
+
+
 def test_kp_never_overwrites_nor_removes_a_designed_association() -> None:
     h = Harness(kp_config())
     mm, rt15 = h.s("Obstacle_M_M"), h.b("rightturn30")

@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from core.qlambda import QLambdaConfig, WatkinsQLambda, run_qlambda, sweep
+from core.qlambda import QLambdaConfig, WatkinsQLambda, epsilon_at, run_qlambda, sweep
 
 LEFT, RIGHT = 0, 1
 GOAL = 3
@@ -158,6 +158,46 @@ def test_act_explores_about_epsilon_of_the_time() -> None:
     q.values(b"s")[:] = [0.0, 1.0]
     lefts = sum(q.act(b"s") == LEFT for _ in range(4000))
     assert lefts / 4000 == pytest.approx(0.1, abs=0.02)  # half the random picks are left
+
+
+def test_a_decaying_epsilon_halves_every_half_life_and_stays_put_without_one() -> None:
+    decaying = QLambdaConfig(epsilon=0.4, epsilon_half_life=10.0)
+    assert [epsilon_at(decaying, k) for k in (0, 10, 20, 30)] == pytest.approx(
+        [0.4, 0.2, 0.1, 0.05]
+    )
+    assert epsilon_at(decaying, 5) == pytest.approx(0.4 / 2**0.5)
+    constant = QLambdaConfig(epsilon=0.4)
+    assert {epsilon_at(constant, k) for k in (0, 10, 1000)} == {0.4}
+    with pytest.raises(ValueError, match="epsilon_half_life"):
+        QLambdaConfig(epsilon_half_life=-1.0)
+    with pytest.raises(ValueError, match="episode"):
+        epsilon_at(decaying, -1)
+
+
+def test_act_explores_at_the_rate_of_its_episode_on_the_schedule() -> None:
+    config = QLambdaConfig(epsilon=0.4, epsilon_half_life=2.0)
+
+    def lefts(seed: int, episode: int) -> list[bool]:
+        q = WatkinsQLambda(2, config, np.random.default_rng(seed))
+        q.start_episode(episode)
+        q.values(b"s")[:] = [0.0, 1.0]
+        return [q.act(b"s") == LEFT for _ in range(4000)]
+
+    for episode, rate in ((0, 0.4), (2, 0.2), (4, 0.1)):
+        assert np.mean(lefts(3, episode)) == pytest.approx(rate / 2, abs=0.02)  # half go left
+    assert lefts(3, 2) == lefts(3, 2), "the same seed explores the same way"
+    assert lefts(3, 2) != lefts(4, 2)
+
+
+def test_run_qlambda_sets_each_episodes_epsilon_from_the_schedule() -> None:
+    config = QLambdaConfig(epsilon=0.2, epsilon_half_life=1.0)
+    seen: list[float] = []
+    agents: list[WatkinsQLambda] = []
+    episodes, _, _ = run_qlambda(
+        5, 3, config, on_agent=agents.append, on_episode=lambda e: seen.append(agents[0].epsilon)
+    )
+    assert len(episodes) == 3
+    assert seen == pytest.approx([0.2, 0.1, 0.05])
 
 
 CONFIGS: dict[str, Callable[[float], QLambdaConfig]] = {

@@ -193,3 +193,41 @@ def test_ticking_out_of_order_raises() -> None:
     sim.tick()
     with pytest.raises(SimulationStateError, match="episode is over"):
         sim.tick()
+
+
+@pytest.mark.parametrize("penalty", [0.0, 1.0])
+def test_a_failed_episode_punishes_kp_rltm_only_when_a_penalty_is_set(penalty: float) -> None:
+    from dataclasses import replace
+
+    from core.brain.propagation import RstmRecord
+    from core.events import AssociationDemoted
+
+    geometry = ScriptedWorld().geometry
+    crash = {4: ScriptedStep(collision="obstacle")}
+    world = ScriptedWorld(lap_steps(geometry, STEP_M, extra=crash))
+    kp = get_condition("kp")
+    config = kp.brain_config()
+    config = replace(config, kp=replace(config.kp, failure_penalty=penalty))
+    sim = Simulation(kp, seed=0, world=world, brain_config=config)
+    sim.reset()
+    brain = sim.brain
+    assert brain.kp is not None
+    catalog = brain.catalog
+    mm = catalog.stimulus("Obstacle_M_M").id
+    rt30 = catalog.behaviour("rightturn30").id
+    front = catalog.stimulus("SonarObstacleFront").id
+    # A copy taught before, in the network, and the sonar's response to M_M in the RSTM.
+    brain.kp.rltm[(mm, rt30)] = 0.52  # just over the threshold (0.5)
+    brain.network.learn(mm, rt30, 0.52, "kp")
+    brain.kp.rstm["camera_obstacle"].append(RstmRecord(1, mm, front, rt30))
+    results = play(sim)
+    assert ended(results).outcome is Outcome.FAILURE
+    after = brain.kp.rltm[(mm, rt30)]
+    if penalty == 0.0:
+        assert after == 0.52, "by default a failure teaches KP nothing"
+        assert brain.network.get(mm, rt30) is not None
+        return
+    v = 0.52 - penalty * brain.config.kp.eta * 0.52
+    assert after == pytest.approx(v)
+    assert AssociationDemoted(mm, rt30, after) in results[-1].events
+    assert brain.network.get(mm, rt30) is None

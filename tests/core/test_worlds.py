@@ -69,3 +69,58 @@ def test_the_classic_world_leaves_the_camera_little_to_add() -> None:
         if r.prop.key == "b"
     }
     assert results["b"].success.mean >= 0.9
+
+
+def _reflex_at(world: str, along: float, lateral: float) -> tuple[list[str], str, float]:
+    """The camera's stimuli, the sonar's, and the turn rate its designed reflex answers with.
+
+    The robot in the middle of the corridor, heading along it; the obstacle `along` m
+    ahead of the robot's centre, `lateral` m to its left (negative: right).
+    """
+    from core.brain.sensors import compile_detector
+    from core.conditions import get_condition
+    from core.setup import Setup
+    from core.sim.world import PymunkWorld
+    from core.simulation import Simulation
+
+    setup = Setup(world, signal="given").resolved()
+    catalog = setup.catalog()
+    sim = Simulation(setup.condition(get_condition("reflexes")), 0, catalog=catalog,
+                     world_config=setup.world_config())  # fmt: skip
+    pymunk = PymunkWorld(setup.world_config())
+    geo = pymunk.geometry
+    pymunk.reset(0, 0)
+    robot = geo.point_on_leg(0, 2.0, 0.0)
+    frame = pymunk.place(*robot, 0.0, geo.point_on_leg(0, 2.0 + along, lateral))
+    active = [catalog.stimuli[s] for s in compile_detector(catalog)(frame.channels.tolist())]
+    camera = [s.name for s in active if s.sensor == "camera_obstacle"]
+    sonar = [s for s in active if s.sensor == "sonar_obstacle"]
+    assert len(sonar) == 1, [s.name for s in sonar]
+    (reflex,) = sim.brain.network.releasers(sonar[0].id)
+    return camera, sonar[0].name, catalog.behaviours[reflex.behaviour].turn_dps
+
+
+@pytest.mark.parametrize(("lateral", "stimulus"), [(0.08, "Obstacle_M_L"), (-0.08, "Obstacle_M_R")])
+@pytest.mark.parametrize("along", [0.45, 0.55])
+def test_crossed_sonar_answers_what_the_camera_sees_by_turning_into_the_obstacle(
+    lateral: float, stimulus: str, along: float
+) -> None:
+    # Where the camera reports an obstacle left (right) of the path and the sonar hears it,
+    # soft-obstacle's reflex turns away from it and crossed-sonar's, its front cables
+    # crossed, turns towards it: the response KP would copy to the camera's stimulus.
+    camera, heard, turn = _reflex_at("soft-obstacle", along, lateral)
+    assert camera == [stimulus]
+    assert turn * lateral < 0, f"{heard} turns away from the obstacle"
+    camera, heard_crossed, turn = _reflex_at("crossed-sonar", along, lateral)
+    assert camera == [stimulus], "the camera is wired as it was"
+    assert heard_crossed != heard
+    assert turn * lateral > 0, f"{heard_crossed} turns into the obstacle"
+
+
+def test_crossed_sonar_crosses_only_the_front_pair() -> None:
+    soft = load_world("soft-obstacle").config
+    crossed = load_world("crossed-sonar").config
+    a, b = soft.robot.sonar_angles_deg, crossed.robot.sonar_angles_deg
+    assert [i for i in range(len(a)) if a[i] != b[i]] == [2, 3]
+    assert (b[2], b[3]) == (a[3], a[2]) and {abs(a[2]), abs(a[3])} == {12.0}
+    assert crossed.track == soft.track

@@ -1,0 +1,61 @@
+"""Pre-declared comparisons: the few paired differences a summary's conclusions rest on.
+
+Each is a difference between two conditions' per-seed figures, paired by seed, with its
+interval and sign-flip p (`core.stats.paired_difference`); the family of them is corrected
+for multiplicity with Holm's step-down method (`core.stats.holm`), so a conclusion drawn
+from any of them keeps the family's error rate at 5%. Every other figure in a summary is
+exploratory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from core.stats import Paired, holm, p_text, paired_difference
+from server.reports.base import diff
+
+
+@dataclass(frozen=True, slots=True)
+class Comparison:
+    """One declared difference: what it compares, in words, and the per-seed figures."""
+
+    label: str
+    a: Sequence[float]
+    b: Sequence[float]
+
+
+@dataclass(frozen=True, slots=True)
+class Tested:
+    """A declared comparison's result: the paired difference and its Holm-adjusted p."""
+
+    label: str
+    paired: Paired
+    p_holm: float
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready form."""
+        return {
+            "label": self.label,
+            "diff": self.paired.diff.as_dict(),
+            "p": self.paired.p,
+            "p_holm": self.p_holm,
+        }
+
+
+def compare_declared(comparisons: Sequence[Comparison]) -> list[Tested]:
+    """Every comparison paired by seed, its p corrected with Holm's over the family."""
+    paired = [paired_difference(c.a, c.b) for c in comparisons]
+    adjusted = holm([p.p for p in paired])
+    return [Tested(c.label, p, q) for c, p, q in zip(comparisons, paired, adjusted, strict=True)]
+
+
+def paired_points(paired: Paired) -> str:
+    """A paired difference of rates in points: ``+9.1 [+5.7, +12.3], p 0.004``."""
+    return diff({**paired.diff.as_dict(), "p": paired.p})
+
+
+def points(tested: Tested) -> str:
+    """``+9.1 [+5.7, +12.3], p 0.004 (Holm 0.012)``, in points."""
+    holm_p = p_text(tested.p_holm).removeprefix("p ")
+    return f"{paired_points(tested.paired)} (Holm {holm_p})"
