@@ -461,6 +461,12 @@ class NetworkRepository(Protocol):
         """A network's edit history, oldest first."""
         ...
 
+    def versions_page(
+        self, name: str, offset: int = 0, limit: int = 100
+    ) -> tuple[tuple[NetworkVersion, ...], int]:
+        """A page of `versions`, and how many versions the history holds."""
+        ...
+
     def snapshot(self, name: str, version: int) -> NetworkSnapshot:
         """The network as it was at `version`."""
         ...

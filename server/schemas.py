@@ -4,20 +4,27 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime
-from typing import Literal, get_args, get_origin
+from typing import Annotated, Any, ClassVar, Literal, get_args, get_origin
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
+    GetJsonSchemaHandler,
     JsonValue,
+    StringConstraints,
     ValidationInfo,
+    WithJsonSchema,
     field_validator,
 )
+from pydantic.json_schema import JsonSchemaValue
+from pydantic_core import CoreSchema
 
 from core.brain.catalog import Source, load_catalog, sensor_definitions
 from core.conditions import CONDITIONS
 from core.engine import HZ_MAX, HZ_MIN
+from core.text import unstorable
 from core.worlds import world_names
 
 EngineCondition = Literal[
@@ -47,15 +54,70 @@ def _kinds(annotation: object) -> set[type]:
     return {t for a in args for t in _kinds(a)} if get_origin(annotation) is not Literal else set()
 
 
+TEXT_PATTERN = r"^[^\u0000]*$"
+"""Text a request may carry, as a JSON Schema pattern: any character but NUL, which
+PostgreSQL cannot store (`core.text` holds the rule). Lone surrogates are refused too, but
+they are not text at all (no UTF-8 holds one, and most validators' regular expressions
+cannot name them), so the pattern leaves them out."""
+
+
+def _storable(value: str) -> str:
+    problem = unstorable(value)
+    if problem is not None:
+        raise ValueError(problem)
+    return value
+
+
+def _with_text_pattern(schema: JsonSchemaValue) -> None:
+    """Give a string schema (or a nullable one's string branch) `TEXT_PATTERN`.
+
+    A schema with its own pattern, enum or constant says more already.
+    """
+    if {"pattern", "enum", "const"} & schema.keys():
+        return
+    if schema.get("type") == "string":
+        schema["pattern"] = TEXT_PATTERN
+    for branch in schema.get("anyOf", ()):
+        _with_text_pattern(branch)
+
+
+class _TextSchema:
+    """Annotated metadata: `TEXT_PATTERN` in the JSON schema of the string it marks."""
+
+    def __get_pydantic_json_schema__(
+        self, core_schema: CoreSchema, handler: GetJsonSchemaHandler
+    ) -> JsonSchemaValue:
+        schema = handler(core_schema)
+        _with_text_pattern(schema)
+        return schema
+
+
+Text = Annotated[str, AfterValidator(_storable), _TextSchema()]
+"""A string the service may store: a query or path parameter's type (a request body's
+strings get the same rule from `Strict`). Anything else is a 422 naming the field."""
+
+
+def _strict_schema(schema: dict[str, Any], model: type) -> None:
+    for prop in schema.get("properties", {}).values():
+        _with_text_pattern(prop)
+    examples = getattr(model, "EXAMPLES", ())
+    if examples:
+        schema["examples"] = list(examples)
+
+
 class Strict(BaseModel):
     """A request body: unknown fields are an error, and values are not coerced.
 
     `"hz": "10"` is a string, not a number, `true` is a boolean, not 1, and `1` is not
     `true`: as JSON Schema reads the document (where 10.0 is an integer, and an integer is
-    a number). Floats are finite.
+    a number). Floats are finite. Every string field takes `Text`'s rule, declared and
+    checked, without saying so: a new field cannot forget it. `EXAMPLES`, when a body has
+    them, are its schema's `examples` (the documentation's, and a contract test's first
+    cases).
     """
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra=_strict_schema)
+    EXAMPLES: ClassVar[tuple[dict[str, JsonValue], ...]] = ()
 
     @field_validator("*", mode="before")
     @classmethod
@@ -66,6 +128,8 @@ class Strict(BaseModel):
             raise ValueError(f"a number is needed, not {type(value).__name__} {value!r}")
         if bool in kinds and value is not None and not isinstance(value, bool):
             raise ValueError(f"true or false is needed, not {value!r}")
+        if str in kinds and isinstance(value, str):
+            _storable(value)
         return value
 
 
@@ -186,6 +250,8 @@ SENSOR_DEFINITIONS: list[JsonValue] = list(sensor_definitions())
 
 
 class LearningParams(Strict):
+    EXAMPLES = ({"eta": 0.2, "epsilon": 0.05},)
+
     eta: float | None = Field(None, ge=0.0, le=1.0, description="Eq. (1)'s learning rate")
     epsilon: float | None = Field(None, ge=0.0, le=1.0, description="exploration rate")
     synthesize: bool = Field(False, description="KP keeps new behaviours instead of snapping")
@@ -199,6 +265,11 @@ def _one_of(value: str | None, known: Sequence[JsonValue], what: str) -> str | N
 
 
 class RunCreate(Strict):
+    EXAMPLES = (
+        {"condition": "kp", "seed": 1, "episodes": 2},
+        {"condition": "trainer", "mode": "realtime", "hz": 20, "world": "classic"},
+    )
+
     condition: EngineCondition
     seed: int = Field(0, ge=0, le=2**31 - 1)
     episodes: int | None = Field(None, ge=1, le=1_000_000, description="None: until stopped")
@@ -246,13 +317,15 @@ class RunCreate(Strict):
 
 class EstimatePublic(BaseModel):
     mean: float | None = Field(description="null without data")
-    low: float | None = Field(description="95% bootstrap interval; null with fewer than 2 seeds")
+    low: float | None = Field(description="95% Student's t interval; null with fewer than 2 seeds")
     high: float | None
     n: int = Field(description="seeds")
 
 
 class ComparisonPublic(BaseModel):
-    episodes: int = Field(description="the first episodes of every run the rates are over")
+    episodes: int = Field(
+        description="the first episodes of every run the rates are over (at most 1,000)"
+    )
     seeds: list[int]
     a: EstimatePublic = Field(description="success rate of runs `a`, over seeds")
     b: EstimatePublic | None = Field(description="of runs `b`, when given")
@@ -308,6 +381,8 @@ class RunPublic(BaseModel):
 class RunRate(Strict):
     """A realtime run's new tick rate."""
 
+    EXAMPLES = ({"hz": 20},)
+
     hz: float = Field(ge=HZ_MIN, le=HZ_MAX, description="ticks per second")
 
 
@@ -324,6 +399,8 @@ class RunsPublic(BaseModel):
 
 
 class RewardCreate(Strict):
+    EXAMPLES = ({"value": 1.0, "note": "a clean pass of the obstacle"}, {"value": -0.5})
+
     value: float = Field(ge=-1.0, le=1.0, description="the reward, -1 (bad) to 1 (good)")
     note: str = Field("", max_length=500)
 
@@ -416,16 +493,42 @@ class EpisodeDetail(EpisodePublic):
 # --- networks: the DP S-R editor ------------------------------------------------------
 
 NETWORK_NAME = r"^[A-Za-z0-9_-]{1,64}$"
+RESERVED_NAMES: list[JsonValue] = ["import"]
+"""Names no network may take: `/api/networks/import` is an operation of its own, which
+OpenAPI matches before `/api/networks/{name}`."""
+
+
+def _not_reserved(name: str) -> str:
+    if name in RESERVED_NAMES:
+        raise ValueError(
+            f"{name!r} names an operation (/api/networks/{name}), not a network: choose another"
+        )
+    return name
+
+
+NetworkName = Annotated[
+    str,
+    StringConstraints(pattern=NETWORK_NAME),
+    AfterValidator(_not_reserved),
+    WithJsonSchema({"type": "string", "pattern": NETWORK_NAME, "not": {"enum": RESERVED_NAMES}}),
+]
+"""A new network's name: 1-64 letters, digits, '-' and '_', not a reserved one."""
 NETWORK_FORMAT: Literal["srlab-network/1"] = "srlab-network/1"
 _SHIPPED = load_catalog()
 STIMULUS_NAMES: list[JsonValue] = [s.name for s in _SHIPPED.stimuli]
 """The stimuli the service knows (its catalogue), listed in /openapi.json."""
 BEHAVIOUR_NAMES: list[JsonValue] = [b.name for b in _SHIPPED.behaviours]
 """The behaviours the service knows (its catalogue), listed in /openapi.json."""
+MAX_ASSOCIATIONS = len(STIMULUS_NAMES) * len(BEHAVIOUR_NAMES)
+"""The most associations a network body lists: one per S-R pair of the catalogue (a later
+one replaces an earlier one of its pair). So many of the shortest take about a third of
+the body limit (`SRLAB_MAX_BODY_BYTES`, 64 KiB): a longer list is a 422, not a 413."""
 
 
 class AssociationCreate(Strict):
     """An S-R association to add: stimulus -> behaviour with a strength, source and lock."""
+
+    EXAMPLES = ({"stimulus": "Red", "behaviour": "stop", "strength": 0.9, "source": "dp"},)
 
     # The names are listed for clients; the route checks them, naming the field in its 422.
     stimulus: str = Field(
@@ -444,6 +547,8 @@ class AssociationCreate(Strict):
 class AssociationUpdate(Strict):
     """New values for an association; an omitted one stays (a new association: 1, dp, no)."""
 
+    EXAMPLES = ({"strength": 0.5}, {"locked": False})
+
     strength: float | None = Field(None, ge=0.0, le=1.0, allow_inf_nan=False)
     source: Source | None = None
     locked: bool | None = Field(None, description="false unlocks it (with force=true)")
@@ -452,14 +557,23 @@ class AssociationUpdate(Strict):
 class NetworkCreate(Strict):
     """A new network: a copy of `base` with `associations` over it."""
 
-    name: str = Field(pattern=NETWORK_NAME, description="1-64 letters, digits, '-' and '_'; unique")
+    EXAMPLES = (
+        {"name": "my-dp", "base": "dp", "description": "dp, stopping sooner at red"},
+        {
+            "name": "mine",
+            "base": None,
+            "associations": [{"stimulus": "Red", "behaviour": "stop", "strength": 0.9}],
+        },
+    )
+
+    name: NetworkName = Field(description="1-64 letters, digits, '-' and '_'; unique")
     description: str = Field("", max_length=2000)
     base: str | None = Field(
         "innate", max_length=100, description="the network to copy (null: start empty)"
     )
     associations: list[AssociationCreate] = Field(
         default_factory=list,
-        max_length=2000,
+        max_length=MAX_ASSOCIATIONS,
         description="added to the base's in order, each replacing any earlier one of its pair",
     )
 
@@ -568,17 +682,32 @@ class NetworkDiffPublic(BaseModel):
 class NetworkRevert(Strict):
     """The version to make current again."""
 
+    EXAMPLES = ({"version": 1},)
+
     version: int = Field(ge=1, le=2**31 - 1)
 
 
 class NetworkDocument(Strict):
     """A network as a file: what GET .../export gives and POST /api/networks/import takes."""
 
+    EXAMPLES = (
+        {
+            "format": "srlab-network/1",
+            "name": "imported",
+            "description": "",
+            "associations": [
+                {"stimulus": "Corner", "behaviour": "leftturn90", "source": "innate"},
+                {"stimulus": "Red", "behaviour": "stop", "strength": 0.9},
+            ],
+        },
+    )
+
     format: Literal["srlab-network/1"] = Field(description="the document's format and version")
-    name: str = Field(pattern=NETWORK_NAME, description="1-64 letters, digits, '-' and '_'")
+    name: NetworkName = Field(description="1-64 letters, digits, '-' and '_'")
     description: str = Field("", max_length=2000)
     associations: list[AssociationCreate] = Field(
-        max_length=2000, description="in order, each replacing any earlier one of its pair"
+        max_length=MAX_ASSOCIATIONS,
+        description="in order, each replacing any earlier one of its pair",
     )
 
 

@@ -60,6 +60,7 @@ from core.sim.world import (
     SensorFrame,
     WorldConfig,
 )
+from core.text import check_storable
 
 FloatArray = np.ndarray[Any, np.dtype[np.float64]]
 
@@ -318,12 +319,15 @@ class InMemoryRunStore:
     def set_status(self, run_id: int, status: RunStatus, error: str | None = None) -> None:
         """Change a run's status (and error message)."""
         run = self._run(run_id)
+        if error is not None:
+            check_storable(error, "a run's error")
         run.status = status
         run.error = error
 
     def log_reward(self, run_id: int, reward: RewardRecord) -> int:
         """Append a reward to the log; returns its id."""
         run = self._run(run_id)
+        check_storable(reward.note, "a reward's note")
         reward_id = self._next_reward
         self._next_reward += 1
         run.rewards[reward_id] = StoredReward(reward_id, reward, applied=False)
@@ -344,6 +348,7 @@ class InMemoryRunStore:
     ) -> int:
         """Log an already applied reward and store what it changed, all or nothing."""
         run = self._run(run_id)
+        check_storable(reward.note, "a reward's note")
         self._apply(run, update)
         reward_id = self.log_reward(run_id, reward)
         run.rewards[reward_id] = replace(run.rewards[reward_id], applied=True, credited=credited)
@@ -355,6 +360,7 @@ class InMemoryRunStore:
         for r in rewards:  # everything is checked before anything changes
             if r.logged_id is not None and r.logged_id not in trial.rewards:
                 raise StorageError(f"run {run_id} has no reward {r.logged_id}")
+            check_storable(r.record.note, "a reward's note")
             trial = self._check(trial, r.update)
         ids = []
         for r in rewards:
@@ -785,6 +791,13 @@ class InMemoryNetworkRepository:
                 NetworkVersion(v.version, v.created_at, v.note, len(v.state))
                 for _, v in sorted(n.history.items())
             )
+
+    def versions_page(
+        self, name: str, offset: int = 0, limit: int = 100
+    ) -> tuple[tuple[NetworkVersion, ...], int]:
+        """A page of `versions`, and their number."""
+        every = self.versions(name)
+        return every[offset : offset + limit], len(every)
 
     def snapshot(self, name: str, version: int) -> NetworkSnapshot:
         """The network as it was at `version`."""

@@ -75,6 +75,7 @@ from core.ports import (
 from core.setup import Setup, condition_network
 from core.sim.world import WorldConfig
 from core.simulation import Simulation, Snapshot
+from core.text import check_storable
 from core.trace import TraceRecorder
 
 FAST_YIELD_TICKS = 128
@@ -345,6 +346,9 @@ class RunEngine:
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
         """
+        # Refused before it is queued: a note no database stores would fail the writer
+        # that logs it, and with it the run. (A logged note is replayed as it was.)
+        check_storable(note, "a reward's note")
         self._check_running()
         if not self._replayed.is_set():
             # A resumed run replays its log first; a new reward stamped inside the replay

@@ -39,6 +39,12 @@ LINKS: dict[tuple[str, str], dict[str, dict[str, Any]]] = {
         "getRun": _link("getRun", "read the started run", run_id=_RUN_FROM_PATH),
         "stopRun": _link("stopRun", "stop the started run", run_id=_RUN_FROM_PATH),
         "streamEvents": _link("streamEvents", "follow it live", run_id=_RUN_FROM_PATH),
+        "pauseRun": _link("pauseRun", "pause the started run", run_id=_RUN_FROM_PATH),
+        "setRunRate": _link("setRunRate", "re-pace the started run", run_id=_RUN_FROM_PATH),
+    },
+    ("pauseRun", "200"): {
+        "stepRun": _link("stepRun", "run one tick of the paused run", run_id=_RUN_FROM_PATH),
+        "resumeRun": _link("resumeRun", "tick again", run_id=_RUN_FROM_PATH),
     },
     ("injectReward", "202"): {
         "listRewards": _link("listRewards", "find the reward in the log", run_id=_RUN_FROM_PATH),
@@ -69,8 +75,8 @@ def install(app: FastAPI, *, token_needed: bool) -> None:
         components.setdefault("securitySchemes", {})["bearer"] = {
             "type": "http",
             "scheme": "bearer",
-            "description": "SRLAB_TOKEN. Every write needs it when the service listens beyond "
-            "loopback or has a token set"
+            "description": "SRLAB_TOKEN. Every write needs it when the service is reachable from "
+            "beyond this machine or has a token set"
             + (" (as this one does)." if token_needed else "; this one needs none."),
         }
         schemas = components.setdefault("schemas", {})
@@ -91,10 +97,28 @@ def install(app: FastAPI, *, token_needed: bool) -> None:
                         response["links"] = links
                 if path.endswith("/events"):
                     _describe_stream(op)
+                for parameter in op.get("parameters", ()):
+                    _absent_not_null(parameter)
         app.openapi_schema = doc
         return doc
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def _absent_not_null(parameter: dict[str, Any]) -> None:
+    """An optional parameter's schema without FastAPI's `null` branch.
+
+    A query or header parameter is left out, never null: the `null` of `int | None` would
+    tell a client that `?expected_version=null` is a value the service takes.
+    """
+    schema = parameter.get("schema", {})
+    branches = schema.get("anyOf")
+    if parameter.get("required") or not isinstance(branches, list):
+        return
+    kept = [b for b in branches if b != {"type": "null"}]
+    if len(kept) == 1 < len(branches):
+        del schema["anyOf"]
+        schema.update(kept[0])
 
 
 def _event_schema_name(model: type[BaseModel]) -> str:

@@ -24,7 +24,11 @@ from server.asgi import send_error
 API_PREFIX = "/api/"
 _HTTP_METHODS = {"get", "put", "post", "delete", "patch", "options", "head", "trace"}
 Operations = list[tuple[re.Pattern[str], frozenset[str]]]
-"""Each API path as a regex, with its methods (upper-case)."""
+"""Each API path as a regex, with its methods (upper-case); paths without parameters first.
+
+OpenAPI matches a concrete path before a templated one (`/api/networks/import` before
+`/api/networks/{name}`), and so does `ApiMethods`: the first path that matches decides.
+"""
 
 
 def _compiled(paths: Iterable[tuple[str, Iterable[str]]]) -> Operations:
@@ -33,7 +37,7 @@ def _compiled(paths: Iterable[tuple[str, Iterable[str]]]) -> Operations:
         if path.startswith(API_PREFIX):
             methods_of.setdefault(path, set()).update(m.upper() for m in methods)
     out = []
-    for path, methods in methods_of.items():
+    for path, methods in sorted(methods_of.items(), key=lambda item: "{" in item[0]):
         pattern = re.sub(r"\\{[^/]+?\\}", "[^/]+", re.escape(path))
         out.append((re.compile(pattern + "$"), frozenset(methods)))
     return out
@@ -80,7 +84,8 @@ class ApiMethods:
                 if method in methods:
                     await self.app(scope, receive, send)
                     return
-                allowed |= methods
+                allowed = set(methods)
+                break
         if method == "OPTIONS" and _preflight(scope):
             await self.app(scope, receive, send)  # CORS answers it
             return

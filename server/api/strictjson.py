@@ -1,13 +1,17 @@
 """JSON request bodies read strictly, before FastAPI reads them.
 
-Python's `json.loads` takes `NaN`, `Infinity`, lone surrogates (an escaped `ud800`) and duplicate
-keys (the last wins), none of which is JSON a client means: a body with any of them gets
-422 in FastAPI's own shape, its `loc` naming the field.
+Python's `json.loads` takes `NaN`, `Infinity`, numbers out of a float's range (`1e400`,
+read as infinity), lone surrogates (an escaped `ud800`) and duplicate keys (the last wins),
+none of which is JSON a client means: a body with any of them gets 422 in FastAPI's own
+shape, its `loc` naming the field. So does a body nested deeper than `MAX_DEPTH` (no body
+of the API nests more than four levels): reading one a thousand levels deep would exhaust
+Python's recursion limit, here or in FastAPI.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
@@ -23,8 +27,26 @@ class _Bad:
         self.value = value
 
 
+MAX_DEPTH = 32
+"""How deeply a request body's arrays and objects may nest."""
+
+
 def _constant(name: str) -> _Bad:
     return _Bad(f"{name} is not a JSON number: use a finite number", name)
+
+
+def _float(text: str) -> float | _Bad:
+    value = float(text)
+    if math.isfinite(value):
+        return value
+    return _Bad(f"{text} is out of a number's range: use a finite number", text)
+
+
+def _int(text: str) -> int | _Bad:
+    try:
+        return int(text)
+    except ValueError:  # over Python's limit of digits
+        return _Bad(f"an integer of {len(text):,} digits is out of range", text[:20] + "...")
 
 
 def _pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -39,38 +61,58 @@ def _lone_surrogate(text: str) -> bool:
 
 
 def problems(value: Any, loc: tuple[str | int, ...] = ("body",)) -> list[dict[str, Any]]:
-    """Each value of a decoded body that JSON does not allow, as a 422 error entry."""
+    """Each value of a decoded body that JSON does not allow, as a 422 error entry.
+
+    Walked without recursion, in document order; a value nested deeper than `MAX_DEPTH`
+    is one error, and nothing under it is looked at.
+    """
     found: list[dict[str, Any]] = []
-    if isinstance(value, _Bad):
-        found.append(
-            {"type": "json_invalid", "loc": list(loc), "msg": value.why, "input": value.value}
-        )
-    elif isinstance(value, str) and _lone_surrogate(value):
-        found.append(
-            {
-                "type": "string_unicode",
-                "loc": list(loc),
-                "msg": "a lone surrogate is not text",
-                "input": None,
-            }
-        )
-    elif isinstance(value, dict):
-        for k, v in value.items():
-            if _lone_surrogate(k):
-                found.append(
-                    {
-                        "type": "string_unicode",
-                        "loc": [*loc],
-                        "msg": "a key holds a lone surrogate",
-                        "input": None,
-                    }
-                )
-                continue
-            found += problems(v, (*loc, k))
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            found += problems(v, (*loc, i))
+    todo: list[tuple[Any, tuple[str | int, ...]]] = [(value, loc)]
+    while todo:
+        value, at = todo.pop()
+        if isinstance(value, _Bad):
+            found.append(
+                {"type": "json_invalid", "loc": list(at), "msg": value.why, "input": value.value}
+            )
+        elif isinstance(value, str) and _lone_surrogate(value):
+            found.append(
+                {
+                    "type": "string_unicode",
+                    "loc": list(at),
+                    "msg": "a lone surrogate is not text",
+                    "input": None,
+                }
+            )
+        elif isinstance(value, dict | list) and len(at) - len(loc) >= MAX_DEPTH:
+            found.append(_too_deep(at))
+            break
+        elif isinstance(value, dict):
+            inner: list[tuple[Any, tuple[str | int, ...]]] = []
+            for k, v in value.items():
+                if _lone_surrogate(k):
+                    found.append(
+                        {
+                            "type": "string_unicode",
+                            "loc": list(at),
+                            "msg": "a key holds a lone surrogate",
+                            "input": None,
+                        }
+                    )
+                    continue
+                inner.append((v, (*at, k)))
+            todo.extend(reversed(inner))
+        elif isinstance(value, list):
+            todo.extend(reversed([(v, (*at, i)) for i, v in enumerate(value)]))
     return found
+
+
+def _too_deep(at: tuple[str | int, ...]) -> dict[str, Any]:
+    return {
+        "type": "json_invalid",
+        "loc": list(at),
+        "msg": f"the body nests arrays and objects more than {MAX_DEPTH} levels deep",
+        "input": None,
+    }
 
 
 class StrictJson:
@@ -100,11 +142,21 @@ class StrictJson:
                 break
         body = b"".join(chunks)
         if body.strip():
+            found: list[dict[str, Any]] = []
             try:
-                decoded = json.loads(body, parse_constant=_constant, object_pairs_hook=_pairs)
+                decoded = json.loads(
+                    body,
+                    parse_constant=_constant,
+                    parse_float=_float,
+                    parse_int=_int,
+                    object_pairs_hook=_pairs,
+                )
             except (ValueError, UnicodeDecodeError):
-                decoded = None  # not JSON at all: FastAPI's own 422 says where
-            found = problems(decoded)
+                pass  # not JSON at all: FastAPI's own 422 says where
+            except RecursionError:  # far deeper than MAX_DEPTH
+                found = [_too_deep(("body",))]
+            else:
+                found = problems(decoded)
             if found:
                 await send_error(send, 422, found)
                 return

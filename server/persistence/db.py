@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
 from core.errors import StorageError
+from core.text import UNSTORABLE, check_storable
 
 DEFAULT_DATABASE_URL = "sqlite:///var/srlab.db"
 IMMEDIATE = "srlab_begin_immediate"
@@ -174,6 +175,26 @@ class _WriteLock:
         self._lock.release()
 
 
+def refuse_unstorable(parameters: Any) -> None:
+    """`ValueError` for a statement's text value no supported database stores.
+
+    The one check every statement's parameters pass (`make_engine`'s engines, and the
+    driver's statements in `server.persistence.driver`), so a text SQLite would take and
+    PostgreSQL refuse (NUL), or neither can encode (a lone surrogate), is refused the same
+    way on both before anything is written: as bad input, not as failing storage.
+    """
+    if isinstance(parameters, dict):
+        parameters = tuple(parameters.values())
+    if not isinstance(parameters, tuple | list):
+        return
+    for value in parameters:
+        if isinstance(value, str):
+            if UNSTORABLE.search(value) is not None:
+                check_storable(value, "a value to store")
+        elif isinstance(value, dict | tuple | list):  # executemany's rows
+            refuse_unstorable(value)
+
+
 def make_engine(
     url: str | URL,
     *,
@@ -198,7 +219,9 @@ def make_engine(
     if url.get_backend_name() == "postgresql":
         kwargs.setdefault("connect_args", {"options": f"-c lock_timeout={int(busy_timeout_ms)}"})
     if url.get_backend_name() != "sqlite":
-        return create_engine(url, pool_pre_ping=True, **kwargs)
+        engine = create_engine(url, pool_pre_ping=True, **kwargs)
+        event.listen(engine, "before_cursor_execute", _refuse_unstorable)
+        return engine
     path = _sqlite_file(url)
     if path is None:
         kwargs.setdefault("poolclass", StaticPool)
@@ -206,6 +229,7 @@ def make_engine(
     else:
         path.parent.mkdir(parents=True, exist_ok=True)
     engine = create_engine(url, **kwargs)
+    event.listen(engine, "before_cursor_execute", _refuse_unstorable)
     guard = SqliteFileGuard(path) if path is not None else None
     if guard is not None:
         _GUARDS[engine] = guard
@@ -247,6 +271,12 @@ def make_engine(
         connection.exec_driver_sql("BEGIN IMMEDIATE" if immediate else "BEGIN")
 
     return engine
+
+
+def _refuse_unstorable(
+    _connection: Any, _cursor: Any, _statement: str, parameters: Any, *_: Any
+) -> None:
+    refuse_unstorable(parameters)
 
 
 def make_sessionmaker(engine: Engine) -> sessionmaker[Session]:

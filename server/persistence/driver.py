@@ -34,7 +34,13 @@ from sqlalchemy.schema import ColumnDefault
 from sqlalchemy.sql import ClauseElement, Executable
 from sqlalchemy.sql.compiler import SQLCompiler
 
-from server.persistence.db import DatabaseIdentityError, sqlite_guard, storage_error, write_lock
+from server.persistence.db import (
+    DatabaseIdentityError,
+    refuse_unstorable,
+    sqlite_guard,
+    storage_error,
+    write_lock,
+)
 
 Row = tuple[Any, ...]
 Params = Mapping[str, Any]
@@ -152,10 +158,12 @@ class DriverStatement:
     def values(self, params: Params) -> tuple[Any, ...]:
         """The driver's parameters for `params`."""
         given = self._compiled.construct_params({**self._defaults, **params})
-        return tuple(
+        values = tuple(
             given[name] if convert is None else convert(given[name])
             for name, convert in self._order
         )
+        refuse_unstorable(values)  # as every engine's statements are (`make_engine`)
+        return values
 
 
 class DriverSql:

@@ -305,23 +305,35 @@ class SqlAlchemyNetworkRepository:
 
     def versions(self, name: str) -> tuple[NetworkVersion, ...]:
         """A network's edit history, oldest first."""
+        page, _ = self.versions_page(name, 0, None)
+        return page
+
+    def versions_page(
+        self, name: str, offset: int = 0, limit: int | None = 100
+    ) -> tuple[tuple[NetworkVersion, ...], int]:
+        """A page of the history, oldest first, and its length: it reads the page's rows only."""
         with self._transaction(f"reading the history of network {name!r}", write=False) as s:
             row = self._row(s, name)
             self._ensure_history(s, row)
+            v = NetworkVersionRow
+            total = s.scalar(select(func.count()).select_from(v).where(v.network_id == row.id))
             rows = s.scalars(
-                select(NetworkVersionRow)
-                .where(NetworkVersionRow.network_id == row.id)
-                .order_by(NetworkVersionRow.version)
+                select(v)
+                .where(v.network_id == row.id)
+                .order_by(v.version)
+                .offset(offset)
+                .limit(limit)
             )
-            return tuple(
+            page = tuple(
                 NetworkVersion(
-                    v.version,
-                    _utc(v.created_at),
-                    v.note,
-                    len(v.snapshot.get("associations", ())),
+                    r.version,
+                    _utc(r.created_at),
+                    r.note,
+                    len(r.snapshot.get("associations", ())),
                 )
-                for v in rows
+                for r in rows
             )
+            return page, int(total or 0)
 
     def snapshot(self, name: str, version: int) -> NetworkSnapshot:
         """The network as it was at `version`."""

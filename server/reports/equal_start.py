@@ -49,7 +49,7 @@ def plot_grid(path: Path, study: EqualStartStudy, summary: dict[str, Any]) -> No
         ax.set_title(title, fontsize=10)
     axes[0][0].set_ylabel("success rate (mean over seeds)")
     axes[0][0].legend(fontsize=8, loc="upper left")
-    fig.suptitle("Every method from Table I and from kp's design (bars: 95% bootstrap intervals)")
+    fig.suptitle("Every method from Table I and from kp's design (bars: 95% Student's t intervals)")
     save(fig, path)
 
 
@@ -102,7 +102,7 @@ def summary_markdown(
         "programmed responses on top of either: `dp-rare` programs the signal and the "
         "left- and middle-lane camera stimuli and learns R-L, R-M and R-R, as the paper's "
         "DP; `dp` programs the side lanes and learns M-L, M-M and M-R (srlab's split). "
-        "Success is the mean over seeds [95% bootstrap interval]; differences are paired by "
+        "Success is the mean over seeds [95% Student's t interval]; differences are paired by "
         "seed, in points, with the sign-flip test's p.",
         "",
         "## Success from each start",

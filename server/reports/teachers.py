@@ -54,7 +54,7 @@ def plot_imperfection(
     """The taught robot's success against one imperfection's level, beside the references'.
 
     Two panels: success over the training episodes, and held out, frozen. Bars and bands
-    are 95% bootstrap intervals over seeds.
+    are 95% Student's t intervals over seeds.
     """
     fig, axes = subplots(len(FIGURES), figsize=(11, 4.4), sharey=True)
     levels = entry["levels"]
@@ -141,7 +141,7 @@ def summary_markdown(
         "",
         *ref_lines,
         "",
-        "Success is the mean over seeds with its 95% bootstrap interval; a difference is rp's "
+        "Success is the mean over seeds with its 95% Student's t interval; a difference is rp's "
         "minus the learner's, paired by seed (every cell meets the same obstacles and lamp "
         "cycles on a seed), in points, with the sign-flip test's p. *Below from* a level: the "
         "first level whose difference's interval lies under 0; *no longer above*: the first "

@@ -573,6 +573,57 @@ def test_the_service_reads_page_and_summarise_what_is_stored(
     assert store.run_summary(other).status is RunStatus.CREATED
 
 
+UNSTORABLE = {"nul": "a\x00b", "high surrogate": "\ud800", "low surrogate": "note \udfff"}
+"""Text no supported database stores (PostgreSQL's text holds no NUL; a surrogate alone is
+not UTF-8): every store refuses it the same way, before writing anything."""
+STORABLE = (
+    "tab\t newline\n \x01\x1f\x7f \ud7ff\ue000\ufffd\uffff \U0001f600\U0010ffff é中 '\"; -- \\ %s ?"
+)
+"""Every other kind of character, those next to the refused ones included."""
+
+
+def noted(note: str, tick: int = 5) -> RewardRecord:
+    return RewardRecord(tick=tick, episode=0, value=1.0, source="trainer", note=note)
+
+
+@pytest.mark.parametrize("text", UNSTORABLE.values(), ids=UNSTORABLE.keys())
+def test_text_no_database_stores_is_refused_and_changes_nothing(
+    store: InspectableRunStore, text: str
+) -> None:
+    run_id = new_run(store)
+    kept = store.log_reward(run_id, reward(1))
+    learned = LearningUpdate(ltm={("Red", "stop"): 0.5})
+    writes: list[Callable[[], object]] = [
+        lambda: store.log_reward(run_id, noted(text)),
+        lambda: store.record_reward(run_id, noted(text), learned, 1),
+        lambda: store.commit_rewards(run_id, (RewardCommit(noted(text), learned, 1),)),
+        lambda: store.set_status(run_id, RunStatus.FAILED, text),
+    ]
+
+    for write in writes:
+        with pytest.raises(ValueError, match="cannot be stored"):
+            write()
+
+    assert [r.id for r in store.rewards(run_id)] == [kept]
+    assert store.ltm(run_id) == {}
+    run = store.load_run(run_id)
+    assert (run.status, run.error) == (RunStatus.CREATED, None)
+    later = store.log_reward(run_id, reward(2))  # the store goes on as before
+    assert [r.id for r in store.rewards(run_id)] == [kept, later]
+
+
+def test_any_other_text_is_stored_and_read_back_exactly(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+
+    logged = store.log_reward(run_id, noted(STORABLE))
+    recorded = store.record_reward(run_id, noted(STORABLE[::-1], 6), LearningUpdate(), 0)
+    store.set_status(run_id, RunStatus.FAILED, STORABLE)
+
+    notes = {r.id: r.record.note for r in store.rewards(run_id)}
+    assert notes == {logged: STORABLE, recorded: STORABLE[::-1]}
+    assert store.load_run(run_id).error == STORABLE
+
+
 UNKNOWN = 987_654
 CALLS: dict[str, Callable[[InspectableRunStore], object]] = {
     "load_run": lambda s: s.load_run(UNKNOWN),

@@ -275,6 +275,23 @@ def test_versions_snapshots_and_diff(networks: NetworkRepository) -> None:
         networks.diff("mine", 0, 1)
 
 
+def test_versions_page_reads_a_page_of_the_history_and_counts_it(
+    networks: NetworkRepository,
+) -> None:
+    networks.create("mine")
+    for strength in (0.1, 0.2, 0.3, 0.4):
+        networks.put_association("mine", *CORNER, strength=strength, note=f"to {strength}")
+
+    page, total = networks.versions_page("mine", offset=1, limit=2)
+
+    assert total == 5
+    assert page == networks.versions("mine")[1:3]
+    assert [v.note for v in page] == ["to 0.1", "to 0.2"]
+    assert networks.versions_page("mine", offset=5, limit=2) == ((), 5)
+    with pytest.raises(UnknownNameError):
+        networks.versions_page("nothing")
+
+
 def test_revert_is_a_new_version_with_the_old_description(networks: NetworkRepository) -> None:
     first = networks.create("mine", description="v1")
     networks.add_association("mine", RED_STOP)

@@ -112,7 +112,7 @@ def test_db_upgrade_prints_plain_lines(db_url: str, capsys: pytest.CaptureFixtur
     assert "already seeded: nothing changed" in capsys.readouterr().out
 
 
-def test_a_rate_with_two_seeds_prints_a_bootstrap_interval_inside_0_1() -> None:
+def test_a_rate_with_two_seeds_prints_an_interval_inside_0_1() -> None:
     stat = mean_ci([0.0, 0.1])  # Student's t half-width 64%: "5% +- 64%" before
     assert stat["ci95"] > 0.6
     assert _fmt(stat, pct=True) == "5% [0, 10]"

@@ -62,6 +62,13 @@ async def test_compare_runs_errors_name_the_problem(tmp_path: Path) -> None:
         assert r.status_code == 422
         r = await client.get("/api/comparisons", params={"a": [999]})
         assert r.status_code == 404
+        # Each run once per side: a repeat would count one seed many times.
+        r = await client.get("/api/comparisons", params={"a": [x["id"], y["id"], x["id"]]})
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "a", 2]
+        r = await client.get("/api/comparisons", params={"a": [x["id"]] * 33})
+        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "a"]
+        r = await client.get("/api/comparisons", params={"a": [], "b": [x["id"]]})
+        assert r.status_code == 422
         r = await client.get("/api/comparisons", params={"a": [x["id"]]})
         assert r.status_code == 200, r.text
         assert r.json()["episodes"] == 0 and r.json()["a"]["mean"] is None

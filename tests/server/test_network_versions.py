@@ -155,3 +155,27 @@ async def test_a_resumed_run_is_reached_by_its_network_id_after_a_restart(
         other = await client.put(cell, json={"strength": 0.1}, params={"live": True})
         assert other.status_code == 200 and other.json()["live_runs"] == []
         await client.post(f"/api/runs/{run_id}/stop")
+
+
+@pytest.mark.parametrize(
+    ("if_match", "status"),
+    [
+        ("{etag}", 200),
+        ("{bare}", 200),  # a client that dropped the quotes means the same tag
+        ('W/{etag}, "v9-0"', 200),
+        ("*", 200),
+        ('"v9-0"', 412),
+        ('"a\\"b"', 422),  # not an entity tag: refused naming the header
+        ("\x7f", 422),
+    ],
+)
+async def test_if_match_takes_entity_tags_as_http_writes_them(
+    tmp_path: Path, if_match: str, status: int
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        etag = await fresh(client)
+        header = if_match.format(etag=etag, bare=etag.strip('"'))
+        r = await client.put(CELL, json={"strength": 0.5}, headers={"If-Match": header})
+        assert r.status_code == status, r.text
+        if status == 422:
+            assert r.json()["detail"][0]["loc"] == ["header", "if-match"]

@@ -12,6 +12,7 @@ import pytest
 from apphelpers import client_for, settings_for
 
 from core.brain.catalog import load_catalog
+from server.api.routes import networks as networks_routes
 
 pytestmark = pytest.mark.anyio
 
@@ -591,3 +592,33 @@ async def test_a_live_edit_with_no_running_run_reaches_none(client: httpx.AsyncC
         f"{A}/mine/associations/Red/stop", params={"live": True}, json={"strength": 0.5}
     )
     assert put.status_code == 200 and put.json()["live_runs"] == []
+
+
+async def test_versions_are_read_a_page_at_a_time(client: httpx.AsyncClient) -> None:
+    await make(client)
+    for strength in (0.1, 0.2, 0.3):
+        r = await client.put(f"{A}/mine/associations/Red/stop", json={"strength": strength})
+        assert r.status_code == 200, r.text
+    page = (await client.get(f"{A}/mine/versions", params={"offset": 1, "limit": 2})).json()
+    assert page["count"] == 4 and [v["version"] for v in page["data"]] == [2, 3]
+    r = await client.get(f"{A}/mine/versions", params={"limit": 1001})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "limit"]
+
+
+async def test_one_network_past_the_cap_is_a_409_and_a_replaced_one_is_not(
+    client: httpx.AsyncClient, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(networks_routes, "MAX_NETWORKS", 2)
+    await make(client, "one")
+    await make(client, "two")
+    r = await client.post(A, json={"name": "three"})
+    assert r.status_code == 409 and "delete one" in r.json()["detail"]
+    document = (await client.get(f"{A}/one/export")).json()
+    r = await client.post(f"{A}/import", params={"name": "three"}, json=document)
+    assert r.status_code == 409
+    r = await client.post(f"{A}/import", params={"replace": True}, json=document)
+    assert r.status_code in (200, 201), r.text  # replacing one adds none
+    assert (await client.delete(f"{A}/two")).status_code == 204
+    assert (await client.post(A, json={"name": "three"})).status_code == 201
+    names = {n["name"] for n in (await client.get(A)).json()["data"]}
+    assert {"one", "three"} <= names and "two" not in names

@@ -1,11 +1,17 @@
-"""Schemathesis over /openapi.json of a live `srlab serve`: no 5xx, responses conform.
+"""Schemathesis's own CLI over /openapi.json of a live `srlab serve`, every phase: 0 failures.
 
-At least 100 generated cases per operation (SRLAB_FUZZ_EXAMPLES raises it). The event
-stream is left out: a live stream does not end, so it has tests of its own.
+`st run` runs its four phases as a user of the tool would: the schema's examples, its
+coverage cases (each keyword's boundaries, and values just outside them), fuzzing and
+stateful sequences along the document's links, with every check (no 5xx, responses and
+headers as documented, schema-valid requests accepted and schema-violating ones refused).
+SRLAB_FUZZ_EXAMPLES (50) bounds the cases of an operation in each generated phase,
+SRLAB_STATEFUL_EXAMPLES (50) the stateful scenarios; `make reliability` raises both. The
+event stream is left out: a live stream does not end, so it has tests of its own.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import subprocess
@@ -17,35 +23,18 @@ from typing import Any
 
 import httpx
 import pytest
-import requests
-import schemathesis
-from hypothesis import HealthCheck, given, settings
 from reliability_report import count, record
 
 ROOT = Path(__file__).resolve().parents[2]
-EXAMPLES = int(os.environ.get("SRLAB_FUZZ_EXAMPLES", "100"))
-STATEFUL = int(os.environ.get("SRLAB_STATEFUL_EXAMPLES", "10"))
-"""Sequences the stateful phase tries (it follows the document's links)."""
-ACCEPTED = ["2xx", "3xx", "401", "403", "404", "409", "412", "429"]
-CONFIG = schemathesis.config.SchemathesisConfig.from_dict(
-    {
-        "checks": {
-            # A write with a generated If-Match or expected_version is rightly refused with
-            # 412: the document says so, and it is not valid data refused.
-            "positive_data_acceptance": {"expected-statuses": ACCEPTED}
-        },
-        "operations": [
-            {
-                # `b` must be empty or as long as `a` (one run of b per seed of a): JSON
-                # Schema cannot say that two lists have one length, so a generated pair of
-                # lists that differ is rightly a 422 naming the rule, not valid data refused
-                # (found by the full-size run, `make reliability`).
-                "include-path": "/api/comparisons",
-                "checks": {"positive_data_acceptance": {"expected-statuses": [*ACCEPTED, "422"]}},
-            }
-        ],
-    }
-)
+EXAMPLES = int(os.environ.get("SRLAB_FUZZ_EXAMPLES", "50"))
+STATEFUL = int(os.environ.get("SRLAB_STATEFUL_EXAMPLES", "50"))
+"""Scenarios the stateful phase tries (it follows the document's links)."""
+SEED = 1
+PHASES = ("examples", "coverage", "fuzzing", "stateful")
+ACCEPTED = ["2xx", "3xx", "401", "403", "404", "409", "429"]
+"""What a schema-valid request may be answered: done, or refused for the state it found."""
+HANG_S = 3600
+"""A guard for a hung run, not a timing: the full-size run takes about 20 minutes."""
 
 
 def free_port() -> int:
@@ -94,117 +83,101 @@ def base_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         assert b"Traceback" not in err, err.decode()[-3000:]
 
 
-def test_api_never_errs_and_conforms(base_url: str) -> None:
-    schema = schemathesis.openapi.from_url(f"{base_url}/openapi.json", config=CONFIG)
-    failures: dict[str, str] = {}
-    tested = []
-    cases: dict[str, int] = {}
-    session = requests.Session()
-    for result in schema.get_all_operations():
-        ok = getattr(result, "ok", None)
-        if ok is None:  # the schema of this operation is invalid
-            failures[repr(result)] = str(result.err())  # type: ignore[union-attr]
-            continue
-        operation = ok()
-        if operation.path.endswith("/events"):
-            continue
-        tested.append(operation.label)
+def _toml(value: object) -> str:
+    return json.dumps(value)  # a JSON string or list of strings is TOML too
 
-        @given(case=operation.as_strategy())
-        @settings(
-            max_examples=EXAMPLES,
-            deadline=None,
-            suppress_health_check=list(HealthCheck),
-            database=None,
-            derandomize=True,
-        )
-        def check(case: schemathesis.Case[Any]) -> None:
-            label = case.operation.label
-            cases[label] = cases.get(label, 0) + 1
-            # One kept-alive connection for every case: a connection a case cost the client
-            # and the service more than most of its calls did.
-            case.call_and_validate(session=session)
 
-        try:
-            check()
-        except Exception as e:  # collect every operation's failure, then fail once
-            failures[operation.label] = f"{type(e).__name__}: {e}"[:1500]
-    session.close()
-    print(f"{len(tested)} operations, {EXAMPLES} examples each")  # noqa: T201
-    counts = sorted(cases.get(label, 0) for label in tested)
-    few = sorted(label for label in tested if cases.get(label, 0) < EXAMPLES)
-    paths = httpx.get(f"{base_url}/openapi.json", timeout=10).json()["paths"]
+def config(doc: dict[str, Any], report: Path) -> str:
+    """Schemathesis's configuration for this document: what each operation may answer.
 
-    def takes_input(label: str) -> bool:
-        method, path = label.split(" ", 1)
-        spec = paths[path][method.lower()]
-        return bool(spec.get("parameters") or spec.get("requestBody"))
-
-    record(
-        "schemathesis over the live API",
-        f"every operation of /openapi.json but the event stream ({len(tested)}), up to "
-        f"{count(EXAMPLES)} generated cases each, against a live srlab serve: no 5xx, "
-        "responses match the schema",
-        f"{count(sum(counts))} cases; {len(tested) - len(few)} operations got at least "
-        f"{count(EXAMPLES)} each, the {len(few)} without parameters or body "
-        f"{'/'.join(sorted({str(cases.get(label, 0)) for label in few})) or '-'} each (one "
-        f"distinct input); {len(failures)} operations failed",
+    A schema-valid write may also get 412 where the document declares it: If-Match or
+    expected_version names a version that is no longer current, which no schema can rule
+    out. `b` of /api/comparisons names one run for each of `a`: JSON Schema cannot say that
+    two lists have one length, so lists of two lengths are a 422 naming the rule.
+    """
+    stale = sorted(
+        op["operationId"]
+        for item in doc["paths"].values()
+        for op in item.values()
+        if isinstance(op, dict) and "412" in op.get("responses", {})
     )
-    assert not any(takes_input(label) for label in few), "an operation with inputs ran short"
-    assert len(tested) >= 15, tested
-    assert not failures, "\n\n".join(f"{k}:\n{v}" for k, v in failures.items())
+    assert stale, "no operation declares 412"
+    return f"""
+seed = {SEED}
+continue-on-failure = true
+request-timeout = 30
+[cache]
+enabled = false
+[generation]
+max-examples = {EXAMPLES}
+database = "none"
+[phases.stateful.generation]
+max-examples = {STATEFUL}
+[reports.json]
+enabled = true
+path = {_toml(str(report))}
+[checks.positive_data_acceptance]
+expected-statuses = {_toml(ACCEPTED)}
+
+[[operations]]
+include-operation-id = {_toml(stale)}
+checks.positive_data_acceptance.expected-statuses = {_toml([*ACCEPTED, "412"])}
+
+[[operations]]
+include-path = "/api/comparisons"
+checks.positive_data_acceptance.expected-statuses = {_toml([*ACCEPTED, "422"])}
+"""
 
 
-def reset(base_url: str) -> None:
-    """Stop every run still going and delete every network a sequence made."""
-    with httpx.Client(base_url=base_url, timeout=30) as client:
-        offset = 0
-        while True:
-            page = client.get("/api/runs", params={"offset": offset, "limit": 100}).json()
-            for run in page["data"]:
-                if run["status"] in ("running", "paused"):
-                    client.post(f"/api/runs/{run['id']}/stop")
-            offset += len(page["data"])
-            if not page["data"] or offset >= page["count"]:
-                break
-        for network in client.get("/api/networks").json()["data"]:
-            if not network["builtin"]:
-                client.delete(f"/api/networks/{network['name']}")
-
-
-def test_stateful_sequences_along_the_links_never_err(base_url: str) -> None:
-    """Create -> start -> reward -> read and the rest, chained by the document's links."""
-    schema = schemathesis.openapi.from_url(f"{base_url}/openapi.json", config=CONFIG)
-    # A live stream does not end.
-    machine = schema.exclude(path_regex=r"/events$").as_state_machine()
-    # Which calls a sequence can make depends on what earlier answers put in its bundles,
-    # and those on the live service's state (a run still running makes the next start a
-    # 429). Hypothesis replays sequences and refuses one that drew differently the second
-    # time, so each sequence leaves the service as it found it.
-
-    def teardown(self: Any) -> None:
-        reset(base_url)
-
-    machine.teardown = teardown  # type: ignore[method-assign]
-    reset(base_url)
-    machine.TestCase.settings = settings(
-        max_examples=STATEFUL,
-        stateful_step_count=8,
-        deadline=None,
-        suppress_health_check=list(HealthCheck),
-        database=None,
-        derandomize=True,
+def test_every_phase_of_schemathesis_finds_nothing(base_url: str, tmp_path: Path) -> None:
+    doc = httpx.get(f"{base_url}/openapi.json", timeout=10).json()
+    report = tmp_path / "report.json"
+    settings = tmp_path / "schemathesis.toml"
+    settings.write_text(config(doc, report))
+    cli = [sys.executable, "-c", "from schemathesis.cli import schemathesis; schemathesis()"]
+    command = [
+        *cli,
+        "--config-file",
+        str(settings),
+        "run",
+        f"{base_url}/openapi.json",
+        "--phases",
+        ",".join(PHASES),
+        "--exclude-path-regex",
+        "/events$",
+        "--no-color",
+    ]
+    # In tmp_path: the CLI writes what it keeps between runs into its working directory.
+    done = subprocess.run(
+        command, cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S, check=False
     )
+    assert report.exists(), done.stdout[-5000:] + done.stderr[-3000:]
+    run = json.loads(report.read_text())
+    cases = run["test_cases"]
+    tested = run["operations"]["tested"]
     links = sum(
         len(r.get("links", {}))
-        for item in httpx.get(f"{base_url}/openapi.json", timeout=10).json()["paths"].values()
+        for item in doc["paths"].values()
         for op in item.values()
+        if isinstance(op, dict)
         for r in op.get("responses", {}).values()
     )
-    machine.run()
     record(
-        "schemathesis stateful phase",
-        f"{count(STATEFUL)} sequences of up to 8 calls along the document's {links} links "
-        "(create -> start -> reward -> read, networks), against a live srlab serve",
-        "no 5xx, every response matches the schema",
+        "schemathesis, every phase",
+        f"schemathesis's CLI (`st run`, {', '.join(PHASES)}) over every operation of "
+        f"/openapi.json but the event stream ({tested}), up to {count(EXAMPLES)} cases an "
+        f"operation in each generated phase and {count(STATEFUL)} stateful scenarios along "
+        f"the document's {links} links, against a live srlab serve",
+        f"{count(cases['generated'])} cases; {cases['unique_failures']} failures, "
+        f"{cases['errored']} errors; every phase "
+        + ("passed" if all(p["status"] == "success" for p in run["phases"].values()) else "not"),
     )
+    failures = done.stdout[done.stdout.find("FAILURES") :][:8000]
+    assert done.returncode == 0 and run["exit_code"] == 0, failures or done.stdout[-5000:]
+    assert cases["unique_failures"] == cases["errored"] == 0, failures
+    assert {name: p["status"] for name, p in run["phases"].items()} == dict.fromkeys(
+        PHASES, "success"
+    ), run["phases"]
+    assert tested >= 40, run["operations"]
+    # A pattern the fuzzer drops is a rule of the schema it never checks.
+    assert run["warnings"]["unsupported_regex"] == [], run["warnings"]["unsupported_regex"]

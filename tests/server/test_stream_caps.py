@@ -1,8 +1,10 @@
-"""Live event streams capped per run and in total: past a cap, 503 with Retry-After."""
+"""Live event streams capped per run and in total (past a cap, 503 with Retry-After), and
+open to this service's own pages, not to another site's."""
 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -49,3 +51,46 @@ async def test_event_streams_past_the_caps_are_503_with_retry_after(tmp_path: Pa
         for sub in subs:
             engines.unsubscribe(a["id"], sub)
         assert engines.streams() == 0
+
+
+async def test_another_sites_page_gets_403_and_holds_no_stream_slot(tmp_path: Path) -> None:
+    # An allowed foreign origin makes the service reachable from elsewhere: a token, then.
+    settings = settings_for(
+        tmp_path, max_streams_per_run=16, cors_origins=["http://lab:3000"], token="s3cret"
+    )
+    async with client_for(settings, {"Authorization": "Bearer s3cret"}) as (client, app):
+        engines = app.state.srlab.engines
+        run = await create(client, condition="expert", episodes=1, seed=1)
+        events = f"/api/runs/{run['id']}/events?tick_hz=0"
+        foreign = [
+            {"Origin": "http://127.0.0.1:9999"},  # another loopback origin: another site
+            {"Origin": "null"},
+            {"Sec-Fetch-Site": "cross-site"},
+        ]
+        for headers in foreign * 6:  # more than the run's slots
+            r = await client.get(events, headers=headers)
+            assert r.status_code == 403, (headers, r.text)
+            assert "another site" in r.json()["detail"]
+            assert engines.streams() == 0  # it held nothing
+        # The service's own pages, an allowed origin and clients that are not browsers
+        # (no Origin) follow the run as before.
+        for headers in (
+            {"Origin": "http://127.0.0.1", "Sec-Fetch-Site": "same-origin"},
+            {"Sec-Fetch-Site": "same-origin"},
+            {"Origin": "http://lab:3000"},
+            {},
+        ):
+            async with client.stream("GET", events, headers=headers) as r:
+                assert r.status_code == 200, headers
+                first = [x async for x in _first(r.aiter_lines())]
+                assert '"status": "created"' in first[0]
+                assert engines.streams() == 1
+        assert engines.streams() == 0
+
+
+async def _first(lines: AsyncIterator[str]) -> AsyncIterator[str]:
+    """The first data line of a stream."""
+    async for line in lines:
+        if line.startswith("data: "):
+            yield line
+            return

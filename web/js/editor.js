@@ -4,7 +4,7 @@
 // change as a new version, so the history always shows what happened. Every write says
 // which version it was based on; the page polls for changes made elsewhere.
 
-import { api, del, get, post, put, seg, ApiError } from "./api.js";
+import { api, del, get, getAll, post, put, seg, ApiError } from "./api.js";
 import { key, columns, neighbour, render, rows } from "./matrix.js";
 import { $, $$, attempt, el, fmt, throttle, toast, typing } from "./ui.js";
 import * as runpanel from "./editor_run.js";
@@ -676,7 +676,7 @@ const refreshVersions = throttle(() => Promise.all([loadVersions(), loadList()])
 
 async function loadVersions() {
   if (!state.net) return;
-  const list = await attempt(() => get(`/networks/${seg(state.net.name)}/versions`), "Loading the history");
+  const list = await attempt(() => getAll(`/networks/${seg(state.net.name)}/versions`), "Loading the history");
   if (!list) return;
   const current = state.net.version;
   $("#versions").replaceChildren(...list.data.slice().reverse().map((v) => el("li", { class: v.version === current ? "current" : "" },

@@ -9,14 +9,15 @@ every run has done, so runs still going are compared on equal terms.
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import HTTPException, Query, status
+from fastapi.exceptions import RequestValidationError
 from pydantic import Field
 from starlette.concurrency import run_in_threadpool as io
 
 from core.ports import RunStatus, StoredRun
-from core.stats import Estimate, bootstrap_mean, paired_difference
+from core.stats import Estimate, mean_interval, paired_difference
 from server.api.deps import EnginesDep, StoreDep
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
@@ -25,9 +26,20 @@ from server.schemas import ComparisonPublic, EstimatePublic
 router = resource_router("/comparisons", tag="runs")
 MAX_SEEDS = 32
 """Runs per side at most: a comparison reads every run's episodes."""
+MAX_EPISODES = 1000
+"""The most episodes of each run a comparison reads: its rates are over the first
+`min(done, MAX_EPISODES)` episodes, so a read's cost never grows with the runs' age."""
 RunIdItem = Annotated[int, Field(ge=1, le=2**62)]
+_IDS = {"uniqueItems": True}
+"""Each run once per side: a run given twice would count twice."""
 RunIds = Annotated[
-    list[RunIdItem], Query(max_length=MAX_SEEDS, description="run ids, one per seed")
+    list[RunIdItem],
+    Query(
+        min_length=1,
+        max_length=MAX_SEEDS,
+        description="run ids, one per seed, each once",
+        json_schema_extra=_IDS,
+    ),
 ]
 _ENDED = (RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.FAILED, RunStatus.INTERRUPTED)
 
@@ -47,6 +59,21 @@ def _rate(store: StoreDep, run_id: int, episodes: int) -> float:
     return sum(e.outcome == "success" for e in page) / len(page)
 
 
+def _repeated(ids: list[int], side: str) -> dict[str, Any] | None:
+    """A 422 entry for the first run id `ids` repeats, or None."""
+    seen: set[int] = set()
+    for i, run_id in enumerate(ids):
+        if run_id in seen:
+            return {
+                "type": "value_error",
+                "loc": ["query", side, i],
+                "msg": f"run {run_id} is given twice in {side}: each run counts once",
+                "input": run_id,
+            }
+        seen.add(run_id)
+    return None
+
+
 @router.get(
     "",
     responses={
@@ -60,22 +87,29 @@ async def compare_runs(
     a: RunIds,
     b: Annotated[
         list[RunIdItem] | None,
-        Query(max_length=MAX_SEEDS, description="runs to compare with, on a's seeds in order"),
+        Query(
+            max_length=MAX_SEEDS,
+            description="runs to compare with, on a's seeds in order, each once; as many as a",
+            json_schema_extra=_IDS,
+        ),
     ] = None,
 ) -> ComparisonPublic:
-    """Runs `a`' success rate over seeds (95% bootstrap), and `a - b` paired by seed."""
-    if not a:
-        raise HTTPException(422, "name at least one run in a")
+    """Runs `a`' success rate over seeds (95% Student's t), and `a - b` paired by seed.
+
+    Over the first episodes every run has done, at most 1,000. Each side names each run
+    once, and b names one run for each of a (or none).
+    """
     b = b or []
-    bad = [i for i in (*a, *b) if not 1 <= i <= 2**62]
-    if bad:
-        raise HTTPException(422, f"run ids are from 1 to 2**62, not {bad[0]}")
+    repeated = [e for e in (_repeated(a, "a"), _repeated(b, "b")) if e is not None]
+    if repeated:
+        raise RequestValidationError(repeated)
     if b and len(b) != len(a):
         raise HTTPException(
             422,
             f"a has {len(a)} runs and b {len(b)}: pair one run of b with each of a",
         )
-    runs: list[StoredRun] = [await io(store.run_summary, i) for i in (*a, *b)]
+    summaries = {i: await io(store.run_summary, i) for i in dict.fromkeys((*a, *b))}
+    runs: list[StoredRun] = [summaries[i] for i in (*a, *b)]
     for run_a, run_b in zip(runs[: len(b)], runs[len(a) :], strict=True):
         if run_a.spec.seed != run_b.spec.seed:
             raise HTTPException(
@@ -86,18 +120,19 @@ async def compare_runs(
             )
     done: list[int] = []
     ended: list[bool] = []
-    for r in runs:
+    for r in summaries.values():
         live = engines.get(r.id)
         done.append((await live.totals()).episodes if live is not None else r.totals.episodes)
         ended.append((live.status if live is not None else r.status) in _ENDED)
-    horizon = min(done)
+    horizon = min(*done, MAX_EPISODES)
     complete = all(ended)
 
-    def rates(ids: list[int]) -> list[float]:
-        return [_rate(store, i, horizon) for i in ids]
+    def rates(ids: list[int]) -> dict[int, float]:
+        return {i: _rate(store, i, horizon) for i in ids}
 
-    ra = await io(rates, list(a))
-    rb = await io(rates, b) if b else []
+    rate = await io(rates, list(summaries))  # a run on both sides is read once
+    ra = [rate[i] for i in a]
+    rb = [rate[i] for i in b]
     seeds = [r.spec.seed for r in runs[: len(a)]]
     if horizon == 0:
         empty = EstimatePublic(mean=None, low=None, high=None, n=len(a))
@@ -114,8 +149,8 @@ async def compare_runs(
     return ComparisonPublic(
         episodes=horizon,
         seeds=seeds,
-        a=_public(bootstrap_mean(ra)),
-        b=_public(bootstrap_mean(rb)) if b else None,
+        a=_public(mean_interval(ra)),
+        b=_public(mean_interval(rb)) if b else None,
         diff=_public(paired.diff) if paired else None,
         p=_number(paired.p) if paired else None,
         complete=complete,

@@ -16,9 +16,11 @@ from core.engine import Competition, StatusChanged, SubscriptionClosed, TickPubl
 from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, RewardApplied
 from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
+from server.api.errors import ErrorPublic
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
 from server.engines import TooManyStreamsError
+from server.guard import SitePolicy
 
 router = resource_router("/runs/{run_id}/events", tag="events")
 HEARTBEAT_S = 15.0
@@ -106,10 +108,20 @@ def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None
     return None
 
 
+def _foreign(request: Request, state: StateDep) -> bool:
+    """Whether a browser says the request comes from another site (`server.guard`'s rule)."""
+    settings = state.settings
+    policy = SitePolicy.of(settings.host_names(), settings.cors_origins)
+    return policy.origin_problem(request.headers, request.url.scheme) is not None
+
+
 @router.get(
     "",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/event-stream": {}}, "description": "SSE stream"}},
+    responses={
+        200: {"content": {"text/event-stream": {}}, "description": "SSE stream"},
+        403: {"model": ErrorPublic, "description": "a page of another site (Origin)"},
+    },
 )
 async def stream_events(
     run_id: RunId,
@@ -130,7 +142,17 @@ async def stream_events(
 
     At most `SRLAB_MAX_STREAMS` streams are open at once, `SRLAB_MAX_STREAMS_PER_RUN` to
     one run: past either, 503 with `Retry-After` (checked first, before any database read).
+    A page of another site (by `Origin` or `Sec-Fetch-Site`, as for writes) gets 403 and
+    holds no slot: it could otherwise take every slot of a run.
     """
+    if _foreign(request, state):
+        raise HTTPException(
+            status.HTTP_403_FORBIDDEN,
+            f"a page of another site ({request.headers.get('origin', 'cross-site')}) may not "
+            "follow runs here, where each stream holds one of a run's few slots: open the "
+            "console this service serves, or allow that origin with SRLAB_CORS_ORIGINS",
+            headers={"Vary": "Origin"},
+        )
     try:
         sub = engines.subscribe(run_id, maxsize=512, tick_hz=tick_hz)
     except TooManyStreamsError as e:

@@ -15,18 +15,19 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Annotated, Any, cast
 
-from fastapi import Depends, Header, Path, Query, Response, status
+from fastapi import Depends, Header, HTTPException, Path, Query, Response, status
 from fastapi.exceptions import RequestValidationError
+from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog, Source
 from core.networks import Precondition, ReadOnlyNetworkError, StoredNetwork
-from core.ports import NetworkPair
+from core.ports import NetworkPair, NetworkRepository
 from server.api.deps import NetworksDep, StateDep, WriteGuard
 from server.api.errors import ErrorPublic, StalePublic
+from server.api.routes.runs import Limit, Offset
 from server.api.routing import resource_router
 from server.schemas import (
     NETWORK_FORMAT,
-    NETWORK_NAME,
     AssociationChangePublic,
     AssociationCreate,
     AssociationPublic,
@@ -36,6 +37,7 @@ from server.schemas import (
     NetworkCreate,
     NetworkDiffPublic,
     NetworkDocument,
+    NetworkName,
     NetworkPublic,
     NetworkRevert,
     NetworkSnapshotPublic,
@@ -44,14 +46,15 @@ from server.schemas import (
     NetworkVersionPublic,
     NetworkVersionsPublic,
     NetworkWritten,
+    Text,
 )
 from server.services.networks import NetworkService, Written
 
 router = resource_router("/networks", tag="networks")
 
-NetworkName = Annotated[str, Path(max_length=100, description="a stored network's name")]
-StimulusName = Annotated[str, Path(max_length=100, description="a stimulus name")]
-BehaviourName = Annotated[str, Path(max_length=100, description="a behaviour name")]
+StoredName = Annotated[Text, Path(max_length=100, description="a stored network's name")]
+StimulusName = Annotated[Text, Path(max_length=100, description="a stimulus name")]
+BehaviourName = Annotated[Text, Path(max_length=100, description="a behaviour name")]
 Live = Annotated[
     bool,
     Query(
@@ -60,7 +63,15 @@ Live = Annotated[
     ),
 ]
 Force = Annotated[bool, Query(description="change or remove locked associations too")]
-Note = Annotated[str, Query(max_length=500, description="a note for the network's history")]
+Note = Annotated[Text, Query(max_length=500, description="a note for the network's history")]
+MAX_NETWORKS = 1000
+"""The most networks of their own users keep (besides the built-in ones): GET
+/api/networks answers every one, so their number bounds what it costs."""
+_TAG = r'(W/)?("[!#-~]*"|[!#-+\--~]+)'
+ENTITY_TAGS = rf"^(\*|{_TAG}([ \t]*,[ \t]*{_TAG})*)$"
+"""`If-Match` as HTTP writes it: `*`, or entity tags (`"v3-1a2b..."`, as an ETag gave
+them, weak ones `W/"..."`), comma-separated. A tag without its quotes is taken as the
+quoted one (a client that dropped them means the same tag)."""
 
 _E = dict[int | str, dict[str, Any]]
 _NOT_FOUND: _E = {404: {"model": ErrorPublic, "description": "no such network"}}
@@ -92,8 +103,10 @@ async def _precondition(
         str | None,
         Header(
             max_length=1000,
-            description="write only if the network is still at this ETag (from a read); "
-            "412 otherwise",
+            pattern=ENTITY_TAGS,
+            examples=['"v3-1a2b3c4d5e6f"', "*"],
+            description="write only if the network is still at one of these entity tags "
+            '(an ETag from a read, e.g. `"v3-1a2b3c4d5e6f"`; `*`: any version); 412 otherwise',
         ),
     ] = None,
     expected_version: Annotated[
@@ -110,8 +123,14 @@ async def _precondition(
         return None
     tags = None
     if if_match is not None:
-        tags = tuple(t.strip().removeprefix("W/") for t in if_match.split(",") if t.strip())
+        tags = tuple(
+            _quoted(t.strip().removeprefix("W/")) for t in if_match.split(",") if t.strip()
+        )
     return Precondition(version=expected_version, etags=tags)
+
+
+def _quoted(tag: str) -> str:
+    return tag if tag == "*" or (len(tag) > 1 and tag[0] == tag[-1] == '"') else f'"{tag}"'
 
 
 Expected = Annotated[Precondition | None, Depends(_precondition)]
@@ -200,6 +219,17 @@ def _check_names(
         raise RequestValidationError(errors)
 
 
+async def _room_for(networks: NetworkRepository, name: str) -> None:
+    """409 when a network named `name` would be one more than `MAX_NETWORKS`."""
+    own = {x.name for x in await io(networks.summaries) if not x.builtin}
+    if len(own) >= MAX_NETWORKS and name not in own:
+        raise HTTPException(
+            status.HTTP_409_CONFLICT,
+            f"there are {len(own):,} networks besides the built-in ones, the most this "
+            "service keeps: delete one (DELETE /api/networks/{name}) before making another",
+        )
+
+
 @router.get("")
 def list_networks(networks: NetworksDep) -> NetworksPublic:
     """Every stored network, built-in ones first, with its version and size."""
@@ -224,7 +254,11 @@ def list_networks(networks: NetworksDep) -> NetworksPublic:
     dependencies=[WriteGuard],
     responses={
         404: {"model": ErrorPublic, "description": "no such base network"},
-        409: {"model": ErrorPublic, "description": "the name is taken"},
+        409: {
+            "model": ErrorPublic,
+            "description": "the name is taken, or there are 1,000 networks besides the "
+            "built-in ones already",
+        },
     },
 )
 async def create_network(
@@ -232,9 +266,11 @@ async def create_network(
 ) -> NetworkPublic:
     """Create an editable network: a copy of `base` (innate by default, null for none).
 
-    This is how a built-in network is edited: copy it and change the copy.
+    This is how a built-in network is edited: copy it and change the copy. 409 once there
+    are 1,000 networks besides the built-in ones: delete one first.
     """
     _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
+    await _room_for(state.networks, body.name)
     created = await service.create(
         body.name,
         description=body.description,
@@ -254,7 +290,8 @@ async def create_network(
         409: {
             "model": ErrorPublic,
             "description": "the name is taken (import under another ?name= or ?replace=true), "
-            "a built-in network, or a locked association without force",
+            "a built-in network, a locked association without force, or a new network "
+            "past the 1,000 kept besides the built-in ones",
         },
         **_STALE,
     },
@@ -266,8 +303,7 @@ async def import_network(
     state: StateDep,
     expected: Expected,
     name: Annotated[
-        str | None,
-        Query(pattern=NETWORK_NAME, description="store it under this name, not the document's"),
+        NetworkName | None, Query(description="store it under this name, not the document's")
     ] = None,
     replace: Annotated[
         bool, Query(description="replace an existing network's associations (a new version)")
@@ -279,6 +315,7 @@ async def import_network(
     """Import a document GET .../export gave: 201 as a new network, 200 when replacing one."""
     target = name or body.name
     _check_names(state.catalog, body.associations, ("body", "associations"), many=True)
+    await _room_for(state.networks, target)
     with _answers():
         written = await service.import_network(
             target,
@@ -297,7 +334,7 @@ async def import_network(
 
 
 @router.get("/{name}", responses={**_NOT_FOUND, 200: {"headers": _ETAG}})
-def get_network(name: NetworkName, networks: NetworksDep, response: Response) -> NetworkPublic:
+def get_network(name: StoredName, networks: NetworksDep, response: Response) -> NetworkPublic:
     """A network with its associations and version (its `ETag`, for If-Match)."""
     n = networks.get(name)
     _tag(response, n)
@@ -315,7 +352,7 @@ def get_network(name: NetworkName, networks: NetworksDep, response: Response) ->
         **_STALE,
     },
 )
-async def delete_network(name: NetworkName, service: Service, expected: Expected) -> Response:
+async def delete_network(name: StoredName, service: Service, expected: Expected) -> Response:
     """Delete a network and its history; built-in networks cannot be deleted.
 
     Runs started from it keep the copy they started with; live edits no longer reach them.
@@ -327,7 +364,7 @@ async def delete_network(name: NetworkName, service: Service, expected: Expected
 
 @router.get("/{name}/associations", responses={**_NOT_FOUND, 200: {"headers": _ETAG}})
 def list_associations(
-    name: NetworkName, networks: NetworksDep, response: Response
+    name: StoredName, networks: NetworksDep, response: Response
 ) -> NetworkAssociationsPublic:
     """A network's associations, in catalogue order (its `ETag`, for If-Match)."""
     n = networks.get(name)
@@ -359,7 +396,7 @@ def _association_written(written: Written, stimulus: str, behaviour: str) -> Ass
     },
 )
 async def add_association(
-    name: NetworkName,
+    name: StoredName,
     body: AssociationCreate,
     service: Service,
     state: StateDep,
@@ -388,7 +425,7 @@ async def add_association(
     },
 )
 async def put_association(
-    name: NetworkName,
+    name: StoredName,
     stimulus: StimulusName,
     behaviour: BehaviourName,
     body: AssociationUpdate,
@@ -448,7 +485,7 @@ async def put_association(
     },
 )
 async def remove_association(
-    name: NetworkName,
+    name: StoredName,
     stimulus: StimulusName,
     behaviour: BehaviourName,
     service: Service,
@@ -472,8 +509,14 @@ async def remove_association(
 
 
 @router.get("/{name}/versions", responses=_NOT_FOUND)
-def list_versions(name: NetworkName, networks: NetworksDep) -> NetworkVersionsPublic:
-    """The network's edit history, oldest first (version 1 is how it was made or seeded)."""
+def list_versions(
+    name: StoredName, networks: NetworksDep, offset: Offset = 0, limit: Limit = 100
+) -> NetworkVersionsPublic:
+    """The network's edit history, oldest first, a page at a time (`count`: all of them).
+
+    Version 1 is how it was made or seeded; the newest page starts at `count - limit`.
+    """
+    page, total = networks.versions_page(name, offset, limit)
     data = [
         NetworkVersionPublic(
             version=v.version,
@@ -481,9 +524,9 @@ def list_versions(name: NetworkName, networks: NetworksDep) -> NetworkVersionsPu
             note=v.note,
             association_count=v.association_count,
         )
-        for v in networks.versions(name)
+        for v in page
     ]
-    return NetworkVersionsPublic(data=data, count=len(data))
+    return NetworkVersionsPublic(data=data, count=total)
 
 
 Version = Annotated[int, Path(ge=1, le=2**31 - 1, description="a version of the network")]
@@ -493,9 +536,7 @@ Version = Annotated[int, Path(ge=1, le=2**31 - 1, description="a version of the 
     "/{name}/versions/{version}",
     responses={404: {"model": ErrorPublic, "description": "no such network or version"}},
 )
-def get_version(
-    name: NetworkName, version: Version, networks: NetworksDep
-) -> NetworkSnapshotPublic:
+def get_version(name: StoredName, version: Version, networks: NetworksDep) -> NetworkSnapshotPublic:
     """The network as it was at one version."""
     snap = networks.snapshot(name, version)
     return NetworkSnapshotPublic(
@@ -514,7 +555,7 @@ def get_version(
     responses={404: {"model": ErrorPublic, "description": "no such network or version"}},
 )
 def diff_versions(
-    name: NetworkName,
+    name: StoredName,
     networks: NetworksDep,
     from_version: Annotated[
         int | None,
@@ -557,7 +598,7 @@ def diff_versions(
     },
 )
 async def revert_network(
-    name: NetworkName,
+    name: StoredName,
     body: NetworkRevert,
     service: Service,
     response: Response,
@@ -579,7 +620,7 @@ async def revert_network(
 
 
 @router.get("/{name}/export", responses=_NOT_FOUND)
-def export_network(name: NetworkName, networks: NetworksDep, response: Response) -> NetworkDocument:
+def export_network(name: StoredName, networks: NetworksDep, response: Response) -> NetworkDocument:
     """The network as a document POST /api/networks/import takes, as a file to save."""
     n = networks.get(name)
     _tag(response, n)
