@@ -4,11 +4,13 @@ open to this service's own pages, not to another site's."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator
 from pathlib import Path
 
+import httpx
 import pytest
 from apphelpers import client_for, create, settings_for
+
+from server.engines import EngineManager
 
 pytestmark = pytest.mark.anyio
 
@@ -33,19 +35,7 @@ async def test_event_streams_past_the_caps_are_503_with_retry_after(tmp_path: Pa
         assert (await client.get("/api/runs/99/events")).status_code == 404
         assert engines.streams() == 2  # the 404 gave its slot back
         # A slot freed is taken again: this stream follows b from its start to its end.
-        lines: list[str] = []
-
-        async def follow() -> None:
-            async with client.stream("GET", f"/api/runs/{b['id']}/events?tick_hz=0") as r:
-                assert r.status_code == 200
-                lines.extend([x async for x in r.aiter_lines() if x.startswith("data: ")])
-
-        async with asyncio.timeout(30):
-            follower = asyncio.create_task(follow())
-            while engines.streams() < 3:
-                await asyncio.sleep(0.01)
-            await client.post(f"/api/runs/{b['id']}/start")
-            await follower
+        lines = await _follow(client, engines, b["id"])
         assert '"finished"' in lines[-1]
         assert engines.streams() == 2  # the stream's end gave its slot back
         for sub in subs:
@@ -73,24 +63,42 @@ async def test_another_sites_page_gets_403_and_holds_no_stream_slot(tmp_path: Pa
             assert "another site" in r.json()["detail"]
             assert engines.streams() == 0  # it held nothing
         # The service's own pages, an allowed origin and clients that are not browsers
-        # (no Origin) follow the run as before.
+        # (no Origin) follow a run as before, from its start to its end (the in-process
+        # transport hands a stream over only once the app has sent all of it).
         for headers in (
             {"Origin": "http://127.0.0.1", "Sec-Fetch-Site": "same-origin"},
             {"Sec-Fetch-Site": "same-origin"},
             {"Origin": "http://lab:3000"},
             {},
         ):
-            async with client.stream("GET", events, headers=headers) as r:
-                assert r.status_code == 200, headers
-                first = [x async for x in _first(r.aiter_lines())]
-                assert '"status": "created"' in first[0]
-                assert engines.streams() == 1
-        assert engines.streams() == 0
+            run = await create(client, condition="expert", episodes=1, seed=2)
+            lines = await _follow(client, engines, run["id"], headers)
+            assert '"status": "created"' in lines[0], headers
+            assert '"finished"' in lines[-1], headers
+            assert engines.streams() == 0
 
 
-async def _first(lines: AsyncIterator[str]) -> AsyncIterator[str]:
-    """The first data line of a stream."""
-    async for line in lines:
-        if line.startswith("data: "):
-            yield line
-            return
+async def _follow(
+    client: httpx.AsyncClient,
+    engines: EngineManager,
+    run_id: int,
+    headers: dict[str, str] | None = None,
+) -> list[str]:
+    """The data lines of a stream, sent with `headers`, that follows run `run_id` from
+    before its start to its end (the run is started once the stream holds its slot)."""
+    lines: list[str] = []
+    before = engines.streams()
+
+    async def follow() -> None:
+        events = f"/api/runs/{run_id}/events?tick_hz=0"
+        async with client.stream("GET", events, headers=headers) as r:
+            assert r.status_code == 200, headers
+            lines.extend([x async for x in r.aiter_lines() if x.startswith("data: ")])
+
+    async with asyncio.timeout(60):  # a hang guard, not a timing
+        follower = asyncio.create_task(follow())
+        while engines.streams() == before:
+            await asyncio.sleep(0.01)
+        assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
+        await follower
+    return lines
