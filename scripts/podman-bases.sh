@@ -7,10 +7,9 @@
 #
 # It prints `PYTHON_IMAGE=<name>` and `POSTGRES_IMAGE=<name>` on stdout. Each image carries
 # a label with a hash of this file and the machine's extra CA certificates: a run with the
-# same hash reuses them (0.1 s), another rebuilds them. A first build takes 1.5 minutes on
-# a quiet 2-core machine and up to 5 on a busy one, mostly debootstrap downloading and
-# unpacking packages; the packages stay in $SRLAB_DEBOOTSTRAP_CACHE (default
-# /var/cache/srlab-debootstrap) for the next build.
+# same hash reuses them (0.1 s), another rebuilds them: 74 to 79 s for both at once on a
+# busy 2-core machine (docs/deploy.md). The packages debootstrap downloads stay in
+# $SRLAB_DEBOOTSTRAP_CACHE (default /var/cache/srlab-debootstrap) for the next build.
 #
 # Without podman or debootstrap, or not as root, it says what is missing and exits 0 (the
 # tests that need the images skip); with SRLAB_REQUIRE_PODMAN=1 (CI) it exits 1 instead.
