@@ -75,6 +75,7 @@ typecheck: install
 WORKERS ?= 4
 test: lint typecheck
 	bash scripts/system-deps.sh
+	bash scripts/podman-bases.sh >/dev/null
 	bash scripts/pg-test-server.sh run -- $(BIN)/pytest -n $(WORKERS) --dist loadfile
 
 # The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL or Docker.

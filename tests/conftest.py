@@ -350,6 +350,7 @@ ALONE = frozenset(
 LONGEST_FIRST = (
     "tests/reliability/test_crash.py",
     "tests/server/test_schemathesis.py",
+    "tests/deploy/test_podman.py",  # builds the image, then the compose stack: 1-2 min
     "tests/web/test_viewer.py",
     "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
     "tests/web/test_console.py",
