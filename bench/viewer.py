@@ -15,7 +15,7 @@ bench/browser.py), then measures in one run, ``--rounds`` times in turn:
   browser's rendering;
 * **viewer, shared cores**: the same with Chromium at the server's priority on any core.
 
-With ``--console`` it measures the trainer console instead (issue 18's figure), ``--rounds``
+With ``--console`` it measures the trainer console instead, ``--rounds``
 times in turn: **none** as above, and **console 2D**: the same run with the console page
 (``/#/console/<run>``, which shows the 2D view) open in Chromium on CPU 1 at ``--nice``,
 following the run's event stream. Besides the lateness it prints what the page measured

@@ -3,8 +3,9 @@
 CPython runs one thread of Python at a time in a process. In `srlab serve` the event loop
 paces every realtime run's ticks, and the storage adapters' Python (SQLAlchemy's ORM, the
 rows built and read) ran in worker threads of the same process: under many runs and a
-steady request load that work took the whole core, and the ticks waited for it (issue 17's
-D4: 32 runs at 20 Hz under 200 requests/s, 107% of one core, p99 lateness 78 ms).
+steady request load that work took the whole core, and the ticks waited for it
+(`bench.service --part day`'s D4: 32 runs at 20 Hz under 200 requests/s, 107% of one core,
+p99 lateness 78 ms).
 
 `StoreProcess` starts one process that owns the database engine and the two repositories
 (runs and networks) and serves their methods over a local socket (the standard library's
