@@ -26,6 +26,7 @@ from core.errors import CatalogError
 from core.experiment import DEFAULT_SETUP, Backend, Task, TaskResult, run_tasks
 from core.params import Parameter, ParameterError, ParamValue, tuned_params
 from core.setup import Setup
+from core.stats import holm
 from core.sweep import Axes, checked_values, parse_grid
 from core.worlds import WorldSettings, get_world_parameter
 
@@ -192,18 +193,6 @@ def run_phase(
 def difference_name(a: str, b: str) -> str:
     """``kp - sonar``."""
     return f"{a} - {b}"
-
-
-def holm(ps: Sequence[float]) -> list[float]:
-    """Holm's step-down adjusted p-values, in the order given (NaN stays NaN)."""
-    index = [i for i, p in enumerate(ps) if not math.isnan(p)]
-    order = sorted(index, key=lambda i: ps[i])
-    out = [math.nan] * len(ps)
-    running = 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (len(order) - rank) * ps[i]))
-        out[i] = running
-    return out
 
 
 def sign_of(d: Mapping[str, float] | None) -> str:

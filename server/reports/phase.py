@@ -15,7 +15,7 @@ from core.params import format_value
 from core.phase import REFLEXES, Phase, sign_of
 from core.stats import Estimate, pct
 from core.worlds import get_world_parameter
-from server.reports.base import diff, failed_lines, head, row, write_summary
+from server.reports.base import diff, failed_lines, head, interval_line, row, write_summary
 from server.reports.plots import colours, save, subplots
 
 FloatArray = npt.NDArray[np.float64]
@@ -121,11 +121,13 @@ def markdown(
         f"{params['elapsed_s']:.0f} s on {params['where']}.",
         "",
         f"Success: a seed's share of successful episodes over all {phase.episodes}, the "
-        "mean over seeds with its 95% bootstrap interval. A difference is paired by seed "
+        "mean over seeds with its 95% interval. A difference is paired by seed "
         "(on a point every condition meets the same obstacles and lamp cycles on a seed), "
         "in points, with its interval and the sign-flip test's p. The diagram is "
         f"exploratory: its {summary['tests']} (point, difference) tests were not declared "
         "one by one; **bold**: p < 0.05 after Holm's correction over all of them.",
+        "",
+        interval_line(),
         "",
         "## Where each difference holds",
         "",

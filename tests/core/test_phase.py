@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import pytest
@@ -10,7 +9,7 @@ import pytest
 from core.events import Cause, Outcome
 from core.experiment import TaskResult, experiment_tasks
 from core.params import ParameterError
-from core.phase import Phase, PhasePoint, holm, load_grid, sign_of, summarise_phase
+from core.phase import Phase, PhasePoint, load_grid, sign_of, summarise_phase
 from core.runner import EpisodeSummary
 from core.setup import Setup
 
@@ -85,12 +84,6 @@ def test_every_point_runs_the_reflexes_and_each_condition_on_the_same_seeds() ->
 def test_a_bad_plan_is_refused(kwargs: dict[str, object], error: type, message: str) -> None:
     with pytest.raises(error, match=message.replace("(", r"\(").replace(")", r"\)")):
         phase(**kwargs)
-
-
-def test_holm_adjusts_step_down_and_keeps_the_order() -> None:
-    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
-    assert holm([0.5, math.nan, 0.001]) == pytest.approx([0.5, math.nan, 0.002], nan_ok=True)
-    assert holm([0.6, 0.7]) == [1.0, 1.0]
 
 
 def test_sign_of_a_difference_is_where_its_interval_lies() -> None:
