@@ -103,7 +103,7 @@ def summarise_cells(
 def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, float]]:
     """Cell `a`'s success minus cell `b`'s, seed by seed, per horizon and held out.
 
-    Each entry: the mean difference, its 95% bootstrap interval, the sign-flip p and the
+    Each entry: the mean difference, its 95% interval (`core.stats`), the sign-flip p and the
     seeds paired; a horizon the cells cannot be paired on is left out.
     """
     out: dict[str, dict[str, float]] = {}
@@ -115,3 +115,19 @@ def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, f
     if d is not None:
         out["held-out"] = d
     return out
+
+
+def declared_family(
+    entries: Sequence[tuple[str, Mapping[str, float] | None]],
+) -> list[dict[str, Any]]:
+    """The comparisons a study declared before it ran, each p Holm-adjusted over them.
+
+    `entries` are (what is compared, in words; a paired difference as `compare` gives it).
+    A difference that could not be paired is left out of the family.
+    """
+    from core.stats import holm
+
+    family: list[dict[str, Any]] = [{"label": name, **d} for name, d in entries if d is not None]
+    for d, adjusted in zip(family, holm([float(d["p"]) for d in family]), strict=True):
+        d["p_holm"] = adjusted
+    return family

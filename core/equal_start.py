@@ -32,6 +32,8 @@ METHODS = ("dp-rare", "dp", "rp", "kp", "qlambda-hybrid")
 REFERENCE = "kp"
 """The method every other is compared with."""
 START_NAMES: dict[str, str] = {"table1": "Table I", "design": "kp's design"}
+DECLARED_MEASURES = (("all", "training"), ("held-out", "held out"))
+"""The measures of the declared comparisons: all training episodes, and frozen held out."""
 
 
 def own_start(condition: str) -> Start:
@@ -100,12 +102,15 @@ def summarise_equal_start(
     ``cells``: every cell's summary. ``grid``: per method, per start its success (episodes
     1-10, all, held out), its own start, and ``start_effect`` (from kp's design minus from
     Table I). ``method``: per start, the reference minus each other method.
+    ``declared``: the comparisons the study's conclusion rests on, named before it runs:
+    the reference minus each other method, both from the reference's start, in training
+    (all episodes) and held out, with each p Holm-adjusted over that family.
     ``decomposition``: per method other than the reference, ``headline`` (the reference
     at its own start minus the method at its own), ``method`` (the two at the
     reference's start) and ``start`` (the method at the reference's start minus at its
     own); each a paired difference per horizon and held out.
     """
-    from core.cells import compare, summarise_cells
+    from core.cells import compare, declared_family, summarise_cells
 
     summary = summarise_cells(study.cells(), results, correct, camera)
 
@@ -141,9 +146,15 @@ def summarise_equal_start(
         for m in study.methods
         if m != ref
     }
+    declared = declared_family([
+        (f"{ref} - {m}, both from {START_NAMES[ref_own]}, {title}", d.get(measure))
+        for m, d in method[ref_own].items()
+        for measure, title in DECLARED_MEASURES
+    ])  # fmt: skip
     return {
         "cells": summary,
         "grid": grid,
         "method": method,
+        "declared": declared,
         "decomposition": decomposition,
     }

@@ -121,8 +121,11 @@ def summarise_teachers(study: TeacherStudy, results: Sequence[TaskResult]) -> di
     first level at which rp is below the reference (the difference's interval under 0),
     and ``not_above``, the first at which it is no longer above it (the interval reaching
     0), per measure (`MEASURES`). ``presets``: the same for each named teacher.
+    ``declared``: what the study's conclusion rests on, named before it runs: rp given by
+    the perfect teacher and by each preset, minus the first reference (kp), per measure,
+    each p Holm-adjusted over that family.
     """
-    from core.cells import compare, summarise_cells
+    from core.cells import compare, declared_family, summarise_cells
 
     cells = study.cells()
     summary = summarise_cells(cells, results)
@@ -152,13 +155,23 @@ def summarise_teachers(study: TeacherStudy, results: Sequence[TaskResult]) -> di
                 for ref in study.references
             },
         }
+    presets = {
+        p: {**figures(f"{TAUGHT} {p}"), "teacher": teacher_presets()[p].changed()}
+        for p in study.presets
+    }
+    taught = [("the perfect teacher", figures(TAUGHT))]
+    taught += [(f"the `{p}` teacher", f) for p, f in presets.items()]
+    declared = declared_family([
+        (f"rp given by {who} - {ref}, {title}", f["vs"].get(ref, {}).get(measure))
+        for who, f in taught
+        for ref in study.references[:1]
+        for measure, title in MEASURES
+    ])  # fmt: skip
     return {
         "cells": summary,
+        "declared": declared,
         "references": {ref: figures(ref) for ref in study.references},
         "perfect": figures(TAUGHT),
         "by_parameter": by_parameter,
-        "presets": {
-            p: {**figures(f"{TAUGHT} {p}"), "teacher": teacher_presets()[p].changed()}
-            for p in study.presets
-        },
+        "presets": presets,
     }

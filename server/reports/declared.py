@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from core.stats import Paired, holm, p_text, paired_difference
 from server.reports.base import diff
@@ -59,3 +60,23 @@ def points(tested: Tested) -> str:
     """``+9.1 [+5.7, +12.3], p 0.004 (Holm 0.012)``, in points."""
     holm_p = p_text(tested.p_holm).removeprefix("p ")
     return f"{paired_points(tested.paired)} (Holm {holm_p})"
+
+
+def declared_section(family: Sequence[dict[str, Any]], declared_as: str) -> list[str]:
+    """A summary's section of the comparisons `family` (`core.cells.declared_family`).
+
+    `declared_as` says, in a sentence's words, what was declared (e.g. "kp minus each other
+    method with the starting knowledge equal, in training and held out").
+    """
+    return [
+        "## Pre-declared comparisons (Holm-corrected)",
+        "",
+        f"Declared before the study ran: {declared_as}; p corrected with Holm's method over "
+        f"these {len(family)}. Every other figure below is exploratory.",
+        "",
+        *(
+            f"{i}. {d['label']}: {diff(d)} (Holm {p_text(d['p_holm']).removeprefix('p ')})"
+            for i, d in enumerate(family, 1)
+        ),
+        "",
+    ]

@@ -11,9 +11,10 @@ import numpy as np
 
 from core.brain.catalog import Catalog
 from core.conditions import STARTS
-from core.equal_start import START_NAMES, EqualStartStudy, label
+from core.equal_start import START_NAMES, EqualStartStudy, label, own_start
 from core.experiment import TaskResult
 from server.reports.base import diff, failed_lines, fmt, head, row, study_document, write_summary
+from server.reports.declared import declared_section
 from server.reports.experiment import write_report
 from server.reports.plots import save, subplots, success_axes
 
@@ -105,6 +106,11 @@ def summary_markdown(
         "Success is the mean over seeds [95% Student's t interval]; differences are paired by "
         "seed, in points, with the sign-flip test's p.",
         "",
+        *declared_section(
+            summary["declared"],
+            f"{ref} minus each other method with the starting knowledge equal (both from "
+            f"{START_NAMES[own_start(ref)]}), in training and held out",
+        ),
         "## Success from each start",
         "",
         *head(grid_columns),

@@ -22,6 +22,7 @@ from server.reports.base import (
     study_document,
     write_summary,
 )
+from server.reports.declared import declared_section
 from server.reports.experiment import CONDITION_COLOURS
 from server.reports.plots import save, subplots, success_axes
 
@@ -149,6 +150,11 @@ def summary_markdown(
         "level's comparison is one of many (5 imperfections x 5 levels x 2 learners x 2 "
         "measures), so a single p near 0.05 is exploratory.",
         "",
+        *declared_section(
+            summary["declared"],
+            f"rp given by the perfect teacher and by each named teacher, minus `{refs[0]}`, "
+            "in training and held out",
+        ),
     ]
     for name, entry in summary["by_parameter"].items():
         short = name.removeprefix(TEACHER_PREFIX)

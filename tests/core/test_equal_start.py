@@ -86,3 +86,23 @@ def test_the_headline_difference_is_the_methods_part_plus_the_starts() -> None:
         assert headline == pytest.approx(method + start)
     assert summary["grid"]["rp"]["own_start"] == "table1"
     assert summary["method"]["design"]["rp"] == split["method"]
+
+
+def test_the_declared_comparisons_are_kp_minus_each_method_from_its_start_holm_adjusted() -> None:
+    study = EqualStartStudy(("dp", "rp", "kp"), Setup(signal="given"))
+    results = run_study(study.cells(), [0, 1, 2], 3, 2, LocalBackend(1))
+    summary = summarise_equal_start(study, results)
+    declared = summary["declared"]
+    assert [d["label"] for d in declared] == [
+        f"kp - {m}, both from kp's design, {t}"
+        for m in ("dp", "rp")
+        for t in ("training", "held out")
+    ]
+    method = summary["method"]["design"]
+    assert [d["mean"] for d in declared] == [
+        method[m][k]["mean"] for m in ("dp", "rp") for k in ("all", "held-out")
+    ]
+    # Holm over the four: the smallest p times 4, each adjusted p at least its own p.
+    ps = sorted(d["p"] for d in declared)
+    assert min(d["p_holm"] for d in declared) == pytest.approx(min(1.0, 4 * ps[0]))
+    assert all(d["p"] <= d["p_holm"] <= 1.0 for d in declared)

@@ -43,6 +43,14 @@ def test_teachers_writes_its_summary_a_plot_per_imperfection_and_the_verdicts(
     # The perfect teacher's level is rp itself: the same task, the same figures.
     assert mistake["levels"][0]["success_rate"] == doc["perfect"]["success_rate"]
     assert doc["presets"]["human"]["teacher"]["skip"] == 0.5
+    # Declared: rp by the perfect and the `human` teacher minus kp, training and held out.
+    assert [d["label"] for d in doc["declared"]] == [
+        f"rp given by {who} - kp, {m}"
+        for who in ("the perfect teacher", "the `human` teacher")
+        for m in ("training, all episodes", "held-out, frozen")
+    ]
+    assert all(d["p"] <= d["p_holm"] <= 1 for d in doc["declared"])
+    assert "## Pre-declared comparisons (Holm-corrected)" in md
     lines = (tmp_path / "runs.jsonl").read_text().splitlines()
     params = {json.dumps(json.loads(x).get("params", {}), sort_keys=True) for x in lines}
     assert any('"teacher_mistake": 0.5' in p for p in params)
@@ -58,6 +66,8 @@ def test_equal_start_writes_the_grid_and_each_starts_report(tmp_path: Path) -> N
     doc = json.loads((tmp_path / "summary.json").read_text())
     assert set(doc["grid"]) == {"rp", "kp"}
     assert set(doc["decomposition"]) == {"rp"}
+    assert "## Pre-declared comparisons (Holm-corrected)" in md
+    assert "1. kp - rp, both from kp's design, training: " in md and "(Holm " in md
     for start in ("table1", "design"):
         sub = json.loads((tmp_path / start / "summary.json").read_text())
         assert sub["params"]["start"] == start
