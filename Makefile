@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck format bench reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -102,6 +102,11 @@ reliability: install
 screenshots: install
 	bash scripts/system-deps.sh
 	$(BIN)/python scripts/screenshots.py
+
+# `bash scripts/results.sh` timed into a scratch folder, against its goal of 30 minutes on
+# 2 cores (the deep baselines included when the srlab[baselines] extra is installed).
+bench-results: install
+	$(BIN)/python -m bench.experiment --only results --jobs 2
 
 bench: install
 	$(BIN)/python -m bench.ticks

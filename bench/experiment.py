@@ -12,15 +12,27 @@ bare pymunk stepping (eight ray casts, the same track) measured in the same run:
 - with the srlab[baselines] extra installed (``make install-baselines``), the deep
   baselines' extra time: dqn and ppo, the same seeds, episodes and evaluation, both
   signal settings (no goal: printed so that it is known).
+
+``--only results`` (not part of the default run: it takes most of half an hour) times
+``bash scripts/results.sh``, every folder the README cites, written into a scratch folder
+(or where ``RESULTS_OUT`` says: ``RESULTS_OUT=docs/results`` regenerates them), with
+``--jobs`` processes: each folder's wall time, then the whole
+set's wall and CPU time (goal: at most 30 minutes on 2 cores).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
+import resource
+import subprocess
+import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 from bench.ticks import bare_pymunk, measure
 from core import baselines
@@ -41,6 +53,10 @@ HEADLINE = ["innate", "delayed", "dp", "rp", "kp", "sonar", "expert", "qlambda",
 EVAL_EPISODES = 10
 SIGNALS: tuple[SignalMode, ...] = ("given", "learned")
 
+
+RESULTS_GOAL_S = 30 * 60
+"""`bash scripts/results.sh`, every folder, on 2 cores."""
+ROOT = Path(__file__).resolve().parents[1]
 
 REFERENCE_BARE = 38_080
 """Bare pymunk's ticks/s on this project's machine when the goals were set (2026-11-28)."""
@@ -86,16 +102,52 @@ def _timed_probe() -> float:
     return time.perf_counter() - started
 
 
+def _results(jobs: int) -> None:
+    """Time `bash scripts/results.sh` into a scratch folder, each folder as it ends."""
+    print(f"bash scripts/results.sh, every folder, JOBS={jobs}")
+    if not baselines.available():
+        print(f"  (dqn and ppo left out: {baselines.INSTALL_HINT})")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="srlab-results-") as scratch:
+        # RESULTS_OUT=docs/results regenerates the published folders while timing them.
+        out = os.environ.get("RESULTS_OUT", scratch)
+        print(f"  into {out}")
+        env = {**os.environ, "RESULTS_OUT": out, "JOBS": str(jobs)}
+        proc = subprocess.Popen(
+            ["bash", "scripts/results.sh"], cwd=ROOT, env=env, text=True,
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        )  # fmt: skip
+        assert proc.stderr is not None
+        said: list[str] = []
+        for line in proc.stderr:
+            said.append(line)
+            if took := re.match(r"results: (\S+) took (\d+) s", line):
+                print(f"  {took[1]:<20}{int(took[2]):8d} s", flush=True)
+        if proc.wait() != 0:
+            sys.exit(f"results.sh failed ({proc.returncode}):\n{''.join(said[-20:])}")
+    elapsed = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    print(f"  wall time             {elapsed:8.0f} s   (goal: <= {RESULTS_GOAL_S} s)")
+    print(f"  CPU time              {cpu:8.0f} s   ({cpu / elapsed:.2f} cores on average)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
-        "--only", choices=["paper", "headline", "deep"], help="run one of the three"
+        "--only",
+        choices=["paper", "headline", "deep", "results"],
+        help="run one of the three, or time scripts/results.sh (never run by default)",
     )
     args = parser.parse_args()
     seeds = list(range(args.seeds))
+    if args.only == "results":
+        _results(args.jobs)
+        return
 
     bare = measure(bare_pymunk(Setup().world_config()), seconds=3.0, warmup_s=0.5)
     print(f"bare pymunk + 8 casts {bare:8.0f} ticks/s on one core")

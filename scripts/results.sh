@@ -3,6 +3,7 @@
 #
 #   bash scripts/results.sh             # all of them, each folder's time printed
 #   bash scripts/results.sh obstacle    # one of them, by name
+#   RESULTS_OUT=/tmp/r bash scripts/results.sh   # all of them, elsewhere
 #
 # The deep baselines (dqn, ppo) need the srlab[baselines] extra (`make install-baselines`);
 # without it the experiments run without them and say so. Tuning (`srlab tune --write`)
@@ -12,6 +13,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 SRLAB=${SRLAB:-.venv/bin/srlab}
+# Where the folders go: docs/results (what the README cites) unless RESULTS_OUT says
+# otherwise (bench/experiment.py times the whole set into a scratch folder).
+OUT=${RESULTS_OUT:-docs/results}
 JOBS=${JOBS:-2}
 ALL="innate,delayed,dp,rp,kp,sonar,reflexes,expert,qlambda,qlambda-hybrid"
 if .venv/bin/python -c 'from core.baselines import available; raise SystemExit(not available())'; then
@@ -44,35 +48,35 @@ run() {
 
 ONLY=${1:-}
 run world-check world-check --sensors all --seeds 20 --episodes 50 --jobs "$JOBS" --quiet \
-    --out docs/results/world-check
+    --out "$OUT"/world-check
 run obstacle experiment --conditions "$ALL" --signal given --declare "$DECLARED" "${HEADLINE[@]}" \
-    --out docs/results/obstacle
-run full-task experiment --conditions "$ALL" "${COMMON[@]}" --out docs/results/full-task
+    --out "$OUT"/obstacle
+run full-task experiment --conditions "$ALL" "${COMMON[@]}" --out "$OUT"/full-task
 run classic-obstacle experiment --conditions "$ALL" --world classic --signal given "${COMMON[@]}" \
-    --out docs/results/classic-obstacle
+    --out "$OUT"/classic-obstacle
 run classic-full-task experiment --conditions "$ALL" --world classic "${COMMON[@]}" \
-    --out docs/results/classic-full-task
+    --out "$OUT"/classic-full-task
 # The paper's Table II: innate knowledge, the signal not given, 20 seeds x 250 episodes.
 run table2 experiment --conditions innate --seeds 20 --episodes 250 --jobs "$JOBS" --quiet \
-    --out docs/results/table2
-run teachers teachers --signal given "${COMMON[@]}" --out docs/results/teachers
-run equal-start equal-start --signal given "${COMMON[@]}" --out docs/results/equal-start
+    --out "$OUT"/table2
+run teachers teachers --signal given "${COMMON[@]}" --out "$OUT"/teachers
+run equal-start equal-start --signal given "${COMMON[@]}" --out "$OUT"/equal-start
 run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid --sensors paper \
-    --signal given "${COMMON[@]}" --out docs/results/paper-stimuli
+    --signal given "${COMMON[@]}" --out "$OUT"/paper-stimuli
 run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \
-    --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out docs/results/phase
+    --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out "$OUT"/phase
 # Two studies written by scripts, run by `run` as the CLI's are (SRLAB set for the call).
 # A teacher that is wrong: kp, kp-punished and sonar, 20 seeds x 200 episodes, two worlds.
-SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py docs/results/wrong-teacher \
+SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py "$OUT"/wrong-teacher \
     --jobs "$JOBS"
 # Exploration on equal terms: frozen after 50, 200 and 1,000 episodes (kp and both
 # qlambda-hybrids to 1,000, qlambda and qlambda-decay to 200; dqn and ppo are in deep-curve).
-SRLAB=.venv/bin/python run exploration scripts/frozen_budgets.py docs/results/exploration \
+SRLAB=.venv/bin/python run exploration scripts/frozen_budgets.py "$OUT"/exploration \
     --jobs "$JOBS"
 if [[ -z "$ONLY" || "$ONLY" == deep-curve ]] && [[ "$ALL" == *dqn* ]]; then
     echo "results: deep-curve" >&2
     started=$SECONDS
-    .venv/bin/python scripts/deep_curve.py docs/results/deep-curve --episodes 1000 --seeds 3 \
+    .venv/bin/python scripts/deep_curve.py "$OUT"/deep-curve --episodes 1000 --seeds 3 \
         --signal given --jobs "$JOBS"
     echo "results: deep-curve took $((SECONDS - started)) s" >&2
 fi
