@@ -28,7 +28,7 @@ from core.params import Parameter, ParameterError, ParamValue, tuned_params
 from core.setup import Setup
 from core.stats import holm
 from core.sweep import Axes, checked_values, parse_grid
-from core.worlds import WorldSettings, get_world_parameter
+from core.worlds import WorldSettings, get_world_parameter, merge_settings
 
 REFLEXES = "reflexes"
 """The condition every point runs besides the others: its success is the diagram's x."""
@@ -169,7 +169,10 @@ class Phase:
             self.episodes,
             tuned_params(condition) if self.tuned else (),
             Setup(
-                self.setup.world_name, self.setup.sensors_name, self.setup.signal, point.settings
+                self.setup.world_name,
+                self.setup.sensors_name,
+                self.setup.signal,
+                merge_settings(self.setup.world_settings, point.settings),
             ),
         )
 

@@ -188,10 +188,11 @@ class WorldParameter:
 
 
 def _world(
-    name: str, path: str, unit: str, low: float, high: float, meaning: str
+    name: str, path: str, unit: str, low: float, high: float, meaning: str, *, zero: bool = False
 ) -> WorldParameter:
+    """A world parameter in (`low`, `high`], or [`low`, `high`] with `zero` (a noise's 0)."""
     return WorldParameter(
-        Parameter(name, meaning, "float", low, high, False, _every, "every condition"), path, unit
+        Parameter(name, meaning, "float", low, high, zero, _every, "every condition"), path, unit
     )
 
 
@@ -217,8 +218,49 @@ WORLD_PARAMETERS: dict[str, WorldParameter] = {
             "the robot's cruise (goforward3) speed; the other forward speeds scale with it, "
             "turns keep theirs",
         ),
+        _world(
+            "camera_range_sd_m", "perception.camera_range_sd_m", "m", 0.0, 1.0,
+            "standard deviation of the camera's range error on each detection of the obstacle",
+            zero=True,
+        ),
+        _world(
+            "camera_bearing_sd_deg", "perception.camera_bearing_sd_deg", "deg", 0.0, 30.0,
+            "standard deviation of the camera's bearing error on each detection (the obstacle "
+            "across the corridor moves by the range times it)",
+            zero=True,
+        ),
+        _world(
+            "camera_miss_rate", "perception.camera_miss_rate", "", 0.0, 1.0,
+            "the chance that a tick's detection of the obstacle is missed",
+            zero=True,
+        ),
+        _world(
+            "odometry_drift_m", "perception.odometry_drift_m", "m", 0.0, 0.5,
+            "standard deviation of the robot's lateral position error after 1 m travelled "
+            "(a random walk with the distance)",
+            zero=True,
+        ),
     )
 }  # fmt: skip
+
+PERCEPTION_PRESETS: dict[str, WorldSettings] = {
+    "exact": (),
+    "noisy": (
+        ("perception.camera_bearing_sd_deg", 3.0),
+        ("perception.camera_miss_rate", 0.2),
+        ("perception.camera_range_sd_m", 0.1),
+        ("perception.odometry_drift_m", 0.03),
+    ),
+}
+"""Named perception settings (`--perception`): ``exact``, the default, senses the truth;
+``noisy`` is a cheap camera and wheel odometry: 10 cm of range error and 3 degrees of
+bearing error a detection, one detection in five missed, 3 cm of lateral drift after 1 m
+(`core.sim.perception`)."""
+
+
+def merge_settings(base: WorldSettings, over: WorldSettings) -> WorldSettings:
+    """`base`'s settings with `over`'s added, `over` winning where both set one; sorted."""
+    return tuple(sorted({**dict(base), **dict(over)}.items()))
 
 
 def get_world_parameter(name: str) -> WorldParameter:

@@ -65,6 +65,14 @@ run paper-stimuli experiment --conditions dp,rp,kp,sonar,expert,qlambda-hybrid -
     --signal given "${COMMON[@]}" --out "$OUT"/paper-stimuli
 run phase phase --grid docs/results/phase/grid.toml --conditions kp,sonar,rp,qlambda-hybrid,dp \
     --signal given --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out "$OUT"/phase
+# Noisy perception: the headline's declared comparisons and the phase diagram's echo-range
+# row, every stimulus computed from a camera and odometry that err (--perception noisy).
+run noisy-perception experiment --conditions kp,sonar,rp,qlambda-hybrid,dp,reflexes \
+    --signal given --perception noisy --declare "$DECLARED" "${COMMON[@]}" \
+    --out "$OUT"/noisy-perception
+run noisy-phase phase --param echo_range_m=0.1,0.2,0.3,0.4,0.5,0.6 \
+    --conditions kp,sonar,rp,qlambda-hybrid,dp --signal given --perception noisy \
+    --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out "$OUT"/noisy-perception/phase
 # Two studies written by scripts, run by `run` as the CLI's are (SRLAB set for the call).
 # A teacher that is wrong: kp, kp-punished and sonar, 20 seeds x 200 episodes, two worlds.
 SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py "$OUT"/wrong-teacher \

@@ -12,6 +12,7 @@ from typing import Any, Literal, NamedTuple, Protocol
 
 import numpy as np
 
+from core.sim.perception import PerceptionConfig
 from core.sim.robot import RobotConfig
 from core.sim.track import TrackConfig, TrackGeometry
 
@@ -44,12 +45,15 @@ class WorldConfig:
     Attributes:
         track: the corridor, signal and obstacle.
         robot: the AmigoBot.
+        perception: how far the robot's estimates are from the truth (exact by default;
+            `core.sim.perception`).
         dt_s: the fixed tick, seconds; the physics steps once per tick.
         max_ticks: an episode's time limit in ticks (120 s by default).
     """
 
     track: TrackConfig = field(default_factory=TrackConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     dt_s: float = 0.1
     max_ticks: int = 1200
 

@@ -10,6 +10,7 @@ import numpy as np
 import pymunk
 
 from core.sim import sensing
+from core.sim.perception import NoisyPerception
 from core.sim.track import TrackGeometry
 from core.sim.types import (
     CollisionKind,
@@ -195,6 +196,13 @@ class PymunkWorld:
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
         self._front_to_line = sensing.UNSEEN
         self._kernel_sense: Callable[..., None] | None = None
+        # Exact perception (the default) skips the estimates entirely: bit for bit as before.
+        perception = self.config.perception
+        self._perception = (
+            None
+            if perception.exact
+            else NoisyPerception(perception, g[sensing.G_FOV_HALF], robot.camera_track_ticks)
+        )
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps
         self._w_max = robot.max_turn_rad_s
@@ -218,6 +226,8 @@ class PymunkWorld:
         self._layout = layout
         self._rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 2]))
         self._refill_noise()
+        if self._perception is not None:
+            self._perception.reset(seed, episode)
         x, y, th = self.geometry.start_pose
         self._body.position = (x, y)
         self._body.angle = th
@@ -269,6 +279,8 @@ class PymunkWorld:
             self._obstacle_body.position = (ox, oy)
         self._space.reindex_shapes_for_body(self._obstacle_body)
         self._track[:] = 0.0
+        if self._perception is not None:
+            self._perception.relocate()
         self._command = MotorCommand(0.0, 0.0)
         self._hit = None
         frame = self._sense(violation=False)
@@ -359,6 +371,8 @@ class PymunkWorld:
             geo.leg_start_m,
             out,
         )
+        if self._perception is not None:
+            self._perception.apply(out, pos.x, pos.y)
         return SensorFrame(
             self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
         )

@@ -82,7 +82,14 @@ def head(cells: Sequence[str]) -> list[str]:
 def setup_params(setup: Setup) -> dict[str, str]:
     """The setup as a report's parameters (its start only when one was chosen)."""
     params = {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
+    if setup.world_settings:
+        params["world_settings"] = settings_text(setup.world_settings)
     return params | ({"start": setup.start} if setup.start else {})
+
+
+def settings_text(settings: Sequence[tuple[str, float]]) -> str:
+    """World settings in words: ``perception.camera_miss_rate 0.2, ...``."""
+    return ", ".join(f"{path} {value:g}" for path, value in settings)
 
 
 def first_line(error: str | None) -> str:

@@ -225,7 +225,9 @@ def _setup_line(params: dict[str, Any]) -> str:
     start = {"table1": "Table I", "design": "kp's design"}.get(params.get("start", ""))
     teacher = params.get("teacher")
     return (
-        f"World `{params.get('world', '?')}`, camera stimuli `{params.get('sensors', '?')}`, "
+        f"World `{params.get('world', '?')}`"
+        + (f" with {params['world_settings']}" if params.get("world_settings") else "")
+        + f", camera stimuli `{params.get('sensors', '?')}`, "
         f"signal {params.get('signal', 'learned')}"
         + (
             " (its correct responses given to every condition, so success measures the obstacle)."

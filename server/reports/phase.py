@@ -15,7 +15,15 @@ from core.params import format_value
 from core.phase import REFLEXES, Phase, sign_of
 from core.stats import Estimate, pct
 from core.worlds import get_world_parameter
-from server.reports.base import diff, failed_lines, head, interval_line, row, write_summary
+from server.reports.base import (
+    diff,
+    failed_lines,
+    head,
+    interval_line,
+    row,
+    settings_text,
+    write_summary,
+)
 from server.reports.plots import colours, save, subplots
 
 FloatArray = npt.NDArray[np.float64]
@@ -90,7 +98,9 @@ def markdown(
         "",
         (f"Declared in `{where}`" if where else "Declared on the command line")
         + (
-            f" and run as a star around world `{setup.world_name}` (camera stimuli "
+            f" and run as a star around world `{setup.world_name}`"
+            + (f" with {settings_text(setup.world_settings)}" if setup.world_settings else "")
+            + " (camera stimuli "
             f"`{setup.sensors_name}`, {signal}): each parameter varied alone, the others at "
             "the base world's values; the base point is run once and belongs to every "
             f"parameter's row. {len(points)} points."

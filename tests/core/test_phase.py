@@ -12,6 +12,7 @@ from core.params import ParameterError
 from core.phase import Phase, PhasePoint, load_grid, sign_of, summarise_phase
 from core.runner import EpisodeSummary
 from core.setup import Setup
+from core.worlds import PERCEPTION_PRESETS
 
 GIVEN = Setup("soft-obstacle", signal="given").resolved()
 
@@ -143,3 +144,23 @@ def test_a_grid_file_declares_each_parameter_with_its_values(tmp_path: Path) -> 
     path = tmp_path / "grid.toml"
     path.write_text("echo_range_m = [0.1, 0.2]\nobstacle_size_m = [0.35]\n")
     assert load_grid(path) == (("echo_range_m", (0.1, 0.2)), ("obstacle_size_m", (0.35,)))
+
+
+def test_a_diagram_over_noisy_perception_keeps_the_noise_on_every_point() -> None:
+    noisy = Setup("soft-obstacle", signal="given", world_settings=PERCEPTION_PRESETS["noisy"])
+    p = phase(setup=noisy.resolved(), axes=(("camera_miss_rate", (0.0, 0.5)),))
+    assert p.base_value("camera_miss_rate") == 0.2  # the base is the noisy world
+    by_point = {t.setup.world_settings for t in p.tasks()}
+    assert by_point == {
+        PERCEPTION_PRESETS["noisy"],
+        tuple(
+            sorted(
+                {**dict(PERCEPTION_PRESETS["noisy"]), "perception.camera_miss_rate": 0.0}.items()
+            )
+        ),
+        tuple(
+            sorted(
+                {**dict(PERCEPTION_PRESETS["noisy"]), "perception.camera_miss_rate": 0.5}.items()
+            )
+        ),
+    }

@@ -296,3 +296,26 @@ def test_experiment_with_a_failed_task_reports_it_and_exits_1(
     assert len((tmp_path / "runs.jsonl").read_text().splitlines()) == 2
     for name in ("learning_curves.png", "reliability.png"):
         assert (tmp_path / name).read_bytes()[:8] == PNG_SIGNATURE
+
+
+@pytest.mark.slow
+def test_experiment_with_noisy_perception_says_so_and_differs_from_exact(tmp_path: Path) -> None:
+    argv = ["experiment", "--conditions", "kp", "--seeds", "2", "--episodes", "3", "--jobs", "1"]
+    for perception in ("exact", "noisy"):
+        out = tmp_path / perception
+        assert main([*argv, "--perception", perception, "--out", str(out), "--quiet"]) == 0
+    exact = (tmp_path / "exact" / "summary.md").read_text()
+    noisy = (tmp_path / "noisy" / "summary.md").read_text()
+    assert "--perception noisy" in noisy.splitlines()[2]
+    assert "World `soft-obstacle` with perception.camera_bearing_sd_deg 3," in noisy
+    assert "perception." not in exact.split("## ")[0]
+    ticks = [
+        [json.loads(x)["ticks"] for x in (tmp_path / p / "runs.jsonl").read_text().splitlines()]
+        for p in ("exact", "noisy")
+    ]
+    assert ticks[0] != ticks[1]  # the noisy robot's laps run otherwise
+
+
+def test_an_unknown_perception_is_a_clean_error(capsys: pytest.CaptureFixture[str]) -> None:
+    err = exits_2(["experiment", "--conditions", "kp", "--perception", "blurry"], capsys)
+    assert "--perception" in err and "'blurry'" in err and "noisy" in err
