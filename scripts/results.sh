@@ -5,6 +5,9 @@
 #   bash scripts/results.sh obstacle    # one of them, by name
 #   RESULTS_OUT=/tmp/r bash scripts/results.sh   # all of them, elsewhere
 #
+# All of them take about 21 minutes on 2 cores (`make bench-results` times it against its
+# goal of 30; docs/benchmarks.md).
+#
 # The deep baselines (dqn, ppo) need the srlab[baselines] extra (`make install-baselines`);
 # without it the experiments run without them and say so. Tuning (`srlab tune --write`)
 # is not rerun here: core/data/tuned.toml holds its result, and docs/results/tuning*/
