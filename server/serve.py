@@ -22,8 +22,8 @@ from server.tuning import configure_process
 log = logging.getLogger("srlab.serve")
 
 SERVICE_NICE = 10
-"""`srlab serve`'s `service_nice`: measured on 2 busy cores (docs/benchmarks.md, eighth
-session), 10 gave the engines' ticks most of what 19 did, and leaves the service a share
+"""`srlab serve`'s `service_nice`: measured on 2 busy cores (`bench.service`,
+docs/benchmarks.md), 10 gave the engines' ticks most of what 19 did, and leaves the service a share
 beside other programs at the default priority (19 would leave it almost none)."""
 
 
@@ -74,7 +74,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
     if "SRLAB_STORE_PROCESS" not in os.environ:
         overrides["store_process"] = True
     # The runs tick in a process of their own (a GIL and a core apart from HTTP, the 3D
-    # view and the store: docs/benchmarks.md, eleventh session), unless the environment
+    # view and the store: `bench.service`, docs/benchmarks.md), unless the environment
     # puts them elsewhere.
     if not {"SRLAB_ENGINE_PROCESS", "SRLAB_ENGINE_THREAD"} & os.environ.keys():
         overrides["engine_process"] = True

@@ -101,7 +101,7 @@ def ask_short_slices(ns: int = SHORT_SLICE_NS) -> bool:
     work is often not let in before the busy process's slice ends, up to a scheduler tick
     later (4 ms at the usual 250 Hz): beside two busy processes 27 % of such wake-ups were
     more than 1 ms late on this machine, 0.6 % with a 0.1 ms slice (`bench.slices`;
-    docs/benchmarks.md, "thirteenth session"). Linux's
+    docs/benchmarks.md). Linux's
     EEVDF scheduler (6.12 and later) lets a thread ask for a shorter slice without
     privileges: it gets no larger share of the CPU, only its turns sooner and shorter.
 

@@ -5,7 +5,7 @@ episodes ended) are a few short statements each. Run through SQLAlchemy (a sessi
 connection, the compiled-statement cache, result objects, events) such a transaction cost
 0.3-0.4 ms of Python on a warm CPU and 1.2-1.5 ms on one woken from idle, as a realtime
 run's writer always is; the same statements on the `sqlite3` cursor cost 0.05 and
-0.25-0.5 ms (docs/benchmarks.md, "ninth session"). Every write of a realtime run waits for
+0.25-0.5 ms (`bench.store`, docs/benchmarks.md). Every write of a realtime run waits for
 that, and in fast mode it is Python time taken from the ticks.
 
 So the store writes against `Sql`, a small interface with two implementations:

@@ -56,10 +56,14 @@ def paired_points(paired: Paired) -> str:
     return diff({**paired.diff.as_dict(), "p": paired.p})
 
 
+def holm_text(p_holm: float) -> str:
+    """``(Holm 0.012)``, ``(Holm < 0.001)``."""
+    return f"(Holm {p_text(p_holm).removeprefix('p ')})"
+
+
 def points(tested: Tested) -> str:
     """``+9.1 [+5.7, +12.3], p 0.004 (Holm 0.012)``, in points."""
-    holm_p = p_text(tested.p_holm).removeprefix("p ")
-    return f"{paired_points(tested.paired)} (Holm {holm_p})"
+    return f"{paired_points(tested.paired)} {holm_text(tested.p_holm)}"
 
 
 def declared_section(family: Sequence[dict[str, Any]], declared_as: str) -> list[str]:
@@ -75,7 +79,7 @@ def declared_section(family: Sequence[dict[str, Any]], declared_as: str) -> list
         f"these {len(family)}. Every other figure below is exploratory.",
         "",
         *(
-            f"{i}. {d['label']}: {diff(d)} (Holm {p_text(d['p_holm']).removeprefix('p ')})"
+            f"{i}. {d['label']}: {diff(d)} {holm_text(d['p_holm'])}"
             for i, d in enumerate(family, 1)
         ),
         "",
