@@ -36,7 +36,7 @@ from core.sim.sensing import (
     empty_channels,
 )
 
-__all__ = ["empty_channels", "ray_entry", "ray_exit", "sense"]
+__all__ = ["empty_channels", "ray_entry", "ray_exit", "sense", "wall_ranges"]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -117,6 +117,31 @@ def _sees(
 
 
 @_jit
+def _walls_along(ox: float, oy: float, dx: float, dy: float, outer: Any, inner: Any) -> float:
+    """Distance along a ray from (ox, oy) inside the corridor to the first static wall."""
+    return min(ray_exit(ox, oy, dx, dy, outer), ray_entry(ox, oy, dx, dy, inner))
+
+
+@_jit
+def wall_ranges(x: float, y: float, th: float, g: Any, sonar_angles: Any, out: Any) -> None:
+    """Fill `out` with what each sonar would read at pose (x, y, th) off the map alone.
+
+    The static walls only, noise-free, within the sonars' range: the prediction a sonar's
+    residual is measured against (`sense` uses the true pose; a robot whose odometry
+    drifts predicts from where it believes it is, `core.sim.perception`).
+    """
+    outer = g[G_OUTER : G_OUTER + 4]
+    inner = g[G_INNER : G_INNER + 4]
+    mount = g[G_SONAR_MOUNT]
+    for i in range(8):
+        a = th + sonar_angles[i]
+        dx = math.cos(a)
+        dy = math.sin(a)
+        walls = _walls_along(x + mount * dx, y + mount * dy, dx, dy, outer, inner)
+        out[i] = min(walls, g[G_SONAR_RANGE])
+
+
+@_jit
 def sense(
     x: float,
     y: float,
@@ -146,7 +171,7 @@ def sense(
         dy = math.sin(a)
         ox = x + mount * dx
         oy = y + mount * dy
-        walls = min(ray_exit(ox, oy, dx, dy, outer), ray_entry(ox, oy, dx, dy, inner))
+        walls = _walls_along(ox, oy, dx, dy, outer, inner)
         seen = walls
         if has_obstacle:
             hit = ray_entry(ox, oy, dx, dy, obstacle)

@@ -17,7 +17,11 @@ tick into estimates, and every logical sensor (stimulus) is computed from those:
 - the robot's own **lateral position** on the map drifts as a random walk with distance
   travelled (`odometry_drift_m`: the standard deviation after 1 m), which moves its
   lateral offset in the corridor and the obstacle's offset, both read on the map through
-  it (the obstacle's lateral from the robot is the camera's, and does not drift).
+  it (the obstacle's lateral from the robot is the camera's, and does not drift), and
+  the sonars' **residuals**: what the map of the static walls predicts each sonar reads
+  is predicted from where the robot believes it is, so a wall read from a drifted pose
+  leaves a residual (a phantom obstacle, or a wall taken for none). Only the lateral
+  position drifts: the heading and the progress along the track stay exact.
 
 The draws come from a generator of their own per seed and episode, so noise on leaves
 every other random stream (layout, lamp, sonar noise, exploration) as it was, and the same
@@ -34,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from core.sim.channels import Channel
-from core.sim.sensing import UNSEEN
+from core.sim.sensing import G_FOV_HALF, UNSEEN
 
 _VISIBLE = int(Channel.OBSTACLE_VISIBLE)
 _DISTANCE = int(Channel.OBSTACLE_DISTANCE_M)
@@ -42,6 +46,10 @@ _LATERAL = int(Channel.OBSTACLE_LATERAL_M)
 _OFFSET = int(Channel.OBSTACLE_OFFSET_M)
 _IMAGE_X = int(Channel.OBSTACLE_IMAGE_X)
 _ROBOT_LATERAL = int(Channel.LATERAL_OFFSET_M)
+_HEADING = int(Channel.HEADING_RAD)
+_HEADING_ERROR = int(Channel.HEADING_ERROR_RAD)
+_SONARS = slice(int(Channel.SONAR_0), int(Channel.SONAR_7) + 1)
+_RESIDUALS = slice(int(Channel.SONAR_0_RESIDUAL), int(Channel.SONAR_7_RESIDUAL) + 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,11 +85,25 @@ class PerceptionConfig:
 
 
 class NoisyPerception:
-    """Turns each tick's exact channels into the robot's estimates (`PerceptionConfig`)."""
+    """Turns each tick's exact channels into the robot's estimates (`PerceptionConfig`).
 
-    def __init__(self, config: PerceptionConfig, fov_half_rad: float, track_ticks: float) -> None:
+    `g` and `sonar_angles` are the sensing kernel's geometry and sonar axes
+    (`core.sim.sensing`), from which the map's prediction of each sonar is recomputed at the
+    drifted pose.
+    """
+
+    def __init__(
+        self,
+        config: PerceptionConfig,
+        g: np.ndarray[Any, np.dtype[np.float64]],
+        sonar_angles: np.ndarray[Any, np.dtype[np.float64]],
+        track_ticks: float,
+    ) -> None:
         self.config = config
-        self._bearing_to_image = 1.0 / fov_half_rad
+        self._g = g
+        self._sonar_angles = sonar_angles
+        self._walls = np.zeros(len(sonar_angles))
+        self._bearing_to_image = 1.0 / float(g[G_FOV_HALF])
         self._track_ticks = track_ticks
         self._rng = np.random.default_rng(0)
         self._reset_state()
@@ -117,6 +139,8 @@ class NoisyPerception:
                     )
             self._last = (x, y)
             out[_ROBOT_LATERAL] += self._drift
+            if self._drift != 0.0:
+                self._residuals_from_estimate(out, x, y)
         if out[_VISIBLE] > 0.0:
             if cfg.camera_miss_rate > 0.0 and rng.random() < cfg.camera_miss_rate:
                 out[_VISIBLE] = 0.0
@@ -143,3 +167,18 @@ class NoisyPerception:
         out[_DISTANCE] = max(0.0, distance + self._range_error)
         out[_LATERAL] += cross
         out[_OFFSET] += cross + self._drift
+
+    def _residuals_from_estimate(
+        self, out: np.ndarray[Any, np.dtype[np.float64]], x: float, y: float
+    ) -> None:
+        """Each sonar's residual against the map as seen from the drifted pose, in place."""
+        from core.sim._kernel import wall_ranges  # numba: loaded with the first reading
+
+        heading = float(out[_HEADING])
+        # The corridor's direction (the leg the lateral offset is measured across); the
+        # drift moves the believed position along its left normal, as the offset is + left.
+        corridor = heading - float(out[_HEADING_ERROR])
+        believed_x = x - self._drift * math.sin(corridor)
+        believed_y = y + self._drift * math.cos(corridor)
+        wall_ranges(believed_x, believed_y, heading, self._g, self._sonar_angles, self._walls)
+        out[_RESIDUALS] = self._walls - out[_SONARS]

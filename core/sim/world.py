@@ -201,7 +201,7 @@ class PymunkWorld:
         self._perception = (
             None
             if perception.exact
-            else NoisyPerception(perception, g[sensing.G_FOV_HALF], robot.camera_track_ticks)
+            else NoisyPerception(perception, g, self._sonar_angles, robot.camera_track_ticks)
         )
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps

@@ -155,6 +155,25 @@ def test_odometry_drift_grows_with_the_distance_travelled() -> None:
     assert far == pytest.approx(2 * near, rel=0.25)
 
 
+def test_a_drifted_robot_measures_its_sonars_against_the_map_from_where_it_believes_it_is() -> None:
+    exact = drive(world(), 5, 60, None)
+    drifted = drive(world(odometry_drift_m=0.05), 5, 60, None)
+    lateral = Channel.LATERAL_OFFSET_M
+    moved = 0
+    for a, b in zip(exact, drifted, strict=True):
+        drift = b.channels[lateral] - a.channels[lateral]
+        moved += abs(drift) > 0.01
+        # What the sonars read is the world's; only what the map predicts moves.
+        assert np.array_equal(a.channels[:8], b.channels[:8])
+        residual = b.channels[8:16] - a.channels[8:16]
+        # Believed `drift` further left: the left wall is predicted nearer by the drift
+        # along a sonar's axis (+90 and +44 degrees), the right one farther.
+        for sonar, sign in ((0, -1), (1, -1), (4, 1), (5, 1)):
+            along = abs(math.sin(math.radians(BASE.robot.sonar_angles_deg[sonar])))
+            assert residual[sonar] == pytest.approx(sign * drift / along, abs=1e-9)
+    assert moved > 20, "the drive must drift for the residuals to move"
+
+
 @pytest.mark.parametrize(
     ("setting", "value", "says"),
     [
