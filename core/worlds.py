@@ -258,6 +258,44 @@ bearing error a detection, one detection in five missed, 3 cm of lateral drift a
 (`core.sim.perception`)."""
 
 
+PERCEPTION_PREFIX = "perception."
+"""The world settings of `PerceptionConfig`: what `--perception` may set one by one."""
+
+
+def perception_parameters() -> list[str]:
+    """The world parameters that set perception (`PerceptionConfig`), by name."""
+    return [n for n, w in WORLD_PARAMETERS.items() if w.path.startswith(PERCEPTION_PREFIX)]
+
+
+def parse_perception(text: str) -> WorldSettings:
+    """``noisy``, ``camera_miss_rate=0.5`` or both (``noisy,odometry_drift_m=0.1``).
+
+    Comma-separated, in order: a preset's name (`PERCEPTION_PRESETS`), which sets every
+    perception setting, or a perception parameter's ``NAME=VALUE`` (`WORLD_PARAMETERS`,
+    checked against its bounds), which sets one. Returns the settings sorted, those at 0
+    left out (0 is exact), so that ``exact`` and ``camera_miss_rate=0`` are one setup.
+    """
+    settings: dict[str, float] = {}
+    for item in (i.strip() for i in text.split(",")):
+        name, is_setting, value = item.partition("=")
+        if not is_setting:
+            if item not in PERCEPTION_PRESETS:
+                known = ", ".join(PERCEPTION_PRESETS)
+                raise UnknownNameError(
+                    f"unknown perception {item!r}: a preset ({known}) or NAME=VALUE"
+                )
+            # A preset sets every perception setting: those it leaves out are exact.
+            settings = dict(PERCEPTION_PRESETS[item])
+            continue
+        name = name.strip()
+        if name not in perception_parameters():
+            known = ", ".join(perception_parameters())
+            raise UnknownNameError(f"unknown perception setting {name!r} (known: {known})")
+        p = WORLD_PARAMETERS[name]
+        settings[p.path] = float(p.parameter.parse(value))
+    return tuple(sorted((k, v) for k, v in settings.items() if v != 0))
+
+
 def merge_settings(base: WorldSettings, over: WorldSettings) -> WorldSettings:
     """`base`'s settings with `over`'s added, `over` winning where both set one; sorted."""
     return tuple(sorted({**dict(base), **dict(over)}.items()))

@@ -27,6 +27,7 @@ from rich.table import Table
 from core.conditions import CONDITIONS
 from core.params import point_label
 from core.setup import Setup
+from core.worlds import WorldSettings
 from server.reports.base import first_line
 
 if TYPE_CHECKING:
@@ -88,13 +89,24 @@ def engine_condition(text: str) -> str:
     )
 
 
+def perception_type(text: str) -> WorldSettings:
+    """An argparse type: `--perception`'s world settings (`core.worlds.parse_perception`)."""
+    from core.errors import CoreError
+    from core.worlds import parse_perception
+
+    try:
+        return parse_perception(text)
+    except CoreError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def add_setup_arguments(
     parser: argparse.ArgumentParser, *, signal: bool = True, start: bool = False
 ) -> None:
     """--world, --sensors, --signal (unless `signal` is False) and, with `start`, --start."""
     from core.brain.catalog import sensor_definitions
     from core.setup import SIGNAL_MODES
-    from core.worlds import PERCEPTION_PRESETS, default_world, world_names
+    from core.worlds import default_world, perception_parameters, world_names
 
     parser.add_argument(
         "--world",
@@ -104,11 +116,14 @@ def add_setup_arguments(
     )
     parser.add_argument(
         "--perception",
-        choices=list(PERCEPTION_PRESETS),
+        type=perception_type,
         default="exact",
+        metavar="{exact,noisy,NAME=VALUE,...}",
         help="exact: stimuli from the true pose and obstacle (default); noisy: from a camera "
         "with 10 cm range and 3 degree bearing errors missing one detection in five, and "
-        "odometry drifting 3 cm after 1 m (docs/results/noisy-perception/)",
+        "odometry drifting 3 cm after 1 m (docs/results/noisy-perception/); or its settings "
+        f"one by one, after a preset or alone ({', '.join(perception_parameters())}: "
+        "noisy,camera_miss_rate=0.5)",
     )
     definitions = sensor_definitions()  # default first, each with its description
     described = "; ".join(f"{n}: {d.rstrip('.')}" for n, d in definitions.items())
@@ -141,13 +156,11 @@ def add_setup_arguments(
 
 def setup_of(args: argparse.Namespace) -> Setup:
     """The setup the --world, --sensors and --signal arguments name, defaults named."""
-    from core.worlds import PERCEPTION_PRESETS
-
     return Setup(
         args.world,
         args.sensors,
         getattr(args, "signal", "learned"),
-        PERCEPTION_PRESETS[getattr(args, "perception", "exact")],
+        getattr(args, "perception", ()),
         start=getattr(args, "start", ""),
     ).resolved()
 

@@ -8,18 +8,19 @@ truth the exact world gives on the same seed.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from core.errors import CatalogError
+from core.errors import CatalogError, CoreError
 from core.sim.channels import Channel
 from core.sim.perception import PerceptionConfig
 from core.sim.sensing import UNSEEN
 from core.sim.types import MotorCommand, SensorFrame
 from core.sim.world import PymunkWorld, WorldConfig
-from core.worlds import PERCEPTION_PRESETS, load_world, with_settings
+from core.worlds import PERCEPTION_PRESETS, load_world, parse_perception, with_settings
 
 BASE = load_world("soft-obstacle").config
 FOV_HALF_DEG = BASE.robot.camera_fov_deg / 2
@@ -76,6 +77,38 @@ def test_perception_is_exact_by_default_and_in_every_preset_but_noisy() -> None:
     assert PERCEPTION_PRESETS["exact"] == ()
     noisy = with_settings(BASE, PERCEPTION_PRESETS["noisy"]).perception
     assert not noisy.exact and noisy.camera_miss_rate == 0.2
+
+
+def test_perception_is_named_by_a_preset_its_settings_one_by_one_or_both() -> None:
+    noisy = PERCEPTION_PRESETS["noisy"]
+    assert parse_perception("noisy") == noisy
+    # Settings at 0 are exact and left out: one setup, however it is spelled.
+    assert parse_perception("exact") == parse_perception("camera_miss_rate=0") == ()
+    assert parse_perception("camera_miss_rate=0.5, odometry_drift_m=0.1") == (
+        ("perception.camera_miss_rate", 0.5),
+        ("perception.odometry_drift_m", 0.1),
+    )
+    # In order: a preset sets every setting, a setting after it changes one.
+    assert dict(parse_perception("noisy,camera_miss_rate=0.5")) == {
+        **dict(noisy),
+        "perception.camera_miss_rate": 0.5,
+    }
+    assert parse_perception("camera_miss_rate=0.5,noisy") == noisy
+    assert parse_perception("noisy,exact") == ()
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("blurry", "unknown perception 'blurry'"),
+        ("sonar_noise_m=0.1", "unknown perception setting 'sonar_noise_m'"),
+        ("camera_miss_rate=2", "camera_miss_rate must be in [0, 1]"),
+        ("camera_bearing_sd_deg=wide", "'wide' is not a number"),
+    ],
+)
+def test_an_unknown_or_out_of_bounds_perception_is_refused_naming_it(text: str, says: str) -> None:
+    with pytest.raises(CoreError, match=re.escape(says)):
+        parse_perception(text)
 
 
 def test_noise_leaves_every_other_channel_and_the_physics_as_they_were() -> None:

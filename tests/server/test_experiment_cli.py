@@ -319,3 +319,19 @@ def test_experiment_with_noisy_perception_says_so_and_differs_from_exact(tmp_pat
 def test_an_unknown_perception_is_a_clean_error(capsys: pytest.CaptureFixture[str]) -> None:
     err = exits_2(["experiment", "--conditions", "kp", "--perception", "blurry"], capsys)
     assert "--perception" in err and "'blurry'" in err and "noisy" in err
+
+
+@pytest.mark.parametrize(
+    ("perception", "says"),
+    [
+        ("noisy,camera_miss_rate=1.5", "camera_miss_rate must be in [0, 1], got 1.5"),
+        ("odometry_drift_m=-0.1", "odometry_drift_m must be in [0, 0.5]"),
+        ("camera_range_sd_m=far", "camera_range_sd_m: 'far' is not a number"),
+        ("echo_range_m=0.2", "unknown perception setting 'echo_range_m'"),
+    ],
+)
+def test_a_bad_perception_setting_is_a_clean_error_naming_it(
+    perception: str, says: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    err = exits_2(["experiment", "--conditions", "kp", "--perception", perception], capsys)
+    assert "--perception" in err and says in err
