@@ -327,7 +327,7 @@ HELD_OUT = (("held-out", "frozen_by_seed"), ("camera only", "camera_only_by_seed
 """The held-out figures compared seed by seed: their labels and per-seed keys."""
 
 
-def _per_seed(s: Mapping[str, Any], horizon: int | None, key: str | None) -> dict[int, float]:
+def per_seed(s: Mapping[str, Any], horizon: int | None, key: str | None) -> dict[int, float]:
     """A condition's figure per seed id: success over a horizon, or a held-out rate."""
     if key is None:
         values = [float(np.mean(row[:horizon])) for row in s["success_by_seed"]]
@@ -354,7 +354,7 @@ def paired(
     sa, sb = summary.get(a, {}), summary.get(b, {})
     if not sa.get("seeds") or not sb.get("seeds"):
         return None
-    mine, theirs = _per_seed(sa, horizon, held_out), _per_seed(sb, horizon, held_out)
+    mine, theirs = per_seed(sa, horizon, held_out), per_seed(sb, horizon, held_out)
     seeds = [x for x in mine if x in theirs]
     if len(seeds) < 2:
         return None

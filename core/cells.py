@@ -14,7 +14,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from core.analysis import paired, summarise
+from core.analysis import paired, per_seed, summarise
 from core.conditions import get_condition
 from core.experiment import Backend, Task, TaskResult, run_tasks
 from core.params import Params, ParamValue, normalise, tuned_params
@@ -24,6 +24,8 @@ HORIZONS = (("1-10", 10), ("all", None))
 """The training horizons a study compares cells over."""
 HELD_OUT = "frozen_by_seed"
 """The held-out figure a study compares cells on: what was learned, frozen."""
+DECLARED_MEASURES = (("all", "training"), ("held-out", "held out"))
+"""What a study's declared comparisons are tested on: all training episodes, and held out."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +102,21 @@ def summarise_cells(
     return out
 
 
+def cell_figures(summary: Mapping[str, Any], name: str) -> dict[str, Any]:
+    """A cell's success over episodes 1-10, over all, and held out (frozen), as summarised."""
+    s = summary[name]
+    return {
+        "success_1_10": s.get("success_horizons", {}).get("1-10"),
+        "success_rate": s.get("success_rate"),
+        "held_out": s.get("evaluation", {}).get("frozen"),
+    }
+
+
+def _measures() -> list[tuple[str, int | None, str | None]]:
+    """What cells are compared on: each training horizon, then held out (label, horizon, key)."""
+    return [*((label, h, None) for label, h in HORIZONS), ("held-out", None, HELD_OUT)]
+
+
 def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, float]]:
     """Cell `a`'s success minus cell `b`'s, seed by seed, per horizon and held out.
 
@@ -107,13 +124,36 @@ def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, f
     seeds paired; a horizon the cells cannot be paired on is left out.
     """
     out: dict[str, dict[str, float]] = {}
-    for label, horizon in HORIZONS:
-        d = paired(summary, a, b, horizon)
+    for label, horizon, key in _measures():
+        d = paired(summary, a, b, horizon, key)
         if d is not None:
             out[label] = d
-    d = paired(summary, a, b, held_out=HELD_OUT)
-    if d is not None:
-        out["held-out"] = d
+    return out
+
+
+def compare_change(
+    summary: Mapping[str, Any], first: tuple[str, str], second: tuple[str, str]
+) -> dict[str, dict[str, float]]:
+    """How a difference changes: `first`'s a - b minus `second`'s, seed by seed.
+
+    `first` and `second` are (a, b) pairs of cells, e.g. kp and rp in a noisy world and in
+    the exact one: the result is how much the noise moves kp's lead over rp, each seed's
+    lead in one compared with its own in the other. Per horizon and held out, as `compare`;
+    a measure on which fewer than two seeds have all four cells is left out.
+    """
+    from core.stats import paired_difference
+
+    names = (*first, *second)
+    if not all(summary.get(n, {}).get("seeds") for n in names):
+        return {}
+    out: dict[str, dict[str, float]] = {}
+    for label, horizon, key in _measures():
+        a1, b1, a2, b2 = (per_seed(summary[n], horizon, key) for n in names)
+        seeds = [x for x in a1 if x in b1 and x in a2 and x in b2]
+        if len(seeds) < 2:
+            continue
+        d = paired_difference([a1[x] - b1[x] for x in seeds], [a2[x] - b2[x] for x in seeds])
+        out[label] = {**d.diff.as_dict(), "p": d.p, "seeds": len(seeds)}
     return out
 
 

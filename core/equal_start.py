@@ -32,8 +32,6 @@ METHODS = ("dp-rare", "dp", "rp", "kp", "qlambda-hybrid")
 REFERENCE = "kp"
 """The method every other is compared with."""
 START_NAMES: dict[str, str] = {"table1": "Table I", "design": "kp's design"}
-DECLARED_MEASURES = (("all", "training"), ("held-out", "held out"))
-"""The measures of the declared comparisons: all training episodes, and frozen held out."""
 
 
 def own_start(condition: str) -> Start:
@@ -110,24 +108,22 @@ def summarise_equal_start(
     reference's start) and ``start`` (the method at the reference's start minus at its
     own); each a paired difference per horizon and held out.
     """
-    from core.cells import compare, declared_family, summarise_cells
+    from core.cells import (
+        DECLARED_MEASURES,
+        cell_figures,
+        compare,
+        declared_family,
+        summarise_cells,
+    )
 
     summary = summarise_cells(study.cells(), results, correct, camera)
-
-    def figures(name: str) -> dict[str, Any]:
-        s = summary[name]
-        return {
-            "success_1_10": s.get("success_horizons", {}).get("1-10"),
-            "success_rate": s.get("success_rate"),
-            "held_out": s.get("evaluation", {}).get("frozen"),
-        }
 
     ref = study.reference
     ref_own = own_start(ref)
     grid = {
         m: {
             "own_start": own_start(m),
-            **{s: figures(label(m, s)) for s in STARTS},
+            **{s: cell_figures(summary, label(m, s)) for s in STARTS},
             "start_effect": compare(summary, label(m, "design"), label(m, "table1")),
         }
         for m in study.methods

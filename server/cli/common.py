@@ -33,6 +33,7 @@ from server.reports.base import first_line
 if TYPE_CHECKING:
     from core.cells import Cell
     from core.experiment import Backend, TaskResult
+    from core.probe import ProbeResult
 
 Handler = Callable[[argparse.Namespace, IO[str], IO[str]], int]
 """What a command runs: its arguments, stdout and stderr in; the exit code out."""
@@ -392,3 +393,70 @@ def run_cells(
         "elapsed_s": elapsed,
         "ticks": sum(r.ticks for r in results),
     }
+
+
+def add_reference_study_arguments(
+    parser: argparse.ArgumentParser, conditions: str, out: Path, conditions_help: str = ""
+) -> None:
+    """What a study of conditions against a reference takes besides its own arguments.
+
+    --conditions (default `conditions`; `conditions_help` adds to its help), --reference,
+    the batch, the setup, --out (default `out`), --quiet, --eval-episodes, --untuned and
+    --no-probe.
+    """
+    parser.add_argument(
+        "--conditions",
+        default=conditions,
+        help=f"the conditions, comma-separated (default {conditions}){conditions_help}",
+    )
+    parser.add_argument(
+        "--reference",
+        default="kp",
+        help="the condition the others are compared with (default kp)",
+    )
+    add_batch_arguments(parser, jobs_help="local processes, or CPUs of a private Ray instance")
+    add_setup_arguments(parser)
+    parser.add_argument("--out", type=Path, default=out, help="output folder")
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+    add_study_arguments(parser)
+    parser.add_argument(
+        "--no-probe",
+        action="store_true",
+        help="do not judge what was learned with the placement probe (srlab probe)",
+    )
+
+
+def judge_learned(args: argparse.Namespace, err: Console, setup: Setup) -> ProbeResult | None:
+    """The placement probe of `setup` (`srlab probe`, cached), or None with --no-probe."""
+    if args.no_probe:
+        return None
+    from server.probe_cache import cached_probe
+
+    status = err.status("judging what was learned (srlab probe)")
+    with status if not args.quiet else nullcontext():
+        probed, _ = cached_probe(setup)
+    return probed
+
+
+def finish_study(
+    stdout: IO[str],
+    err: Console,
+    table: Table,
+    params: dict[str, Any],
+    paths: Sequence[Path],
+    results: Sequence[TaskResult],
+    *,
+    with_params: bool = False,
+) -> int:
+    """Print a study's table, what it ran and the files it wrote; the exit code.
+
+    1 if a task failed (each named, with its parameters when `with_params`), else 0.
+    """
+    console = print_table(stdout, table)
+    console.print(
+        f"{params['tasks']} tasks, {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
+        f"{params['where']}"
+    )
+    for path in paths:
+        console.print(f"wrote {path}")
+    return report_failures(err, results, params=with_params)

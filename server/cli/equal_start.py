@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 from typing import IO
@@ -12,11 +11,9 @@ from rich.console import Console
 from rich.table import Table
 
 from server.cli.common import (
-    add_batch_arguments,
-    add_setup_arguments,
-    add_study_arguments,
-    print_table,
-    report_failures,
+    add_reference_study_arguments,
+    finish_study,
+    judge_learned,
     run_cells,
     setup_of,
 )
@@ -38,26 +35,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         "at equal start and splits each difference of the conditions as they are into the "
         "method's part and the start's.",
     )
-    p.add_argument(
-        "--conditions",
-        default=METHODS,
-        help=f"the methods, comma-separated (default {METHODS}); each must start from "
-        "Table I or kp's design",
-    )
-    p.add_argument(
-        "--reference",
-        default="kp",
-        help="the method the others are compared with (default kp)",
-    )
-    add_batch_arguments(p, jobs_help="local processes, or CPUs of a private Ray instance")
-    add_setup_arguments(p)
-    p.add_argument("--out", type=Path, default=Path("results/equal-start"), help="output folder")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    add_study_arguments(p)
-    p.add_argument(
-        "--no-probe",
-        action="store_true",
-        help="do not judge what was learned with the placement probe (srlab probe)",
+    add_reference_study_arguments(
+        p, METHODS, Path("results/equal-start"), "; each must start from Table I or kp's design"
     )
     p.set_defaults(handler=equal_start_command)
 
@@ -75,13 +54,7 @@ def equal_start_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[st
     )
     err = Console(file=stderr, stderr=True)
     results, ran = run_cells(args, err, "equal-start", study.cells())
-    probed = None
-    if not args.no_probe:
-        from server.probe_cache import cached_probe
-
-        status = err.status("judging what was learned (srlab probe)")
-        with status if not args.quiet else nullcontext():
-            probed, _ = cached_probe(replace(setup, start=""))
+    probed = judge_learned(args, err, replace(setup, start=""))
     catalog = setup.catalog()
     camera = [s.name for s in catalog.stimuli_of_sensor(CAMERA_SENSOR)]
     summary = summarise_equal_start(study, results, probed.correct() if probed else None, camera)
@@ -106,11 +79,4 @@ def equal_start_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[st
         ]
         vs = summary["method"]["design"].get(m, {}).get("held-out")
         table.add_row(m, *figures, diff(vs) if m != study.reference else "")
-    console = print_table(stdout, table)
-    console.print(
-        f"{params['tasks']} tasks, {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
-        f"{params['where']}"
-    )
-    for path in paths:
-        console.print(f"wrote {path}")
-    return report_failures(err, results, params=False)
+    return finish_study(stdout, err, table, params, paths, results)

@@ -12,8 +12,7 @@ from rich.table import Table
 from server.cli.common import (
     add_study_arguments,
     add_task_arguments,
-    print_table,
-    report_failures,
+    finish_study,
     run_cells,
     setup_of,
 )
@@ -102,11 +101,4 @@ def teachers_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str])
                 fmt(lv["held_out"], pct=True),
                 *[diff(lv["vs"][ref].get("held-out")) for ref in study.references],
             )
-    console = print_table(stdout, table)
-    console.print(
-        f"{params['tasks']} tasks, {params['ticks']:,} ticks in {params['elapsed_s']:.1f} s on "
-        f"{params['where']}"
-    )
-    for path in paths:
-        console.print(f"wrote {path}")
-    return report_failures(err, results, params=True)
+    return finish_study(stdout, err, table, params, paths, results, with_params=True)

@@ -2,21 +2,18 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from core.brain.catalog import Catalog
 from core.conditions import STARTS
 from core.equal_start import START_NAMES, EqualStartStudy, label, own_start
 from core.experiment import TaskResult
-from server.reports.base import diff, failed_lines, fmt, head, row, study_document, write_summary
+from server.reports.base import diff, failed_lines, fmt, head, row
 from server.reports.declared import declared_section
-from server.reports.experiment import write_report
-from server.reports.plots import save, subplots, success_axes
+from server.reports.plots import grouped_bars, save, subplots, success_axes
+from server.reports.study import Part, write_study
 
 MEASURES = (("all", "training, all episodes"), ("held-out", "held-out, frozen"))
 """The figures the grid reports: the paired comparisons' keys and their titles."""
@@ -28,22 +25,19 @@ def plot_grid(path: Path, study: EqualStartStudy, summary: dict[str, Any]) -> No
     """Each method's success from each start, in training and held out (95% intervals)."""
     fig, axes = subplots(len(MEASURES), figsize=(12, 4.6), sharey=True)
     methods = list(study.methods)
-    x = np.arange(len(methods), dtype=float)
-    width = 0.38
     for ax, (measure, title) in zip(axes[0], MEASURES, strict=True):
-        for i, start in enumerate(STARTS):
-            stats = [summary["grid"][m][start][FIGURE_OF[measure]] or {} for m in methods]
-            y = np.array([s.get("mean", math.nan) for s in stats])
-            low = np.array([s.get("low", math.nan) for s in stats])
-            high = np.array([s.get("high", math.nan) for s in stats])
-            err = np.nan_to_num(np.array([y - low, high - y]))
-            ax.bar(
-                x + (i - 0.5) * width, y, width, yerr=err, capsize=3,
-                color=START_COLOURS[start], label=f"from {START_NAMES[start]}",
-            )  # fmt: skip
         own = [summary["grid"][m]["own_start"] for m in methods]
-        ax.set_xticks(
-            x, [f"{m}\n(own: {START_NAMES[o]})" for m, o in zip(methods, own, strict=True)]
+        grouped_bars(
+            ax,
+            [f"{m}\n(own: {START_NAMES[o]})" for m, o in zip(methods, own, strict=True)],
+            [
+                (
+                    f"from {START_NAMES[start]}",
+                    START_COLOURS[start],
+                    [summary["grid"][m][start][FIGURE_OF[measure]] for m in methods],
+                )
+                for start in STARTS
+            ],
         )
         ax.tick_params(axis="x", labelsize=8)
         success_axes(ax, xlabel="", criterion=False)
@@ -173,16 +167,23 @@ def write_equal_start_report(
     params: dict[str, Any],
 ) -> list[Path]:
     """Write the study's summary and plot into `out`, and each start's report beneath it."""
-    failed = [r for r in results if not r.ok]
-    doc = study_document(params, summary, results)
-    paths = write_summary(out, doc, summary_markdown(study, summary, params, failed), results)
-    plot = out / "equal_start.png"
-    plot_grid(plot, study, summary)
-    paths.append(plot)
-    for start in STARTS:
-        mine = [r for r in results if r.task.setup.start == start]
-        by_method = {m: summary["cells"][label(m, start)] for m in study.methods}
-        start_params = {**params, "start": start}
-        title = f"srlab equal-start: every method from {START_NAMES[start]}"
-        paths += write_report(out / start, mine, by_method, catalog, start_params, title)
-    return paths
+    parts = [
+        Part(
+            start,
+            [r for r in results if r.task.setup.start == start],
+            {m: summary["cells"][label(m, start)] for m in study.methods},
+            {**params, "start": start},
+            f"srlab equal-start: every method from {START_NAMES[start]}",
+        )
+        for start in STARTS
+    ]
+    return write_study(
+        out,
+        params,
+        summary,
+        results,
+        lambda failed: summary_markdown(study, summary, params, failed),
+        ("equal_start.png", lambda path: plot_grid(path, study, summary)),
+        catalog,
+        parts,
+    )

@@ -6,6 +6,8 @@ so a report never opens a window or needs a display.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -61,3 +63,28 @@ def success_axes(ax: Axes, *, xlabel: str = "episode", criterion: bool = True) -
     if criterion:
         ax.axhline(CRITERION_RATE, color="grey", linestyle=":", linewidth=1)
     ax.grid(alpha=0.3)
+
+
+def grouped_bars(
+    ax: Axes,
+    groups: Sequence[str],
+    series: Sequence[tuple[str, str, Sequence[Mapping[str, float] | None]]],
+    *,
+    scale: float = 1.0,
+) -> None:
+    """One bar per group and series, each with its 95% interval, the series side by side.
+
+    `series` are (label, colour, a figure per group with ``mean``, ``low`` and ``high``;
+    None or NaN: no bar); the figures are multiplied by `scale` (100: rates in points).
+    """
+    x = np.arange(len(groups), dtype=float)
+    width = 0.76 / len(series)
+    for i, (name, colour, stats) in enumerate(series):
+        figs = [s or {} for s in stats]
+        y = scale * np.array([s.get("mean", math.nan) for s in figs])
+        low = scale * np.array([s.get("low", math.nan) for s in figs])
+        high = scale * np.array([s.get("high", math.nan) for s in figs])
+        err = np.nan_to_num(np.array([y - low, high - y]))
+        offset = (i - (len(series) - 1) / 2) * width
+        ax.bar(x + offset, y, width, yerr=err, capsize=3, color=colour, label=name)
+    ax.set_xticks(x, list(groups))

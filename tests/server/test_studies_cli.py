@@ -1,4 +1,4 @@
-"""`srlab teachers`, `srlab equal-start`, `experiment --teacher` and `--start`: reports, errors."""
+"""`srlab teachers`, `equal-start`, `noise`, `experiment --teacher` and `--start`: reports."""
 
 from __future__ import annotations
 
@@ -75,6 +75,27 @@ def test_equal_start_writes_the_grid_and_each_starts_report(tmp_path: Path) -> N
 
 
 @pytest.mark.slow
+def test_noise_writes_both_perceptions_and_each_ones_report(tmp_path: Path) -> None:
+    argv = ["noise", "--conditions", "kp,sonar", "--signal", "given", *SMALL]
+    argv += ["--perception", "noisy,camera_miss_rate=0.5"]
+    assert main([*argv, "--no-probe", "--out", str(tmp_path)]) == 0
+    md = (tmp_path / "summary.md").read_text()
+    command = f"srlab {' '.join(argv)} --no-probe --out {tmp_path}"
+    assert md.splitlines()[:3] == ["# srlab noise", "", f"`{command}`"]
+    assert "perception.camera_miss_rate 0.5" in md and "](noise.png)" in md
+    assert (tmp_path / "noise.png").read_bytes().startswith(PNG_SIGNATURE)
+    doc = json.loads((tmp_path / "summary.json").read_text())
+    assert doc["params"]["noise"]["perception.camera_miss_rate"] == 0.5
+    assert set(doc["grid"]) == {"kp", "sonar"} and set(doc["change"]) == {"sonar"}
+    assert "## Pre-declared comparisons (Holm-corrected)" in md
+    assert "1. kp - sonar, noisy perception, training: " in md and "(Holm " in md
+    subs = {p: json.loads((tmp_path / p / "summary.json").read_text()) for p in ("exact", "noisy")}
+    assert "world_settings" not in subs["exact"]["params"]
+    assert "perception.camera_miss_rate 0.5" in subs["noisy"]["params"]["world_settings"]
+    assert subs["exact"]["conditions"]["kp"] != subs["noisy"]["conditions"]["kp"]
+
+
+@pytest.mark.slow
 def test_experiment_with_a_teacher_and_a_start_says_so_and_runs_them(tmp_path: Path) -> None:
     base = ["experiment", "--conditions", "rp", "--signal", "given", "--no-probe", *SMALL]
     assert main([*base, "--out", str(tmp_path / "perfect")]) == 0
@@ -102,9 +123,12 @@ def test_experiment_with_a_teacher_and_a_start_says_so_and_runs_them(tmp_path: P
         (["teachers", "--presets", "grumpy"], "unknown teacher 'grumpy'"),
         (["equal-start", "--conditions", "rp,kp,expert"], "'expert' starts from neither"),
         (["equal-start", "--conditions", "rp,dp"], "the reference 'kp' is not among"),
+        (["noise", "--perception", "exact"], "nothing to compare: name a noisy one"),
+        (["noise", "--perception", "camera_miss_rate=2"], r"camera_miss_rate must be in \[0, 1\]"),
+        (["noise", "--conditions", "rp,dp"], "the reference 'kp' is not among"),
     ],
 )
-def test_bad_teachers_and_starts_exit_2_naming_what_is_wrong(
+def test_bad_teachers_starts_and_noises_exit_2_naming_what_is_wrong(
     argv: list[str], message: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
     err = exits_2([*argv, "--seeds", "1", "--episodes", "1", "--out", str(tmp_path)], capsys)
