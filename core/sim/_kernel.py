@@ -36,7 +36,7 @@ from core.sim.sensing import (
     empty_channels,
 )
 
-__all__ = ["empty_channels", "ray_entry", "ray_exit", "sense", "wall_ranges"]
+__all__ = ["empty_channels", "ray_entry", "ray_exit", "residuals_at", "sense"]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -123,12 +123,12 @@ def _walls_along(ox: float, oy: float, dx: float, dy: float, outer: Any, inner: 
 
 
 @_jit
-def wall_ranges(x: float, y: float, th: float, g: Any, sonar_angles: Any, out: Any) -> None:
-    """Fill `out` with what each sonar would read at pose (x, y, th) off the map alone.
+def residuals_at(x: float, y: float, th: float, g: Any, sonar_angles: Any, out: Any) -> None:
+    """Set each sonar's residual in `out` from the map's prediction at pose (x, y, th).
 
-    The static walls only, noise-free, within the sonars' range: the prediction a sonar's
-    residual is measured against (`sense` uses the true pose; a robot whose odometry
-    drifts predicts from where it believes it is, `core.sim.perception`).
+    The residual is the prediction minus the reading (`out`'s sonars). `sense` measures the
+    residuals against the map from the true pose; a robot whose odometry drifts predicts
+    from where it believes it is (`core.sim.perception`).
     """
     outer = g[G_OUTER : G_OUTER + 4]
     inner = g[G_INNER : G_INNER + 4]
@@ -138,7 +138,7 @@ def wall_ranges(x: float, y: float, th: float, g: Any, sonar_angles: Any, out: A
         dx = math.cos(a)
         dy = math.sin(a)
         walls = _walls_along(x + mount * dx, y + mount * dy, dx, dy, outer, inner)
-        out[i] = min(walls, g[G_SONAR_RANGE])
+        out[8 + i] = min(walls, g[G_SONAR_RANGE]) - out[i]
 
 
 @_jit

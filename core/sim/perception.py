@@ -32,6 +32,7 @@ world is then bit for bit the exact one.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -48,8 +49,6 @@ _IMAGE_X = int(Channel.OBSTACLE_IMAGE_X)
 _ROBOT_LATERAL = int(Channel.LATERAL_OFFSET_M)
 _HEADING = int(Channel.HEADING_RAD)
 _HEADING_ERROR = int(Channel.HEADING_ERROR_RAD)
-_SONARS = slice(int(Channel.SONAR_0), int(Channel.SONAR_7) + 1)
-_RESIDUALS = slice(int(Channel.SONAR_0_RESIDUAL), int(Channel.SONAR_7_RESIDUAL) + 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,7 +101,7 @@ class NoisyPerception:
         self.config = config
         self._g = g
         self._sonar_angles = sonar_angles
-        self._walls = np.zeros(len(sonar_angles))
+        self._residuals_at: Callable[..., None] | None = None
         self._bearing_to_image = 1.0 / float(g[G_FOV_HALF])
         self._track_ticks = track_ticks
         self._rng = np.random.default_rng(0)
@@ -172,13 +171,14 @@ class NoisyPerception:
         self, out: np.ndarray[Any, np.dtype[np.float64]], x: float, y: float
     ) -> None:
         """Each sonar's residual against the map as seen from the drifted pose, in place."""
-        from core.sim._kernel import wall_ranges  # numba: loaded with the first reading
+        if self._residuals_at is None:
+            from core.sim._kernel import residuals_at  # numba: loaded with the first reading
 
+            self._residuals_at = residuals_at
         heading = float(out[_HEADING])
         # The corridor's direction (the leg the lateral offset is measured across); the
         # drift moves the believed position along its left normal, as the offset is + left.
         corridor = heading - float(out[_HEADING_ERROR])
         believed_x = x - self._drift * math.sin(corridor)
         believed_y = y + self._drift * math.cos(corridor)
-        wall_ranges(believed_x, believed_y, heading, self._g, self._sonar_angles, self._walls)
-        out[_RESIDUALS] = self._walls - out[_SONARS]
+        self._residuals_at(believed_x, believed_y, heading, self._g, self._sonar_angles, out)
