@@ -32,14 +32,13 @@ D4. ``--runs`` (32) realtime runs at 20 Hz under ``--rate`` req/s of mixed load 
    them for ``--seconds``: tick lateness p99 and max (worst run) and overruns over all runs
    (goals: <= 5 ms, <= 25 ms, 0).
 
-With ``--part engines`` it measures D3 and D4 with the engines on the service's loop, on
-a thread of their own (``SRLAB_ENGINE_THREAD``, `server/engine_loop.py`) and in a process
-of their own (``SRLAB_ENGINE_PROCESS``, `server/engine_process.py`), a fresh server for
-each, alternated ``--rounds`` times, and prints them side by side (medians over the
-rounds). ``--part costs`` measures what a request of each kind in D4's mix costs the
-server in CPU, one at a time, and what the mix at ``--rate`` would cost it in cores.
-``--engines`` picks the placement of every other part's servers (default: the engines'
-process, as ``srlab serve``).
+With ``--part engines`` it measures D3 and D4 with the engines on the service's loop
+(``SRLAB_ENGINES=local``) and in a process of their own (``SRLAB_ENGINES=process``,
+`server/runtime/process.py`), a fresh server for each, alternated ``--rounds`` times,
+and prints them side by side (medians over the rounds). ``--part costs`` measures what a
+request of each kind in D4's mix costs the server in CPU, one at a time, and what the mix
+at ``--rate`` would cost it in cores. ``--engines`` picks the placement of every other
+part's servers (default: the engines' process, as ``srlab serve``).
 
 Open loop: every request has a scheduled send time on a fixed-rate grid, whether earlier
 ones were answered or not, and its latency counts from that time; a slow answer cannot hide
@@ -1417,23 +1416,20 @@ async def one_run_part(args: argparse.Namespace, server: Server) -> None:
     await many_runs(args, server)
 
 
-PLACEMENTS = ("loop", "thread", "process")
-"""Where a server's engines tick: the service's loop, a thread, a process of their own."""
+PLACEMENTS = ("loop", "process")
+"""Where a server's engines tick: the service's loop, a process of their own."""
 
 
 def placement_env(placement: str) -> dict[str, str]:
     """The settings that put a server's engines there."""
     return {
-        "SRLAB_ENGINE_THREAD": str(placement == "thread").lower(),
-        "SRLAB_ENGINE_PROCESS": str(placement == "process").lower(),
+        "SRLAB_ENGINES": "process" if placement == "process" else "local",
     }
 
 
 def placement_name(placement: str) -> str:
     """How the comparison names where the engines tick."""
-    return {"loop": "the service's loop", "thread": "their own thread"}.get(
-        placement, "their own process"
-    )
+    return "the service's loop" if placement == "loop" else "their own process"
 
 
 async def many_runs(args: argparse.Namespace, server: Server) -> dict[str, float]:
@@ -1537,7 +1533,7 @@ def main() -> None:
         choices=["all", "load", "day", "runs", "engines", "costs"],
         default="all",
         help="the load figures (1-2), the long day's (D1-D4), both (default), D4 alone, "
-        "D3 and D4 with the engines on the service's loop, their own thread and process, or "
+        "D3 and D4 with the engines on the service's loop and in their own process, or "
         "the server's CPU per request of each kind in D4's mix",
     )
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
@@ -1545,9 +1541,9 @@ def main() -> None:
         "--engines",
         choices=list(PLACEMENTS),
         default="process",
-        help="where the servers tick their runs: the service's loop, a thread "
-        "(SRLAB_ENGINE_THREAD) or a process (SRLAB_ENGINE_PROCESS, the default, as srlab "
-        "serve) of their own; --part engines runs all three",
+        help="where the servers tick their runs: the service's loop (SRLAB_ENGINES=local) "
+        "or a process of their own (SRLAB_ENGINES=process, the default, as srlab serve); "
+        "--part engines runs both",
     )
     parser.add_argument("--episodes", type=int, default=10_000, help="D2's stored episodes")
     parser.add_argument("--old-ticks", type=int, default=200_000, help="D1's old run's age")

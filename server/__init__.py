@@ -1,15 +1,15 @@
 """srlab's adapters around the pure core: the HTTP service, storage, the 3D view, the CLI.
 
 The rooms: `api/` (the HTTP API's routes and its contract), `services/` (live network
-edits), `persistence/` (SQLAlchemy, migrations, the store process), `viewer/` (the viser
+edits), `persistence/` (SQLAlchemy, migrations, the store process), `runtime/` (the runs'
+host, where they tick, and the service's side of them), `viewer/` (the viser
 3D view), `cli/` (the `srlab` command, a module a command), `reports/` (the markdown,
 JSON and plots the experiment commands write) and `backends/` (where experiment tasks
 run besides local processes: Ray).
 
 At the top, the service's own wiring: `main.py` (`create_app`), `bootstrap.py` (what the
 service is made of), `config.py` (settings), `schemas.py` (the HTTP models), `asgi.py`,
-`engines.py` (the runs of this process), `live_reads.py` (what routes and the 3D view read
-from a live run or send it, run where it ticks), `serve.py` (uvicorn), the protections of both
+`serve.py` (uvicorn), the protections of both
 ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
 and small helpers of the service and the commands: `runspec.py` (a run's spec from a
 request, a command line or a row), `probe_cache.py` (the placement probe's results on

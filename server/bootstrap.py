@@ -2,8 +2,8 @@
 
 `create_app`'s lifespan calls `service(settings, storage)`: storage first (SQLAlchemy in
 this process, or in a store process as `srlab serve` runs it), then the runs' manager
-(the engines on an event loop of this process, or in a process of their own:
-`server.engine_process`), the reward rate limiter and the 3D view over it. Tests give
+(`server.runtime`: the runs' host on this process's event loop, or in a process of its
+own), the reward rate limiter and the 3D view over it. Tests give
 another `storage` factory, e.g. the in-memory fakes of `tests/fakes.py`, and drive the
 same routes and engines.
 """
@@ -21,12 +21,10 @@ import anyio.to_thread
 from core.setup import Setup
 from server.api.deps import AppState
 from server.config import Settings
-from server.engine_loop import EngineLoop
-from server.engine_process import ProcessEngines
-from server.engines import EngineManager, Engines
 from server.guard import SitePolicy
 from server.persistence.storage import StorageFactory, open_storage
 from server.ratelimit import RateLimiter
+from server.runtime import open_runs
 from server.tuning import step_back, warm_up
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
@@ -42,42 +40,19 @@ async def service(
     On the way out: the 3D view closes, every run is interrupted at a tick boundary (and
     stays resumable), then storage closes after the runs' last writes.
     """
-    if settings.engine_process and storage is not open_storage:
+    if settings.engines == "process" and storage is not open_storage:
         # The engines' process opens its own, from the settings: it would not be this one.
-        raise ValueError("SRLAB_ENGINE_PROCESS opens storage by SRLAB_DATABASE_URL only")
+        raise ValueError("SRLAB_ENGINES=process opens storage by SRLAB_DATABASE_URL only")
     opened = await asyncio.to_thread(storage, settings)
     async with contextlib.AsyncExitStack() as stack:
-        # Undone in reverse: the 3D view, the runs, the engines' loop or process, then storage.
+        # Undone in reverse: the 3D view, the runs, the engines' process, then storage.
         stack.push_async_callback(asyncio.to_thread, opened.close)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
-        manager: Engines
-        if settings.engine_process:
-            remote = ProcessEngines(
-                opened.runs,
-                max_streams=settings.max_streams,
-                max_streams_per_run=settings.max_streams_per_run,
-            )
-            await remote.start_process(
-                settings.model_dump(include={"database_url", "store_process", "max_runs"})
-            )
-            stack.push_async_callback(remote.close)
+        manager = await open_runs(settings, opened.runs, stack)
+        if settings.engines == "process":
             step_back(settings.service_nice)
-            manager = remote
-        else:
-            engine_loop = EngineLoop(thread=settings.engine_thread)
-            await engine_loop.start()
-            stack.push_async_callback(engine_loop.stop)
-            manager = EngineManager(
-                opened.runs,
-                catalog,
-                settings.max_runs,
-                loop=engine_loop,
-                max_streams=settings.max_streams,
-                max_streams_per_run=settings.max_streams_per_run,
-            )
-        stack.push_async_callback(manager.shutdown)
         # The kernel only where the runs tick.
-        await warm_up(kernel=not settings.engine_process)
+        await warm_up(kernel=settings.engines == "local")
         # Routes run their blocking work in threads, which take the GIL from the event loop
         # that paces realtime ticks. Starlette allows 40 at once; under 64 busy connections
         # that delayed ticks by tens of ms. As many as asyncio's own default executor keeps

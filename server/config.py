@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import ipaddress
 import json
-from typing import Annotated
+from typing import Annotated, Literal
 from urllib.parse import urlsplit
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from server.persistence.db import DEFAULT_DATABASE_URL
@@ -55,16 +55,11 @@ class Settings(BaseSettings):
             that paces realtime ticks. `srlab serve` turns it on unless
             ``SRLAB_STORE_PROCESS`` says otherwise; `create_app` alone keeps storage in the
             service's process (quick to start, as tests want).
-        engine_thread: tick the runs on an event loop of their own, in a thread of its
-            own (`server.engine_loop`): a burst of connections (hundreds of event streams
-            refused at once) then delays a tick by little more than the interpreter's
-            switch interval, but under steady load the engines' thread waits for the GIL
-            at every wake-up and ticks run later than on the service's loop (the default;
-            `bench/service.py --part engines` measures both).
-        engine_process: tick the runs in a process of their own
-            (`server.engine_process`): the ticks get a GIL and a core of their own, and
-            every call, read and event crosses a pipe. Not with `engine_thread`.
-        service_nice: with `engine_process`, how far the service's own processes (HTTP,
+        engines: where the runs tick: ``local``, on the service's own event loop (quick
+            to start, as tests want: `create_app`'s default), or ``process``, in a process
+            of their own (`server.runtime.process`), where the ticks get a GIL and a core
+            of their own and every message crosses a pipe (`srlab serve`'s default).
+        service_nice: with the engines in a process, how far the service's own processes (HTTP,
             the 3D view and their store process) step back for the engines' process when
             the machine is busy: a nice increment, 0-19, applied once the engines' process
             runs (`server.tuning.step_back`). `srlab serve` makes it 10 unless the
@@ -93,8 +88,7 @@ class Settings(BaseSettings):
     viser_max_viewers: int = Field(16, ge=1)
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
     store_process: bool = False
-    engine_thread: bool = False
-    engine_process: bool = False
+    engines: Literal["local", "process"] = "local"
     service_nice: int = Field(0, ge=0, le=19)
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
@@ -109,14 +103,6 @@ class Settings(BaseSettings):
             except json.JSONDecodeError as e:
                 raise ValueError(f"not a JSON list: {e}") from None
         return [item.strip() for item in v.split(",") if item.strip()]
-
-    @model_validator(mode="after")
-    def _one_placement(self) -> Settings:
-        if self.engine_thread and self.engine_process:
-            raise ValueError(
-                "SRLAB_ENGINE_THREAD and SRLAB_ENGINE_PROCESS exclude each other: choose one"
-            )
-        return self
 
     @field_validator("token")
     @classmethod

@@ -32,10 +32,10 @@ from server.api.strictjson import StrictJson
 from server.asgi import cut_off, send_error
 from server.bootstrap import service
 from server.config import Settings
-from server.engines import TooManyRunsError
 from server.guard import CrossSiteGuard, SitePolicy
 from server.persistence.networks import StaleVersionError
 from server.persistence.storage import StorageFactory, open_storage
+from server.runtime import TooManyRunsError
 from server.timeouts import BodyTimeout
 
 log = logging.getLogger("srlab.server")

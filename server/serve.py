@@ -75,9 +75,9 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         overrides["store_process"] = True
     # The runs tick in a process of their own (a GIL and a core apart from HTTP, the 3D
     # view and the store: `bench.service`, docs/benchmarks.md), unless the environment
-    # puts them elsewhere.
-    if not {"SRLAB_ENGINE_PROCESS", "SRLAB_ENGINE_THREAD"} & os.environ.keys():
-        overrides["engine_process"] = True
+    # keeps them on the service's loop.
+    if "SRLAB_ENGINES" not in os.environ:
+        overrides["engines"] = "process"
     # With the engines in a process of their own, the ticks come first on a busy machine.
     if "SRLAB_SERVICE_NICE" not in os.environ:
         overrides["service_nice"] = SERVICE_NICE

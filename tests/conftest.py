@@ -295,7 +295,7 @@ SLOW_MODULES = frozenset(
         "server/test_benches.py",  # each bench in a subprocess
         "server/test_e2e_serve.py",
         "server/test_listening_sockets.py",
-        "server/test_engine_process.py",  # each test starts an engines' process
+        "server/test_process_link.py",  # each test starts an engines' process
         "server/test_proxy.py",
         "server/test_ray_backend.py",
         "server/test_schemathesis.py",

@@ -1,11 +1,10 @@
-"""What the service reads of a live run: `RunView`, a read-only window on one engine.
+"""What a query reads of a live run: `RunView`, a read-only window on one engine.
 
-Routes, the event stream and the 3D view read a run through its view and control it
-through the engine's methods (`reward`, `edit`, `pause`, `stop`, `subscribe`, ...); none
+The service reads a run through the queries its host answers on this view and through the
+`RunState` built from it (`core.engine.messages`), and controls it through commands; none
 reaches into the simulation. A view reads the live state, not a copy: read it on the
 engine's event loop, where the tick and reward tasks change that state only between awaits,
-so what is read between two awaits is one consistent state (the service, whose loop is
-another, reads through `server.engine_loop.LiveRun.read`, which runs its reader there).
+so what is read between two awaits is one consistent state.
 """
 
 from __future__ import annotations

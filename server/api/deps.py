@@ -17,8 +17,8 @@ from fastapi import Depends, HTTPException, Request, status
 from core.brain.catalog import Catalog
 from core.ports import NetworkRepository, RunQueries
 from server.config import Settings
-from server.engines import Engines
 from server.ratelimit import RateLimiter
+from server.runtime import Runs
 
 if TYPE_CHECKING:
     from server.persistence.storage import DatabaseProbe
@@ -34,7 +34,7 @@ class AppState:
     database: DatabaseProbe
     store: RunQueries
     networks: NetworkRepository
-    engines: Engines
+    engines: Runs
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
     run_networks: dict[int, int | None] = field(default_factory=dict)
@@ -50,7 +50,7 @@ async def _state(request: Request) -> AppState:
 StateDep = Annotated[AppState, Depends(_state)]
 
 
-async def _engines(state: StateDep) -> Engines:
+async def _engines(state: StateDep) -> Runs:
     return state.engines
 
 
@@ -62,7 +62,7 @@ async def _networks(state: StateDep) -> NetworkRepository:
     return state.networks
 
 
-EnginesDep = Annotated[Engines, Depends(_engines)]
+EnginesDep = Annotated[Runs, Depends(_engines)]
 NetworksDep = Annotated[NetworkRepository, Depends(_networks)]
 StoreDep = Annotated[RunQueries, Depends(_store)]
 

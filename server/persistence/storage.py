@@ -1,7 +1,7 @@
 """How a process opens the service's storage: SQLAlchemy in it, or in a store process.
 
 The service's composition root (`server.bootstrap`) and the engines' process
-(`server.engine_process`) both open storage from the settings; this module is what they
+(`server.runtime.process`) both open storage from the settings; this module is what they
 share, without the HTTP side the root also builds.
 """
 

@@ -21,14 +21,14 @@ from core.commands import EditAssociation
 from core.errors import RunStateError, StorageError
 from core.networks import AssociationChange, NetworkEdit, Precondition, StoredNetwork
 from core.ports import ACTIVE, NetworkPair, NetworkRepository
-from server.engines import Live
+from server.runtime import LiveRun as Live
 
 log = logging.getLogger("srlab.networks")
 _T = TypeVar("_T")
 
 
 class Engines(Protocol):
-    """The service's runs (`server.engines.Engines`)."""
+    """The service's runs (`server.runtime.Runs`)."""
 
     def engines(self) -> Iterable[Live]:
         """Every engine this process has."""

@@ -19,9 +19,9 @@ from core.brain.catalog import Catalog
 from core.ports import RunQueries
 from core.sim.world import WorldConfig
 from core.worlds import load_world
-from server.engines import Engines
 from server.guard import SitePolicy
 from server.ratelimit import RateLimiter
+from server.runtime import Runs as Engines
 from server.viewer.control import Controller
 from server.viewer.gate import MAX_VIEWERS, Gate, Peer
 from server.viewer.inbound import quiet_malformed

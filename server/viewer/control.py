@@ -15,19 +15,20 @@ import contextlib
 import logging
 import time
 from dataclasses import replace
-from operator import methodcaller
 
 from core.brain.catalog import Catalog
 from core.commands import RewardSource
 from core.engine import StatusChanged, SubscriptionClosed, TickPublished, check_hz
+from core.engine.messages import Latest, LatestTick, SetRate
 from core.errors import CoreError
 from core.events import EpisodeEnded
 from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
 from core.sim.world import WorldConfig
 from core.simulation import Snapshot
-from server.engines import Engines, Live, RunLetGo
-from server.live_reads import latest
 from server.ratelimit import RateLimiter
+from server.runtime import LiveRun as Live
+from server.runtime import RunLetGo
+from server.runtime import Runs as Engines
 from server.viewer.render import MAX_HZ, REWARD_NOTE, run_label
 from server.viewer.replay import ReplayClock, load_replay
 from server.viewer.scene import TickView
@@ -414,11 +415,11 @@ class Controller:
     async def _show_now(self, live: Live) -> None:
         """Push the run's latest tick (none before its first episode, or once it ended)."""
         try:
-            now = await live.read(latest)
+            now: LatestTick | None = await live.ask(Latest())
         except RunLetGo:  # ended there while the read was on its way
             return
         if now is not None:
-            self.inbox.push(tick_view(live, *now))
+            self.inbox.push(tick_view(live, now.snapshot, now.totals, now.kp))
 
     async def _change_rate(self, hz: float) -> None:
         st = self.state
@@ -430,7 +431,7 @@ class Controller:
         if live.spec.mode is not Mode.REALTIME:
             raise ValueError("a fast run has no tick rate to change")
         check_hz(hz)  # ValueError (shown) out of HZ_MIN..HZ_MAX
-        await live.control(methodcaller("set_rate", hz))
+        await live.send(SetRate(hz))
         self._publish(live=self._live_info(st.run_id), notice=f"Tick rate set to {hz:g} Hz")
 
     async def _reward(self, value: float, client: int | None = None) -> None:

@@ -44,7 +44,7 @@ DEADLINE_S = 120.0
 def store_processes(service: int) -> dict[str, int]:
     """The store processes of a `srlab serve` by whose they are (none while one is down)."""
     found = children(service)
-    (engines,) = [pid for pid, cmd in found.items() if "server.engine_process" in cmd]
+    (engines,) = [pid for pid, cmd in found.items() if "server.runtime.process" in cmd]
     stores = {}
     for whose, parent in (("service's", found), ("engines'", children(engines))):
         pids = [pid for pid, cmd in parent.items() if "spawn_main" in cmd]

@@ -30,8 +30,9 @@ async def test_create_run_with_a_world_and_sensors_keeps_their_names(tmp_path: P
         assert (run["world"], run["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
         assert app.state.srlab.engines.get(run["id"]) is None  # created: in storage only
         assert (await client.post(f"/api/runs/{run['id']}/start")).status_code == 200
-        live = app.state.srlab.engines.get(run["id"])
-        definition, config = await live.read(lambda v: (v.catalog.definition, v.world_config))
+        engine = app.state.srlab.engines.link.engine(run["id"])  # the local host's
+        view = engine.view()
+        definition, config = view.catalog.definition, view.world_config
         assert definition == OTHER_SENSORS
         assert config == load_world(OTHER_WORLD).config
         await client.post(f"/api/runs/{run['id']}/stop")
@@ -89,9 +90,10 @@ async def test_a_run_resumed_by_another_service_keeps_its_world_and_sensors(
         r = await client.post(f"/api/runs/{run['id']}/start")
         assert r.status_code == 200, r.text
         assert (r.json()["world"], r.json()["sensors"]) == (OTHER_WORLD, OTHER_SENSORS)
-        live = app.state.srlab.engines.get(run["id"])
+        engine = app.state.srlab.engines.link.engine(run["id"])  # the local host's
         preset = load_world(OTHER_WORLD).config
-        definition, config = await live.read(lambda v: (v.catalog.definition, v.world_config))
+        view = engine.view()
+        definition, config = view.catalog.definition, view.world_config
         assert definition == OTHER_SENSORS
         assert config == preset
         assert config.track.obstacle == preset.track.obstacle

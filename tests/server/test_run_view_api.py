@@ -12,7 +12,8 @@ from apphelpers import client_for, create, settings_for, until
 
 from core.errors import RunStateError
 from server.api.routes.events import encode
-from server.engines import EngineManager
+from server.runtime import Runs
+from server.runtime.local import LocalLink
 from server.schemas import TickEvent
 
 pytestmark = pytest.mark.anyio
@@ -72,10 +73,10 @@ async def test_steps_asked_together_each_run_one_tick(tmp_path: Path) -> None:
 async def test_a_pending_step_is_answered_when_the_run_stops(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, app):
         run_id = await _paused_realtime_run(client)
-        manager: EngineManager = app.state.srlab.engines
-        live = manager.get(run_id)
-        assert live is not None
-        engine = live.engine
+        runs: Runs = app.state.srlab.engines
+        assert isinstance(runs.link, LocalLink)
+        engine = runs.link.engine(run_id)
+        assert engine is not None
 
         async def step_then_stop() -> int:  # on the engines' loop, where the run ticks
             step = asyncio.ensure_future(engine.step())
@@ -83,7 +84,7 @@ async def test_a_pending_step_is_answered_when_the_run_stops(tmp_path: Path) -> 
             engine.stop()
             return await step
 
-        step = asyncio.create_task(manager.loop.run(step_then_stop()))
+        step = asyncio.create_task(step_then_stop())
         with pytest.raises(RunStateError, match="ended before the step"):
             await step
         await until(client, run_id, "stopped")

@@ -11,8 +11,9 @@ import pytest
 from apphelpers import client_for, create, settings_for, until
 
 from core.engine import RunEngine
+from core.engine.messages import state_of
 from core.ports import RunStatus
-from server.live_reads import run_of_view
+from server.runtime.reads import run_of_state
 from server.schemas import EpisodeDetail
 
 pytestmark = pytest.mark.anyio
@@ -208,9 +209,10 @@ async def test_a_run_that_has_ended_has_no_live_figures_while_its_engine_is_stil
     async with client_for(settings_for(tmp_path)) as (client, app):
         run = await create(client, condition="innate", episodes=1)
         engine = RunEngine.restore(run["id"], app.state.srlab.store)
-        assert run_of_view(engine.view()).live is not None  # created: starting
+        public = run_of_state(engine.spec, state_of(engine.view(), 1))
+        assert public.live is not None  # created: starting
         assert await engine.run() == RunStatus.FINISHED
-        held = run_of_view(engine.view())
+        held = run_of_state(engine.spec, state_of(engine.view(), 1))
         stored = (await client.get(f"/api/runs/{run['id']}")).json()
     assert (held.status, held.live) == ("finished", None)
     assert held.model_dump(mode="json") == stored

@@ -10,7 +10,7 @@ import httpx
 import pytest
 from apphelpers import client_for, create, settings_for
 
-from server.engines import EngineManager
+from server.runtime import Runs
 
 pytestmark = pytest.mark.anyio
 
@@ -80,7 +80,7 @@ async def test_another_sites_page_gets_403_and_holds_no_stream_slot(tmp_path: Pa
 
 async def _follow(
     client: httpx.AsyncClient,
-    engines: EngineManager,
+    engines: Runs,
     run_id: int,
     headers: dict[str, str] | None = None,
 ) -> list[str]:

@@ -95,13 +95,13 @@ async def test_a_watched_live_run_is_drawn_and_an_unwatched_one_costs_nothing(
     async with client_for(settings) as (client, app):
         viewer = viewer_of(app)
         run_id = await start_run(client, condition="kp", mode="realtime", hz=50, seed=3)
-        engine = app.state.srlab.engines.get(run_id)
+        engine = app.state.srlab.engines.link.engine(run_id)  # the local host's
         await asyncio.sleep(0.2)
-        assert engine.engine.view().tick_watchers == 0  # nobody watches yet
+        assert engine.view().tick_watchers == 0  # nobody watches yet
         viewer.controller.post(ClientsChanged(1))
         r = viewer.renderer
         await until(lambda: r.drawn is not None and r.drawn.tick > 5, what="live ticks drawn")
-        assert engine.engine.view().tick_watchers == 1
+        assert engine.view().tick_watchers == 1
         assert viewer.controller.state.run_id == run_id  # the live run was picked
         drawn = r.drawn
         assert drawn is not None and drawn.run_id == run_id and drawn.behaviour
@@ -115,7 +115,7 @@ async def test_a_watched_live_run_is_drawn_and_an_unwatched_one_costs_nothing(
         # At most 30 frames a second (the throttle), and some were drawn.
         assert 0 < r.frames - first <= 0.5 * 30 + 2
         viewer.controller.post(ClientsChanged(0))
-        await until(lambda: engine.engine.view().tick_watchers == 0, what="the subscription")
+        await until(lambda: engine.view().tick_watchers == 0, what="the subscription")
         await client.post(f"/api/runs/{run_id}/stop")
 
 

@@ -122,7 +122,7 @@ async def compare_runs(
     ended: list[bool] = []
     for r in summaries.values():
         live = engines.get(r.id)
-        done.append((await live.totals()).episodes if live is not None else r.totals.episodes)
+        done.append(live.state.totals.episodes if live is not None else r.totals.episodes)
         ended.append((live.status if live is not None else r.status) in _ENDED)
     horizon = min(*done, MAX_EPISODES)
     complete = all(ended)

@@ -19,8 +19,8 @@ from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.errors import ErrorPublic
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
-from server.engines import TooManyStreamsError
 from server.guard import SitePolicy
+from server.runtime import TooManyStreamsError
 
 router = resource_router("/runs/{run_id}/events", tag="events")
 HEARTBEAT_S = 15.0

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from functools import partial
-
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
@@ -14,8 +12,7 @@ from core.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
-from server.engines import read_live
-from server.live_reads import kp_of_view, not_kp
+from server.runtime.reads import InspectKp, not_kp
 from server.schemas import (
     KpAssociationPublic,
     KpPublic,
@@ -68,7 +65,7 @@ async def get_run_kp(
     in the running engine only); a run whose condition does not propagate answers
     `kp: false` with a `reason`. 404 for an unknown run.
     """
-    view = await read_live(engines, run_id, partial(kp_of_view, run_id))
+    view: KpPublic | None = await engines.ask(run_id, InspectKp())
     if view is not None:
         return view
     run = await io(store.run_summary, run_id)

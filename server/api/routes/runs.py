@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from functools import partial
 from typing import Annotated
 
 from fastapi import HTTPException, Path, Query, Request, Response, status
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
 
-from core.engine import RunEngine
+from core.engine.messages import Command, Pause, Resume, SetRate, Stop
 from core.errors import UnknownNameError
 from core.ports import StoredRun
 from core.sim.track import TrackGeometry
@@ -20,9 +18,9 @@ from core.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
-from server.engines import Live, read_live
-from server.live_reads import Guarded, run_of_view, run_public, set_rate
 from server.runspec import run_spec
+from server.runtime import LiveRun
+from server.runtime.reads import run_of_state, run_public
 from server.schemas import (
     AssociationPublic,
     EpisodeDetail,
@@ -53,9 +51,9 @@ def _of_stored(run: StoredRun) -> RunPublic:
 
 
 async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
-    view = await read_live(engines, run_id, run_of_view)
-    if view is not None:
-        return view
+    live = engines.get(run_id)
+    if live is not None:
+        return run_of_state(live.spec, live.state)
     # Database work runs in a thread: the event loop also paces realtime ticks.
     return _of_stored(await io(store.run_summary, run_id))
 
@@ -108,8 +106,8 @@ async def list_runs(
     page, total = await io(store.run_summaries, offset, limit)
     data = []
     for r in page:
-        view = await read_live(engines, r.id, run_of_view)
-        data.append(view if view is not None else _of_stored(r))
+        live = engines.get(r.id)
+        data.append(run_of_state(live.spec, live.state) if live is not None else _of_stored(r))
     return RunsPublic(data=data, count=total)
 
 
@@ -131,7 +129,7 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     return await _run(store, engines, run_id)
 
 
-def _live(engines: EnginesDep, run_id: int) -> Live:
+def _live(engines: EnginesDep, run_id: int) -> LiveRun:
     live = engines.get(run_id)
     if live is None:
         raise HTTPException(status.HTTP_409_CONFLICT, f"run {run_id} is not running here")
@@ -139,36 +137,28 @@ def _live(engines: EnginesDep, run_id: int) -> Live:
 
 
 async def _control(
-    run_id: int,
-    store: StoreDep,
-    engines: EnginesDep,
-    allowed: tuple[str, ...],
-    action: Callable[[RunEngine], str | None],
+    run_id: int, store: StoreDep, engines: EnginesDep, command: Command
 ) -> RunPublic:
-    """Apply `action` to a live run whose status is one of `allowed` (409 otherwise).
+    """Send a control to a live run (409 when its status forbids it: `perform`).
 
-    The status is checked and the action taken in one call on the engines' loop, so the
-    run cannot change status in between. An action refusing answers why (a 409's message).
+    The status is checked and the control applied in one step where the run ticks, so the
+    run cannot change status in between.
     """
     await io(store.run_summary, run_id)
-    live = _live(engines, run_id)
-
-    refused = await live.control(Guarded(run_id, allowed, action))
-    if refused is not None:
-        raise HTTPException(status.HTTP_409_CONFLICT, refused)
+    await _live(engines, run_id).send(command)
     return await _run(store, engines, run_id)
 
 
 @router.post("/{run_id}/pause", dependencies=[WriteGuard])
 async def pause_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Stop ticking until resumed."""
-    return await _control(run_id, store, engines, ("running",), RunEngine.pause)
+    return await _control(run_id, store, engines, Pause())
 
 
 @router.post("/{run_id}/resume", dependencies=[WriteGuard])
 async def resume_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """Tick again after a pause."""
-    return await _control(run_id, store, engines, ("paused",), RunEngine.resume)
+    return await _control(run_id, store, engines, Resume())
 
 
 @router.post(
@@ -196,8 +186,7 @@ async def set_run_rate(
     run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
 ) -> RunPublic:
     """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
-    rate = partial(set_rate, body.hz)
-    return await _control(run_id, store, engines, ("running", "paused"), rate)
+    return await _control(run_id, store, engines, SetRate(body.hz))
 
 
 def world_public(name: str) -> RunWorldPublic:
@@ -263,7 +252,7 @@ async def stop_run(
     ended within 10 s (storage slow to take its last writes) gets 202 with its status as
     now; it ends all the same, and GET /api/runs/{id} says when.
     """
-    await _control(run_id, store, engines, ("running", "paused"), RunEngine.stop)
+    await _control(run_id, store, engines, Stop())
     if not await engines.ended(run_id, STOP_WAIT_S):
         response.status_code = status.HTTP_202_ACCEPTED
     return await _run(store, engines, run_id)

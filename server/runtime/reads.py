@@ -1,25 +1,23 @@
-"""What the service reads from a live run, and the controls it sends: run on the engines' loop.
+"""What the service reads of its runs: their public state from a `RunState`, and the KP inspector.
 
-`LiveRun.read` and `LiveRun.control` take a function of the run. With the engines in a
-process of their own, the function is pickled there and unpickling it imports its module.
-These functions live here, in a module that imports neither FastAPI nor viser, and the
-engines' process loads it at its start (`server.engine_process.PRELOADED`): a route's first
-read of a run used to import its route module, FastAPI with it, on the engines' loop,
-holding every ticking run for some 170 ms (three overruns of a 20 Hz run).
+`run_of_state` answers `GET /api/runs/{id}` from the run's last `RunState`, without asking
+the run. The KP inspector is a query (`InspectKp`): its handler runs where the run ticks,
+on its view, between two steps of its tasks, and answers a value; `QUERIES` is what a
+`RunHost` answers beyond the core's own queries.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.conditions import CONDITIONS
-from core.engine import RunEngine, RunView
-from core.errors import SimulationStateError
-from core.ports import NOT_ENDED, Mode, RunSpec, RunTotals
-from core.simulation import Snapshot
+from core.engine import RunView
+from core.engine.messages import Query, RunState
+from core.ports import NOT_ENDED, RunSpec, RunTotals
+from server.runtime.host import QueryHandler
 from server.schemas import (
     KpAssociationPublic,
     KpPerceptPublic,
@@ -39,19 +37,19 @@ def _ms(x: float) -> float | None:
     return None if math.isnan(x) else x * 1000
 
 
-def live_state(view: RunView) -> LiveState:
+def live_state(state: RunState) -> LiveState:
     """A running run's live figures."""
-    stats = view.stats
+    figures = state.figures
     return LiveState(
-        tick=view.tick,
-        episode=view.episode,
-        hz=view.hz,
-        ticks_run=stats.ticks,
-        lateness_p99_ms=_ms(stats.lateness_s.percentile(99)),
-        lateness_max_ms=_ms(stats.lateness_s.max),
-        overruns=stats.overruns,
-        reward_ack_p99_ms=_ms(stats.reward_ack_s.percentile(99)),
-        ticks_by_origin=dict(view.ticks_by_origin),
+        tick=state.tick,
+        episode=state.episode,
+        hz=state.hz,
+        ticks_run=figures.ticks_run,
+        lateness_p99_ms=_ms(figures.lateness_p99_s),
+        lateness_max_ms=_ms(figures.lateness_max_s),
+        overruns=figures.overruns,
+        reward_ack_p99_ms=_ms(figures.reward_ack_p99_s),
+        ticks_by_origin=dict(state.ticks_by_origin),
     )
 
 
@@ -85,41 +83,14 @@ def run_public(
     )
 
 
-def run_of_view(view: RunView) -> RunPublic:
-    """A live run's state, without touching the database.
+def run_of_state(spec: RunSpec, state: RunState) -> RunPublic:
+    """A live run's state from its last `RunState`, without asking it or the database.
 
-    Read on the engines' loop (`LiveRun.read`): one consistent state of the run. A run that
-    has ended has no live figures, whether or not its engine is let go yet: the answer does
-    not depend on when that happens.
+    A run that has ended has no live figures, whether or not its engine is let go yet: the
+    answer does not depend on when that happens.
     """
-    live = live_state(view) if view.status in NOT_ENDED else None
-    return run_public(view.run_id, view.spec, view.status.value, view.error, view.totals, live)
-
-
-@dataclass(frozen=True, slots=True)
-class Guarded:
-    """An action taken only if the run's status is one of `allowed`; else why not.
-
-    A class, not a closure: it is pickled when the engines run in a process of their own.
-    """
-
-    run_id: int
-    allowed: tuple[str, ...]
-    action: Callable[[RunEngine], str | None]
-
-    def __call__(self, engine: RunEngine) -> str | None:
-        """Take the action, or say why not."""
-        if engine.status.value not in self.allowed:
-            return f"run {self.run_id} is {engine.status.value}"
-        return self.action(engine)
-
-
-def set_rate(hz: float, engine: RunEngine) -> str | None:
-    """A realtime run's new tick rate, from its next tick; a fast run's refusal."""
-    if engine.spec.mode is not Mode.REALTIME:
-        return f"run {engine.run_id} is fast: it has no rate"
-    engine.set_rate(hz)
-    return None
+    live = live_state(state) if state.status in NOT_ENDED else None
+    return run_public(state.run_id, spec, state.status.value, state.error, state.totals, live)
 
 
 def not_kp(run_id: int, condition: str, live: bool) -> KpPublic:
@@ -162,16 +133,21 @@ def _provenance(kp: KnowledgePropagation, p: KpProvenance, dt_s: float) -> KpPro
     )
 
 
-def kp_of_view(run_id: int, view: RunView) -> KpPublic:
-    """A live run's answer, read on the engines' loop (`LiveRun.read`)."""
+@dataclass(frozen=True, slots=True)
+class InspectKp(Query):
+    """The KP inspector's query: answered with a `KpPublic`."""
+
+
+def kp_of_view(view: RunView, _: InspectKp | None = None) -> KpPublic:
+    """A live run's KP inspector, read where it ticks (`InspectKp`'s handler)."""
     kp = view.kp
     if kp is None:
-        return not_kp(run_id, view.spec.condition, live=True)
-    return _kp_live(run_id, view, kp)
+        return not_kp(view.run_id, view.spec.condition, live=True)
+    return _kp_live(view.run_id, view, kp)
 
 
 def _kp_live(run_id: int, view: RunView, kp: KnowledgePropagation) -> KpPublic:
-    """Read on the engines' loop, between ticks (`LiveRun.read`): it changes only there."""
+    """Read where the run ticks, between ticks: it changes only there."""
     dt_s = kp.dt_s
     cat = kp.catalog
     s = [x.name for x in cat.stimuli]
@@ -248,10 +224,5 @@ def _kp_live(run_id: int, view: RunView, kp: KnowledgePropagation) -> KpPublic:
     )
 
 
-def latest(view: RunView) -> tuple[Snapshot, RunTotals, bool] | None:
-    """The run's latest tick, its totals and its KP flag (None: no episode yet)."""
-    try:
-        snap = view.snapshot
-    except SimulationStateError:  # not reset yet
-        return None
-    return snap, view.totals, view.released_by_kp(snap)
+QUERIES: Mapping[type[Query], QueryHandler] = {InspectKp: kp_of_view}
+"""The queries of the service's routes a `RunHost` answers, by type."""

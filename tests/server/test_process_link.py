@@ -1,4 +1,4 @@
-"""The runs in a process of their own (`server.engine_process`), through the service's API.
+"""The runs in a process of their own (`server.runtime.process`), through the service's API.
 
 What the placement guarantees, without timing anything: a run ticks, reads and takes its
 rewards in the engines' process, not the service's; every control and read of the API
@@ -24,12 +24,13 @@ from apphelpers import client_for, create, settings_for, started_realtime, until
 from fakes import InMemoryRunStore
 
 from bench.liveserver import children, live_server, wait_status
-from core.engine import RunView, StatusChanged
-from server import engine_process
+from core.engine import StatusChanged
+from core.engine.messages import Latest, LatestTick
 from server.config import Settings
-from server.engine_process import EngineProcessError, ProcessEngines, RemoteRun
-from server.engines import RunLetGo, read_live
 from server.persistence.storage import Storage, open_storage
+from server.runtime import LiveRun, RunLetGo, Runs
+from server.runtime import process as engine_process
+from server.runtime.process import EngineProcessError, ProcessLink
 from server.tuning import SHORT_SLICE_NS, slice_ns, threads
 
 pytestmark = pytest.mark.anyio
@@ -38,29 +39,34 @@ BLOCK_S = 0.5
 """How long a test holds the service's loop: many 50 Hz periods on any machine."""
 
 
-def _engines(app: object) -> ProcessEngines:
+def _engines(app: object) -> Runs:
     engines = app.state.srlab.engines  # type: ignore[attr-defined]
-    assert isinstance(engines, ProcessEngines)
+    assert isinstance(engines, Runs) and isinstance(engines.link, ProcessLink)
     return engines
 
 
-def _pid(_: RunView) -> int:
-    return os.getpid()
+def _pid(engines: Runs) -> int | None:
+    assert isinstance(engines.link, ProcessLink)
+    return engines.link.pid
 
 
-def _tick(view: RunView) -> int:
-    return view.tick
+async def _tick(live: LiveRun) -> int:
+    """The run's latest tick, read where it ticks."""
+    now: LatestTick | None = await live.ask(Latest())
+    assert now is not None
+    return now.snapshot.tick
 
 
 async def test_a_run_ticks_reads_and_takes_rewards_in_the_engines_process(
     tmp_path: Path,
 ) -> None:
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
         live = engines.get(run_id)
         assert live is not None
-        assert await live.read(_pid) == engines.pid != os.getpid()
+        assert _pid(engines) not in (None, os.getpid())
+        assert await _tick(live) >= 0  # a query answered there
         await until(client, run_id, "running")
         r = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})
         assert r.status_code == 202, r.text
@@ -88,23 +94,15 @@ async def test_a_run_ticks_reads_and_takes_rewards_in_the_engines_process(
 async def test_a_read_reaching_the_engines_process_after_the_run_was_let_go_reads_storage(
     tmp_path: Path,
 ) -> None:
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
         late = engines.get(run_id)  # what the service held when a read left for it
         assert late is not None
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
         with pytest.raises(RunLetGo):  # the child let it go: its end is stored
-            await late.read(_tick)
-
-        class Books:
-            """The service's books as they were when that read left."""
-
-            def get(self, _: int) -> RemoteRun:
-                assert late is not None
-                return late
-
-        assert await read_live(Books(), run_id, _tick) is None  # callers read storage
+            await _tick(late)
+        assert await engines.ask(run_id, Latest()) is None  # callers read storage
         run = await client.get(f"/api/runs/{run_id}")
         assert run.status_code == 200 and run.json()["status"] == "stopped"
 
@@ -115,7 +113,10 @@ async def test_a_stream_opened_before_the_start_keeps_the_runs_names_after_it_wa
 ) -> None:
     # A stream follows a run from its next start; the run may end and be let go (its end
     # stored) before the stream reads its last events, which name things by its catalogue.
-    async with client_for(settings_for(tmp_path, engine_process=in_process)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process" if in_process else "local")) as (
+        client,
+        app,
+    ):
         engines = app.state.srlab.engines
         run_id = int((await create(client, condition="expert", seed=2, episodes=1))["id"])
         sub = engines.subscribe(run_id, maxsize=512, tick_hz=0.0)
@@ -135,7 +136,7 @@ async def test_a_stream_opened_before_the_start_keeps_the_runs_names_after_it_wa
 async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
     tmp_path: Path,
 ) -> None:
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
         sub = engines.subscribe(run_id, maxsize=256, tick_hz=50.0)
@@ -157,15 +158,15 @@ async def test_the_event_stream_carries_the_runs_events_across_and_ends_with_it(
 
 
 async def test_a_blocked_service_loop_does_not_stop_the_ticks(tmp_path: Path) -> None:
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         run_id = await started_realtime(client)
         live = _engines(app).get(run_id)
         assert live is not None
         await until(client, run_id, "running")
-        before = await live.read(_tick)
+        before = await _tick(live)
         time.sleep(BLOCK_S)  # the service's loop (this test's) does nothing else meanwhile
         # What ticked meanwhile is read after: the process ticked on its own.
-        assert await live.read(_tick) > before
+        assert await _tick(live) > before
         await client.post(f"/api/runs/{run_id}/stop")
 
 
@@ -173,12 +174,13 @@ async def test_runs_fail_clearly_and_the_service_stays_up_when_the_engines_proce
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 3600.0)  # gone for the test
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
         sub = engines.subscribe(run_id, maxsize=64, tick_hz=0.0)
-        assert engines.pid is not None
-        os.kill(engines.pid, signal.SIGKILL)
+        pid = _pid(engines)
+        assert pid is not None
+        os.kill(pid, signal.SIGKILL)
         async with asyncio.timeout(30):  # a hang guard: its stream ends
             async for _ in sub:
                 pass
@@ -203,11 +205,11 @@ async def test_a_new_engines_process_is_started_and_a_failed_run_resumes_there(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 0.0)
-    async with client_for(settings_for(tmp_path, engine_process=True)) as (client, app):
+    async with client_for(settings_for(tmp_path, engines="process")) as (client, app):
         engines = _engines(app)
         run_id = await started_realtime(client)
         await until(client, run_id, "running")
-        dead = engines.pid
+        dead = _pid(engines)
         assert dead is not None
         os.kill(dead, signal.SIGKILL)
         async with asyncio.timeout(60):  # a hang guard: stored as failed, then resumed
@@ -217,11 +219,11 @@ async def test_a_new_engines_process_is_started_and_a_failed_run_resumes_there(
             while (started := await client.post(f"/api/runs/{run_id}/start")).status_code == 503:
                 await asyncio.sleep(0.05)
         assert started.status_code == 200, started.text
-        assert engines.pid not in (None, dead)
+        assert _pid(engines) not in (None, dead)
         assert (await client.get("/api/health")).status_code == 200
         live = engines.get(run_id)
         assert live is not None
-        assert await live.read(_pid) == engines.pid
+        assert await _tick(live) >= 0  # a query answered by the new process
         await until(client, run_id, "running")
         other = await started_realtime(client)
         assert (await client.post(f"/api/runs/{other}/stop")).json()["status"] == "stopped"
@@ -233,7 +235,7 @@ async def test_a_child_that_fails_to_start_is_started_again_until_one_does(
 ) -> None:
     monkeypatch.setattr(engine_process, "RESPAWN_FIRST_S", 0.0)
     monkeypatch.setattr(engine_process, "RESPAWN_MAX_S", 0.0)  # no waiting in a test
-    engines = ProcessEngines(InMemoryRunStore())
+    engines = ProcessLink(Runs(InMemoryRunStore()))
     starts: list[int] = []
 
     async def start_child() -> None:
@@ -254,11 +256,11 @@ async def test_a_child_that_fails_to_start_is_started_again_until_one_does(
 async def test_the_service_stops_with_the_engines_process_gone_and_its_run_resumable(
     tmp_path: Path,
 ) -> None:
-    settings = settings_for(tmp_path, engine_process=True)
+    settings = settings_for(tmp_path, engines="process")
     async with client_for(settings) as (client, app):
         run_id = await started_realtime(client)
         await until(client, run_id, "running")
-        pid = _engines(app).pid
+        pid = _pid(_engines(app))
     assert pid is not None
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)  # reaped: gone
@@ -268,15 +270,15 @@ async def test_the_service_stops_with_the_engines_process_gone_and_its_run_resum
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
 
 
-def test_the_engines_cannot_be_on_a_thread_and_in_a_process_at_once(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="exclude each other"):
-        settings_for(tmp_path, engine_process=True, engine_thread=True)
+def test_the_engines_are_local_or_in_a_process_and_nothing_else(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="engines"):
+        settings_for(tmp_path, engines="thread")
 
 
 async def test_the_engines_process_refuses_storage_it_could_not_open_itself(
     tmp_path: Path,
 ) -> None:
-    settings = settings_for(tmp_path, engine_process=True)
+    settings = settings_for(tmp_path, engines="process")
 
     def storage(s: Settings) -> Storage:  # any factory but the default
         return open_storage(s)
@@ -310,11 +312,11 @@ def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
     ticks get a core before requests do (docs/benchmarks.md measures the effect).
     """
     base = os.getpriority(os.PRIO_PROCESS, 0)
-    env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
+    env = {"SRLAB_ENGINES": "process", "SRLAB_VISER": "false"}
     with live_server(tmp_path / "nice.db", env=env) as server:
         service = server.process.pid
         found = children(service)
-        (engines,) = [pid for pid, cmd in found.items() if "server.engine_process" in cmd]
+        (engines,) = [pid for pid, cmd in found.items() if "server.runtime.process" in cmd]
         stores = [pid for pid, cmd in found.items() if "spawn_main" in cmd]
         assert stores, f"the service's store process, among {found}"
         assert _nices(service) == {min(19, base + 10)}
@@ -334,11 +336,11 @@ def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path:
     So that beside busy processes a tick's or a storage thread's wake-up is let in at once
     rather than at the end of another process's slice (`server.tuning.ask_short_slices`).
     """
-    env = {"SRLAB_ENGINE_PROCESS": "true", "SRLAB_VISER": "false"}
+    env = {"SRLAB_ENGINES": "process", "SRLAB_VISER": "false"}
     with live_server(tmp_path / "slices.db", env=env) as server:
         service = server.process.pid
         found = children(service)
-        (engines,) = [pid for pid, cmd in found.items() if "server.engine_process" in cmd]
+        (engines,) = [pid for pid, cmd in found.items() if "server.runtime.process" in cmd]
         stores = [pid for pid, cmd in {**found, **children(engines)}.items() if "spawn_main" in cmd]
         assert len(stores) == 2, f"the service's and the engines' store processes: {found}"
         for pid in (service, engines, *stores):
@@ -347,19 +349,19 @@ def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path:
 
 @pytest.mark.parametrize(
     ("env", "in_process"),
-    [({}, True), ({"SRLAB_ENGINE_THREAD": "true"}, False)],
-    ids=["default", "engines-thread"],
+    [({}, True), ({"SRLAB_ENGINES": "local"}, False)],
+    ids=["default", "engines-local"],
 )
 def test_srlab_serve_ticks_runs_in_the_engines_process_unless_told_otherwise(
     tmp_path: Path, env: dict[str, str], in_process: bool
 ) -> None:
     with live_server(tmp_path / "placement.db", env={"SRLAB_VISER": "false", **env}) as server:
         found = children(server.process.pid).values()
-        assert any("server.engine_process" in cmd for cmd in found) is in_process, found
+        assert any("server.runtime.process" in cmd for cmd in found) is in_process, found
         run = server.client.post("/api/runs", json={"condition": "rp", "episodes": 1}).json()
         assert server.client.post(f"/api/runs/{run['id']}/start").status_code == 200
         assert wait_status(server.client, run["id"], "finished")["episodes_done"] == 1
         # Numba (the sensing kernel) is loaded where runs tick, and only there.
         assert _loads_numba(server.process.pid) is not in_process
-        engines = [p for p, cmd in children(server.process.pid).items() if "engine_process" in cmd]
+        engines = [p for p, cmd in children(server.process.pid).items() if "runtime.process" in cmd]
         assert [_loads_numba(p) for p in engines] == ([True] if in_process else [])
