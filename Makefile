@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -65,6 +65,10 @@ lint: install
 typecheck: install
 	$(BIN)/mypy
 
+# lint's and typecheck's checks before each commit (.pre-commit-config.yaml), in .git/hooks.
+hooks: install
+	$(BIN)/pre-commit install
+
 # Chromium (browser tests) and docker-compose (config check) come from Debian: the first
 # script installs them as root, or says what to install.
 # The storage tests run on SQLite and on a throwaway PostgreSQL server on 127.0.0.1, which
@@ -72,11 +76,14 @@ typecheck: install
 # The suite runs on $(WORKERS) pytest-xdist workers (its tests mostly wait on servers and pages,
 # so more workers than cores pay); tests/conftest.py's scheduler keeps a module's tests on
 # one worker and starts the longest first. `make test WORKERS=0` runs it in one process.
+# It measures branch coverage of core/ and server/ (pyproject.toml) and prints the total last:
+# a figure, not a gate; `.venv/bin/coverage report` then lists the files by coverage.
 WORKERS ?= 4
 test: lint typecheck
 	bash scripts/system-deps.sh
 	bash scripts/podman-bases.sh >/dev/null
-	bash scripts/pg-test-server.sh run -- $(BIN)/pytest -n $(WORKERS) --dist loadfile
+	bash scripts/pg-test-server.sh run -- $(BIN)/pytest -n $(WORKERS) --dist loadfile --cov --cov-report=
+	@echo "branch coverage of core/ and server/: $$($(BIN)/coverage report --format=total)%"
 
 # The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL or Docker.
 UNIT := not slow and not browser and not reliability and not pg and not docker

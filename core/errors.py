@@ -1,4 +1,4 @@
-"""Errors the core raises; the server maps them to HTTP codes in one place."""
+"""Errors the core raises; the server maps them to its answers in one place."""
 
 
 class CoreError(Exception):

@@ -5,14 +5,14 @@ its description and its version. Its rules live here, pure:
 
 - built-in networks (the catalogue's knowledge sets) are read-only: copy one to edit it;
 - a locked association changes (or goes) only when the edit is forced;
-- a write may expect a version or entity tag (`Precondition`) and is refused when the
-  network is no longer at it (`StaleVersionError`);
+- a write may expect a version or a fingerprint (`ExpectedVersion`) and is refused when
+  the network is no longer at it (`StaleVersionError`);
 - every change makes the next version, a `Revision` (a value); an edit that changes
   nothing makes none.
 
 Storage (`server/persistence/networks.py`, `tests/fakes.py`) loads a `Network`, asks it
 for a `Revision` and saves that, all in one transaction; it implements
-`core.ports.NetworkRepository`. Messages here name no HTTP route: the API adds its own.
+`core.ports.NetworkRepository`. Messages here name no request of the API: it adds its own.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ Key = tuple[str, str]
 
 
 class NetworkConflictError(RunStateError):
-    """A network write that conflicts with what is stored (answered 409, as RunStateError)."""
+    """A network write that conflicts with what is stored (a kind of RunStateError)."""
 
 
 class NetworkExistsError(NetworkConflictError):
@@ -81,16 +81,31 @@ class UnknownVersionError(UnknownNameError):
 
 
 class StaleVersionError(CoreError):
-    """A write based on a version of the network that is no longer current (HTTP 412)."""
+    """A write based on a version of the network that is no longer current.
 
-    def __init__(self, message: str, current: int, etag: str) -> None:
-        super().__init__(message)
+    `network` is at version `current` (its `fingerprint`); the write expected version
+    `expected`, or (`expected` None) one of some fingerprints, none of them current.
+    """
+
+    def __init__(
+        self, network: str, current: int, fingerprint: str, expected: int | None = None
+    ) -> None:
+        if expected is not None:
+            at = f"version {current}, not {expected}"
+        else:
+            at = f"version {current} ({fingerprint}), which no fingerprint expected names"
+        super().__init__(
+            f"network {network!r} is at {at}: another write came first; read it again and "
+            "reapply the change"
+        )
+        self.network = network
         self.current = current
-        self.etag = etag
+        self.fingerprint = fingerprint
+        self.expected = expected
 
-    def __reduce__(self) -> tuple[type[StaleVersionError], tuple[str, int, str]]:
+    def __reduce__(self) -> tuple[type[StaleVersionError], tuple[str, int, str, int | None]]:
         """Pickled with its fields (the store process sends errors to the service)."""
-        return type(self), (str(self), self.current, self.etag)
+        return type(self), (self.network, self.current, self.fingerprint, self.expected)
 
 
 # --- values ------------------------------------------------------------------------------
@@ -119,49 +134,40 @@ def check_pair(pair: NetworkPair, where: str = "") -> NetworkPair:
     return NetworkPair(pair.stimulus, pair.behaviour, float(s), pair.source, pair.locked)
 
 
-def etag_of(
+def fingerprint_of(
     network_id: int,
     created_at: object,
     version: int,
     description: str,
     pairs: Iterable[NetworkPair],
 ) -> str:
-    """The entity tag of one version of one network, as HTTP's `ETag`.
+    """The fingerprint of one version of one network: `v<version>-<digest>`.
 
     The version, and a digest of what makes it this network's version: its identity (its
     id, which SQLite gives a deleted network's to the next one, and its creation time as
-    storage keeps it) and its content.
+    storage keeps it) and its content. A network made again under a deleted one's name
+    has other fingerprints, though its versions count from 1 again.
     """
     content = sorted((p.stimulus, p.behaviour, p.strength, p.source, p.locked) for p in pairs)
     identity = [network_id, str(created_at), version, description, content]
     digest = hashlib.sha256(repr(identity).encode()).hexdigest()[:12]
-    return f'"v{version}-{digest}"'
+    return f"v{version}-{digest}"
 
 
 @dataclass(frozen=True, slots=True)
-class Precondition:
-    """What a write expects of the network: a version, or one of some entity tags."""
+class ExpectedVersion:
+    """What a write expects of the network: a version, and/or one of some fingerprints."""
 
     version: int | None = None
-    etags: tuple[str, ...] | None = None
-    """From If-Match: the tags any of which may be current ("*": any)."""
+    fingerprints: tuple[str, ...] | None = None
+    """The fingerprints any of which may be current (None: any)."""
 
-    def check(self, name: str, version: int, tag: str) -> None:
-        """`StaleVersionError` unless the network (at `version`, tagged `tag`) is expected."""
+    def check(self, name: str, version: int, fingerprint: str) -> None:
+        """`StaleVersionError` unless the network (at `version`, `fingerprint`) is expected."""
         if self.version is not None and self.version != version:
-            raise StaleVersionError(
-                f"network {name!r} is at version {version}, not {self.version}: another "
-                "write came first; read it again (GET) and reapply the change",
-                version,
-                tag,
-            )
-        if self.etags is not None and "*" not in self.etags and tag not in self.etags:
-            raise StaleVersionError(
-                f"network {name!r} is at version {version} ({tag}), which If-Match does not "
-                "name: another write came first; read it again (GET) and reapply the change",
-                version,
-                tag,
-            )
+            raise StaleVersionError(name, version, fingerprint, self.version)
+        if self.fingerprints is not None and fingerprint not in self.fingerprints:
+            raise StaleVersionError(name, version, fingerprint)
 
 
 @dataclass(frozen=True, slots=True)
@@ -247,8 +253,8 @@ class Vocabulary:
 class Network:
     """A stored network at one version: the aggregate the editor's rules apply to.
 
-    `etag` is the entity tag storage gave this version (see `etag_of`; "" for a version
-    not stored yet). Every edit returns a `Revision`; the network itself never changes.
+    `fingerprint` is the one storage gave this version (see `fingerprint_of`; "" for a
+    version not stored yet). Every edit returns a `Revision`; the network itself never changes.
     """
 
     name: str
@@ -256,20 +262,20 @@ class Network:
     builtin: bool = False
     version: int = 1
     associations: tuple[NetworkPair, ...] = ()
-    etag: str = ""
+    fingerprint: str = ""
 
     @property
     def state(self) -> dict[Key, NetworkPair]:
         """The associations by (stimulus, behaviour)."""
         return {(p.stimulus, p.behaviour): p for p in self.associations}
 
-    def check_writable(self, what: str = "edited", expected: Precondition | None = None) -> None:
+    def check_writable(self, what: str = "edited", expected: ExpectedVersion | None = None) -> None:
         """Refuse a write expecting another version, or one to a built-in network.
 
         `what` says what the write would do to it: edited, deleted, replaced.
         """
         if expected is not None:
-            expected.check(self.name, self.version, self.etag)
+            expected.check(self.name, self.version, self.fingerprint)
         if self.builtin:
             raise ReadOnlyNetworkError(self.name, what)
 
@@ -280,7 +286,7 @@ class Network:
         *,
         force: bool = False,
         description: str | None = None,
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         what: str = "edited",
     ) -> Revision:
         """The network with `target` as its associations (and `description`): its next version.
@@ -311,7 +317,7 @@ class Network:
         vocabulary: Vocabulary,
         *,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> Revision:
         """Add an association the network lacks (`AssociationExistsError` if it has it)."""
         self.check_writable(expected=expected)
@@ -335,7 +341,7 @@ class Network:
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> Revision:
         """Set an association (insert or update); None keeps a value (new: 1.0, dp, unlocked).
 
@@ -365,7 +371,7 @@ class Network:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> Revision:
         """Remove an association (a locked one only with `force`)."""
         self.check_writable(expected=expected)
@@ -387,7 +393,7 @@ class Network:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> Revision:
         """Make the network what it was at `version` (from `history`), as a new version."""
         self.check_writable(expected=expected)
@@ -457,7 +463,7 @@ def import_network(
     replace: bool = False,
     force: bool = False,
     note: str = "",
-    expected: Precondition | None = None,
+    expected: ExpectedVersion | None = None,
 ) -> Revision:
     """An imported network: a new one, or with `replace` a new version of `existing`.
 
@@ -517,8 +523,8 @@ class StoredNetwork:
     associations: tuple[NetworkPair, ...]
     id: int = 0
     """Its row's id (SQLite may give a deleted network's id to a new one)."""
-    etag: str = ""
-    """The entity tag of this version of this network (HTTP `ETag`, see `etag_of`)."""
+    fingerprint: str = ""
+    """What names this version of this network (see `fingerprint_of`)."""
 
     @property
     def summary(self) -> NetworkSummary:

@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 if TYPE_CHECKING:  # core.networks imports this module's values
     from core.networks import (
         AssociationChange,
+        ExpectedVersion,
         NetworkEdit,
         NetworkSnapshot,
         NetworkSummary,
         NetworkVersion,
-        Precondition,
         StoredNetwork,
     )
 
@@ -413,7 +413,7 @@ class NetworkRepository(Protocol):
         """A new, editable network at version 1: `base` (None: empty) with `associations`."""
         ...
 
-    def delete(self, name: str, *, expected: Precondition | None = None) -> None:
+    def delete(self, name: str, *, expected: ExpectedVersion | None = None) -> None:
         """Delete an editable network and its history."""
         ...
 
@@ -423,7 +423,7 @@ class NetworkRepository(Protocol):
         pair: NetworkPair,
         *,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Add an association the network lacks."""
         ...
@@ -439,7 +439,7 @@ class NetworkRepository(Protocol):
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Set an association (insert or update); None keeps a value."""
         ...
@@ -452,7 +452,7 @@ class NetworkRepository(Protocol):
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Remove an association."""
         ...
@@ -482,7 +482,7 @@ class NetworkRepository(Protocol):
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Make the network what it was at `version`, as a new version."""
         ...
@@ -496,7 +496,7 @@ class NetworkRepository(Protocol):
         replace: bool = False,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Store an imported network: a new one, or with `replace` a new version of one."""
         ...

@@ -3,7 +3,7 @@
 PostgreSQL's `text` cannot hold NUL (U+0000), and a lone surrogate (U+D800 to U+DFFF on
 its own) is not Unicode text at all: neither SQLite nor PostgreSQL can encode it as UTF-8.
 Every other character is stored and read back as it was, on every supported database.
-The HTTP API refuses such text where it arrives (a 422 naming the field, with
+The API refuses such text where it arrives (naming the field, with
 `server.schemas.TEXT_PATTERN` in the OpenAPI document); the engine refuses a reward note
 holding it; the stores refuse it before writing, so no store holds what another cannot.
 """

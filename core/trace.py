@@ -8,9 +8,9 @@ before, read with those unknown (origin "", stimulus -1).
 from __future__ import annotations
 
 import zlib
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import MISSING, dataclass, fields
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -22,23 +22,64 @@ if TYPE_CHECKING:
 
 MAGIC = b"SRT2"
 _MAGIC_V1 = b"SRT1"
-_FIELDS_V1 = [
-    ("tick", "<i4"),
-    ("x", "<f4"),
-    ("y", "<f4"),
-    ("heading", "<f4"),
-    ("behaviour", "<i2"),
-    ("how", "<i1"),
-    ("lamp", "<i1"),
-    ("stimuli", "<u8"),
-]
-_DTYPE_V1 = np.dtype(_FIELDS_V1)
-_DTYPE = np.dtype([*_FIELDS_V1, ("origin", "<i1"), ("released_by", "<i1")])
+HOWS = ("released", "default", "explored", "continued", "commanded")
+Encode = Callable[[Sequence[Any]], Iterable[int]]
+"""A column's values (one per tick) as the numbers stored."""
+Decode = Callable[[list[Any]], list[Any]]
+"""A stored column's numbers as the trace row's values."""
+
+
+@dataclass(frozen=True, slots=True)
+class Column:
+    """One column of a stored trace: where it comes from, how it is stored and read.
+
+    `field` names both the `Snapshot` field it packs and the `TraceRow` field it reads
+    back into: packing and reading go by name, so the snapshot's field order is free.
+    """
+
+    name: str
+    """The column's name in the stored layout."""
+    dtype: str
+    """Its stored type (little-endian numpy)."""
+    field: str
+    encode: Encode | None = None
+    """None: the values are the numbers stored."""
+    decode: Decode | None = None
+    """None: the numbers stored are the row's values."""
+
+
+def _indices(names: tuple[str, ...]) -> tuple[Encode, Decode]:
+    """A column storing one of `names` as its index."""
+    index = {n: i for i, n in enumerate(names)}
+    return (lambda v: map(index.__getitem__, v)), (lambda v: [names[i] for i in v])
+
+
+def _masks(values: Sequence[tuple[int, ...]]) -> Iterable[int]:
+    masks = list(map(_MASKS.get, values))  # a run meets few stimulus sets: nearly all known
+    return map(_mask, values) if None in masks else cast("list[int]", masks)
+
+
+COLUMNS: tuple[Column, ...] = (
+    Column("tick", "<i4", "tick"),
+    Column("x", "<f4", "x"),
+    Column("y", "<f4", "y"),
+    Column("heading", "<f4", "heading_rad"),
+    Column("behaviour", "<i2", "behaviour"),
+    Column("how", "<i1", "how", *_indices(HOWS)),
+    Column("lamp", "<i1", "lamp"),
+    Column("stimuli", "<u8", "stimuli", _masks, lambda v: [_bits(m) for m in v]),
+    Column("origin", "<i1", "origin", *_indices(ORIGINS)),
+    Column("released_by", "<i1", "released_by"),
+)
+"""A stored trace's layout (SRT2), in its stored order: the one list packing and reading
+follow. Reordering or retyping a column changes what is stored (tests/core/test_trace.py
+holds traces packed before)."""
+_V1_COLUMNS = 8
+"""SRT1 traces, stored before, have the first columns only."""
+_DTYPE = np.dtype([(c.name, c.dtype) for c in COLUMNS])
+_DTYPE_V1 = np.dtype([(c.name, c.dtype) for c in COLUMNS[:_V1_COLUMNS]])
 TraceArray = npt.NDArray[np.void]
 """An episode's trace rows, one structured record per tick (SRT2's layout)."""
-HOWS = ("released", "default", "explored", "continued", "commanded")
-_HOW_INDEX = {h: i for i, h in enumerate(HOWS)}
-_ORIGIN_INDEX = {o: i for i, o in enumerate(ORIGINS)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +98,22 @@ class TraceRow:
     """What made the behaviour run (`core.brain.selection.ORIGINS`; "" in an SRT1 trace)."""
     released_by: int = -1
     """The stimulus the behaviour answered (-1: none, or unknown in an SRT1 trace)."""
+
+
+_ROW_FIELDS = tuple(f.name for f in fields(TraceRow))
+_ROW_DEFAULTS = {f.name: f.default for f in fields(TraceRow) if f.default is not MISSING}
+"""What a row holds that an SRT1 trace does not store."""
+assert {c.field for c in COLUMNS} == set(_ROW_FIELDS), "each row field is one column's"
+
+
+def _places(snapshot: object) -> dict[str, int]:
+    """Where each column's field sits in `snapshot` (a NamedTuple): packing goes by name."""
+    names: tuple[str, ...] = getattr(snapshot, "_fields", ())
+    missing = [c.field for c in COLUMNS if c.field not in names]
+    if missing:
+        kind = type(snapshot).__name__
+        raise ValueError(f"a {kind} has no field {', '.join(missing)} for its trace")
+    return {c.field: names.index(c.field) for c in COLUMNS}
 
 
 class TraceRecorder:
@@ -85,20 +142,12 @@ class TraceRecorder:
             # fills a structured array from a list per field several times faster than
             # from a tuple per row, and faster still without guessing each column's type.
             # This runs on the tick task: a few per cent of a fast run's time.
-            _, tick, _, x, y, heading, stimuli, behaviour, how, lamp, *_, origin, by = zip(
-                *rows, strict=True
-            )
-            arr["tick"] = np.fromiter(tick, np.int32, n)
-            arr["x"] = np.fromiter(x, np.float32, n)
-            arr["y"] = np.fromiter(y, np.float32, n)
-            arr["heading"] = np.fromiter(heading, np.float32, n)
-            arr["behaviour"] = np.fromiter(behaviour, np.int16, n)
-            arr["how"] = np.fromiter(map(_HOW_INDEX.__getitem__, how), np.int8, n)
-            arr["lamp"] = np.fromiter(lamp, np.int8, n)
-            masks = list(map(_MASKS.get, stimuli))  # a run meets few sets: nearly all known
-            arr["stimuli"] = masks if None not in masks else list(map(_mask, stimuli))
-            arr["origin"] = np.fromiter(map(_ORIGIN_INDEX.__getitem__, origin), np.int8, n)
-            arr["released_by"] = np.fromiter(by, np.int8, n)
+            values = list(zip(*rows, strict=True))
+            place = _places(rows[0])
+            for c in COLUMNS:
+                column = values[place[c.field]]
+                encoded = column if c.encode is None else c.encode(column)
+                arr[c.name] = np.fromiter(encoded, c.dtype, n)
         return arr
 
 
@@ -140,24 +189,12 @@ def unpack(blob: bytes) -> list[TraceRow]:
     # Whole columns as Python lists: indexing numpy's structured rows one field at a time
     # cost about 50 us a row, most of a stored episode's read.
     n = len(arr)
-    origins = [ORIGINS[o] for o in arr["origin"].tolist()] if v2 else [""] * n
-    released = arr["released_by"].tolist() if v2 else [-1] * n
-    return [
-        TraceRow(tick, x, y, heading, behaviour, HOWS[how], lamp, _bits(mask), origin, by)
-        for tick, x, y, heading, behaviour, how, lamp, mask, origin, by in zip(
-            arr["tick"].tolist(),
-            arr["x"].tolist(),
-            arr["y"].tolist(),
-            arr["heading"].tolist(),
-            arr["behaviour"].tolist(),
-            arr["how"].tolist(),
-            arr["lamp"].tolist(),
-            arr["stimuli"].tolist(),
-            origins,
-            released,
-            strict=True,
-        )
-    ]
+    columns = COLUMNS if v2 else COLUMNS[:_V1_COLUMNS]
+    values: dict[str, list[Any]] = {f: [d] * n for f, d in _ROW_DEFAULTS.items()}
+    for c in columns:
+        stored = arr[c.name].tolist()
+        values[c.field] = stored if c.decode is None else c.decode(stored)
+    return [TraceRow(*row) for row in zip(*(values[f] for f in _ROW_FIELDS), strict=True)]
 
 
 def _bits(mask: int) -> tuple[int, ...]:

@@ -24,7 +24,7 @@ from core.errors import (
     UnknownNameError,
     UnknownRunError,
 )
-from server.api import ROUTERS, contract, docs
+from server.api import ROUTERS, contract, docs, etags
 from server.api.contract import operation_id
 from server.api.methods import ApiMethods
 from server.api.routing import add_routes
@@ -121,8 +121,7 @@ def create_app(settings: Settings | None = None, storage: StorageFactory = open_
 
     async def core_error(request: Request, exc: Exception) -> JSONResponse:
         if isinstance(exc, StaleVersionError):
-            body = {"detail": str(exc), "version": exc.current, "etag": exc.etag}
-            return JSONResponse(body, status_code=412, headers={"ETag": exc.etag})
+            return etags.stale(exc)
         for kind, code in _STATUS:
             if isinstance(exc, kind):
                 return JSONResponse({"detail": str(exc)}, status_code=code)

@@ -18,18 +18,18 @@ from core.engine.pacing import Wake
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
 from core.networks import (
     AssociationChange,
+    ExpectedVersion,
     Network,
     NetworkEdit,
     NetworkSnapshot,
     NetworkSummary,
     NetworkVersion,
-    Precondition,
     Revision,
     StoredNetwork,
     UnknownVersionError,
     Vocabulary,
     changes_between,
-    etag_of,
+    fingerprint_of,
 )
 from core.ports import (
     ACTIVE,
@@ -628,12 +628,12 @@ class InMemoryNetworkRepository:
         return None if stored is None else self._aggregate(stored)
 
     @staticmethod
-    def _etag(n: _MemoryNetwork) -> str:
-        return etag_of(n.id, n.created_at, n.version, n.description, n.rows.values())
+    def _fingerprint(n: _MemoryNetwork) -> str:
+        return fingerprint_of(n.id, n.created_at, n.version, n.description, n.rows.values())
 
     def _aggregate(self, n: _MemoryNetwork) -> Network:
         pairs = tuple(n.rows.values())
-        return Network(n.name, n.description, n.builtin, n.version, pairs, self._etag(n))
+        return Network(n.name, n.description, n.builtin, n.version, pairs, self._fingerprint(n))
 
     def _stored(self, n: _MemoryNetwork) -> StoredNetwork:
         return StoredNetwork(
@@ -645,7 +645,7 @@ class InMemoryNetworkRepository:
             n.updated_at,
             self._vocabulary.order(n.rows.values()),
             n.id,
-            self._etag(n),
+            self._fingerprint(n),
         )
 
     def _version(self, n: _MemoryNetwork, version: int) -> _MemoryVersion:
@@ -716,7 +716,7 @@ class InMemoryNetworkRepository:
             )
             return self._insert(revision).network
 
-    def delete(self, name: str, *, expected: Precondition | None = None) -> None:
+    def delete(self, name: str, *, expected: ExpectedVersion | None = None) -> None:
         """Delete an editable network and its history."""
         with self._lock:
             self._aggregate(self._get(name)).check_writable("deleted", expected)
@@ -728,7 +728,7 @@ class InMemoryNetworkRepository:
         pair: NetworkPair,
         *,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Add an association the network lacks."""
         with self._lock:
@@ -747,7 +747,7 @@ class InMemoryNetworkRepository:
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Set an association (insert or update); None keeps a value."""
         with self._lock:
@@ -773,7 +773,7 @@ class InMemoryNetworkRepository:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Remove an association."""
         with self._lock:
@@ -821,7 +821,7 @@ class InMemoryNetworkRepository:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Make the network what it was at `version`, as a new version."""
         with self._lock:
@@ -848,7 +848,7 @@ class InMemoryNetworkRepository:
         replace: bool = False,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Store an imported network: a new one, or with `replace` a new version of one."""
         with self._lock:

@@ -24,6 +24,7 @@ from core.networks import (
     NAME_PATTERN,
     AssociationChange,
     AssociationExistsError,
+    ExpectedVersion,
     Key,
     Network,
     NetworkConflictError,
@@ -32,7 +33,6 @@ from core.networks import (
     NetworkSnapshot,
     NetworkSummary,
     NetworkVersion,
-    Precondition,
     ReadOnlyNetworkError,
     Revision,
     StaleVersionError,
@@ -42,7 +42,7 @@ from core.networks import (
     changes_between,
     check_name,
     check_pair,
-    etag_of,
+    fingerprint_of,
 )
 from core.ports import NetworkPair
 from server.persistence.db import transaction
@@ -60,13 +60,13 @@ __all__ = [
     "NAME_PATTERN",
     "AssociationChange",
     "AssociationExistsError",
+    "ExpectedVersion",
     "NetworkConflictError",
     "NetworkEdit",
     "NetworkExistsError",
     "NetworkSnapshot",
     "NetworkSummary",
     "NetworkVersion",
-    "Precondition",
     "ReadOnlyNetworkError",
     "SqlAlchemyNetworkRepository",
     "StaleVersionError",
@@ -228,7 +228,7 @@ class SqlAlchemyNetworkRepository:
             )
             return self._insert(s, cat, revision).network
 
-    def delete(self, name: str, *, expected: Precondition | None = None) -> None:
+    def delete(self, name: str, *, expected: ExpectedVersion | None = None) -> None:
         """Delete a network and its history (runs started from it keep their own copy)."""
         with self._transaction(f"deleting network {name!r}", write=True) as s:
             row, network = self._load(s, name)
@@ -241,7 +241,7 @@ class SqlAlchemyNetworkRepository:
         pair: NetworkPair,
         *,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Add a new association; `AssociationExistsError` if the pair is there already."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
@@ -261,7 +261,7 @@ class SqlAlchemyNetworkRepository:
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Set an association (insert or update); None keeps a value (new: 1.0, dp, unlocked).
 
@@ -292,7 +292,7 @@ class SqlAlchemyNetworkRepository:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Remove an association (a locked one only with `force`); unknown pair: 404's error."""
         with self._transaction(f"editing network {name!r}", write=True) as s:
@@ -366,7 +366,7 @@ class SqlAlchemyNetworkRepository:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Make the network what it was at `version`, as a new version.
 
@@ -402,7 +402,7 @@ class SqlAlchemyNetworkRepository:
         replace: bool = False,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
     ) -> NetworkEdit:
         """Store an imported network: a new one, or with `replace` a new version of one.
 
@@ -447,7 +447,7 @@ class SqlAlchemyNetworkRepository:
         return row
 
     def _aggregate(self, s: Session, row: NetworkRow) -> Network:
-        """The domain's network of a row, with its stored associations and entity tag."""
+        """The domain's network of a row, with its stored associations and fingerprint."""
         state = self._state(s, row.id)
         return Network(
             row.name,
@@ -455,7 +455,7 @@ class SqlAlchemyNetworkRepository:
             row.builtin,
             row.version,
             tuple(state.values()),
-            etag_of(row.id, row.created_at, row.version, row.description, state.values()),
+            fingerprint_of(row.id, row.created_at, row.version, row.description, state.values()),
         )
 
     def _load(self, s: Session, name: str) -> tuple[NetworkRow, Network]:
@@ -503,7 +503,7 @@ class SqlAlchemyNetworkRepository:
             _utc(row.updated_at),
             cat.vocabulary.order(state.values()),
             row.id,
-            etag_of(row.id, row.created_at, row.version, row.description, state.values()),
+            fingerprint_of(row.id, row.created_at, row.version, row.description, state.values()),
         )
 
     @staticmethod

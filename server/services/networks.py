@@ -19,7 +19,7 @@ from starlette.concurrency import run_in_threadpool
 
 from core.commands import EditAssociation
 from core.errors import RunStateError, StorageError
-from core.networks import AssociationChange, NetworkEdit, Precondition, StoredNetwork
+from core.networks import AssociationChange, ExpectedVersion, NetworkEdit, StoredNetwork
 from core.ports import ACTIVE, NetworkPair, NetworkRepository
 from server.runtime import LiveRun as Live
 
@@ -144,7 +144,7 @@ class NetworkService:
         replace: bool = False,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         live: bool = False,
     ) -> Written:
         """Store an imported network; a replaced one's changes reach its runs (`live`)."""
@@ -161,7 +161,7 @@ class NetworkService:
         live_runs = await self.fan_out(edit.network, () if edit.created else edit.changes, live)
         return Written(edit, live_runs)
 
-    async def delete(self, name: str, *, expected: Precondition | None = None) -> None:
+    async def delete(self, name: str, *, expected: ExpectedVersion | None = None) -> None:
         """Delete a network; runs started from it keep their copy and get no more live edits.
 
         A network made later under its name is another one.
@@ -178,7 +178,7 @@ class NetworkService:
         pair: NetworkPair,
         *,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         live: bool = False,
     ) -> Written:
         """Add an association the network lacks; it reaches the network's runs (`live`)."""
@@ -198,7 +198,7 @@ class NetworkService:
         locked: bool | None = None,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         live: bool = False,
     ) -> Written:
         """Set an association; with `live` the network's runs get it as it now is.
@@ -234,7 +234,7 @@ class NetworkService:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         live: bool = False,
     ) -> Written:
         """Remove an association; the removal reaches the network's runs (`live`)."""
@@ -256,7 +256,7 @@ class NetworkService:
         *,
         force: bool = False,
         note: str = "",
-        expected: Precondition | None = None,
+        expected: ExpectedVersion | None = None,
         live: bool = False,
     ) -> Written:
         """Make the network what it was at `version`; what changed reaches its runs (`live`)."""

@@ -16,10 +16,10 @@ from core.errors import (
 )
 from core.networks import (
     AssociationExistsError,
+    ExpectedVersion,
     Network,
     NetworkExistsError,
     NetworkSnapshot,
-    Precondition,
     ReadOnlyNetworkError,
     StaleVersionError,
     UnknownVersionError,
@@ -27,7 +27,7 @@ from core.networks import (
     changes_between,
     check_name,
     create,
-    etag_of,
+    fingerprint_of,
     import_network,
 )
 from core.ports import NetworkPair
@@ -35,8 +35,8 @@ from core.ports import NetworkPair
 WORDS = Vocabulary({"Red": 0, "Green": 1, "Corner": 2}, {"stop": 0, "back": 1, "turn": 2})
 RED_STOP = NetworkPair("Red", "stop", 0.8, "dp")
 CORNER = NetworkPair("Corner", "turn", 1.0, "innate", locked=True)
-MINE = Network("mine", "d", False, 3, (RED_STOP, CORNER), etag='"v3-x"')
-BUILTIN = Network("dp", "shipped", True, 1, (RED_STOP,), etag='"v1-y"')
+MINE = Network("mine", "d", False, 3, (RED_STOP, CORNER), fingerprint="v3-x")
+BUILTIN = Network("dp", "shipped", True, 1, (RED_STOP,), fingerprint="v1-y")
 _T0 = datetime(2024, 1, 1)
 
 
@@ -64,7 +64,7 @@ def test_an_edit_returns_the_next_version_and_leaves_the_network_as_it_was() -> 
     after = revision.network
     assert (after.name, after.version, after.description, after.builtin) == ("mine", 4, "d", False)
     assert after.state[("Red", "stop")] == NetworkPair("Red", "stop", 0.5, "dp")
-    assert after.etag == ""  # storage tags it once stored
+    assert after.fingerprint == ""  # storage tags it once stored
     assert revision.versioned and not revision.created and revision.note == "changed Red -> stop"
     assert [(c.before, c.after) for c in revision.changes] == [
         (RED_STOP, after.state[("Red", "stop")])
@@ -147,7 +147,7 @@ def test_the_rules_are_checked_before_the_names() -> None:
     with pytest.raises(ReadOnlyNetworkError):
         BUILTIN.put("Blue", "fly", WORDS, strength=1.0)
     with pytest.raises(StaleVersionError):
-        MINE.add(NetworkPair("Blue", "fly", 1, "dp"), WORDS, expected=Precondition(version=1))
+        MINE.add(NetworkPair("Blue", "fly", 1, "dp"), WORDS, expected=ExpectedVersion(version=1))
 
 
 def test_a_locked_association_changes_or_goes_only_when_forced() -> None:
@@ -169,19 +169,19 @@ def test_a_locked_association_changes_or_goes_only_when_forced() -> None:
 
 def test_a_stale_version_or_tag_is_refused_before_anything_else() -> None:
     for expected, text in (
-        (Precondition(version=2), "at version 3, not 2"),
-        (Precondition(etags=('"v2-old"',)), "which If-Match does not name"),
+        (ExpectedVersion(version=2), "at version 3, not 2"),
+        (ExpectedVersion(fingerprints=("v2-old",)), "which no fingerprint expected names"),
     ):
         with pytest.raises(StaleVersionError, match=text) as e:
             MINE.put("Red", "stop", WORDS, strength=0.1, expected=expected)
-        assert (e.value.current, e.value.etag) == (3, '"v3-x"')
+        assert (e.value.current, e.value.fingerprint) == (3, "v3-x")
         with pytest.raises(StaleVersionError):
-            BUILTIN.check_writable("deleted", Precondition(version=2))  # stale before read-only
+            BUILTIN.check_writable("deleted", ExpectedVersion(version=2))  # stale before read-only
     for current in (
-        Precondition(version=3),
-        Precondition(etags=("*",)),
-        Precondition(etags=('"v1-a"', '"v3-x"')),
-        Precondition(version=3, etags=('"v3-x"',)),
+        ExpectedVersion(version=3),
+        ExpectedVersion(),
+        ExpectedVersion(fingerprints=("v1-a", "v3-x")),
+        ExpectedVersion(version=3, fingerprints=("v3-x",)),
     ):
         assert MINE.put("Red", "stop", WORDS, strength=0.1, expected=current).versioned
 
@@ -237,22 +237,22 @@ def test_import_makes_a_new_network_or_with_replace_a_new_version() -> None:
     replaced = import_network("mine", MINE, [RED_STOP], WORDS, replace=True, force=True)
     assert replaced.network.version == 4 and replaced.network.description == ""
     with pytest.raises(StaleVersionError):
-        import_network("mine", MINE, [], WORDS, replace=True, expected=Precondition(version=1))
+        import_network("mine", MINE, [], WORDS, replace=True, expected=ExpectedVersion(version=1))
 
 
 # --- the small values ----------------------------------------------------------------------
 
 
-def test_etags_name_the_version_and_digest_identity_and_content() -> None:
-    tag = etag_of(1, _T0, 3, "d", [RED_STOP, CORNER])
+def test_fingerprints_name_the_version_and_digest_identity_and_content() -> None:
+    tag = fingerprint_of(1, _T0, 3, "d", [RED_STOP, CORNER])
 
-    assert tag.startswith('"v3-') and tag.endswith('"')
-    assert tag == etag_of(1, _T0, 3, "d", [CORNER, RED_STOP])  # order does not matter
+    assert tag.startswith("v3-") and len(tag) == len("v3-") + 12  # a 12-digit digest
+    assert tag == fingerprint_of(1, _T0, 3, "d", [CORNER, RED_STOP])  # order does not matter
     for other in (
-        etag_of(2, _T0, 3, "d", [RED_STOP, CORNER]),  # another network with its id
-        etag_of(1, "later", 3, "d", [RED_STOP, CORNER]),
-        etag_of(1, _T0, 3, "e", [RED_STOP, CORNER]),
-        etag_of(1, _T0, 3, "d", [RED_STOP]),
+        fingerprint_of(2, _T0, 3, "d", [RED_STOP, CORNER]),  # another network with its id
+        fingerprint_of(1, "later", 3, "d", [RED_STOP, CORNER]),
+        fingerprint_of(1, _T0, 3, "e", [RED_STOP, CORNER]),
+        fingerprint_of(1, _T0, 3, "d", [RED_STOP]),
     ):
         assert other != tag
 

@@ -17,8 +17,8 @@ from core.brain.catalog import Catalog
 from core.errors import CatalogError, LockedAssociationError, UnknownNameError
 from core.networks import (
     AssociationExistsError,
+    ExpectedVersion,
     NetworkExistsError,
-    Precondition,
     ReadOnlyNetworkError,
     StaleVersionError,
     UnknownVersionError,
@@ -90,7 +90,7 @@ def test_create_copies_the_base_at_version_1(networks: NetworkRepository, catalo
 
     assert (made.name, made.builtin, made.version, made.description) == ("mine", False, 1, "a copy")
     assert made == networks.get("mine")
-    assert made.etag.startswith('"v1-') and made.etag != networks.get("dp").etag
+    assert made.fingerprint.startswith("v1-") and made.fingerprint != networks.get("dp").fingerprint
     assert made.associations == Vocabulary.of(catalog).order(networks.get("dp").associations)
     assert [(v.version, v.note) for v in networks.versions("mine")] == [(1, "created from dp")]
 
@@ -220,31 +220,31 @@ def test_preconditions_refuse_a_stale_write_and_change_nothing(
 ) -> None:
     v1 = networks.create("mine")
     v2 = networks.put_association("mine", "Red", "stop", strength=0.5).network
-    assert v2.etag.startswith('"v2-') and v2.etag != v1.etag
+    assert v2.fingerprint.startswith("v2-") and v2.fingerprint != v1.fingerprint
 
     stale = [
-        Precondition(version=1),
-        Precondition(etags=(v1.etag,)),
-        Precondition(version=2, etags=(v1.etag,)),
+        ExpectedVersion(version=1),
+        ExpectedVersion(fingerprints=(v1.fingerprint,)),
+        ExpectedVersion(version=2, fingerprints=(v1.fingerprint,)),
     ]
     for expected in stale:
         with pytest.raises(StaleVersionError, match="version 2") as e:
             networks.put_association("mine", "Red", "stop", strength=0.9, expected=expected)
-        assert (e.value.current, e.value.etag) == (2, v2.etag)
+        assert (e.value.current, e.value.fingerprint) == (2, v2.fingerprint)
         with pytest.raises(StaleVersionError):
             networks.delete("mine", expected=expected)
     assert networks.get("mine") == v2
 
     for current in (
-        Precondition(version=2),
-        Precondition(etags=("*",)),
-        Precondition(etags=(v2.etag, v1.etag)),
+        ExpectedVersion(version=2),
+        ExpectedVersion(),
+        ExpectedVersion(fingerprints=(v2.fingerprint, v1.fingerprint)),
     ):
         edit = networks.put_association("mine", "Red", "stop", strength=0.5, expected=current)
         assert edit.network == v2  # no change, and no refusal
     # The precondition comes first: a stale write to a built-in network is stale.
     with pytest.raises(StaleVersionError):
-        networks.put_association("dp", "Red", "stop", strength=0.1, expected=Precondition(9))
+        networks.put_association("dp", "Red", "stop", strength=0.1, expected=ExpectedVersion(9))
 
 
 def test_versions_snapshots_and_diff(networks: NetworkRepository) -> None:
@@ -320,7 +320,7 @@ def test_import_creates_replaces_and_refuses(networks: NetworkRepository) -> Non
     assert replaced.network.description == ""
     with pytest.raises(LockedAssociationError):
         networks.import_network("mine", [RED_STOP], replace=True)
-    stale = Precondition(version=1)
+    stale = ExpectedVersion(version=1)
     with pytest.raises(StaleVersionError):
         networks.import_network("mine", [RED_STOP], replace=True, force=True, expected=stale)
     assert (
@@ -338,7 +338,7 @@ def test_delete_frees_the_name_for_another_network(networks: NetworkRepository) 
     with pytest.raises(UnknownNameError):
         networks.delete("mine")
     new = networks.create("mine")
-    assert new.version == 1 and new.etag != old.etag
+    assert new.version == 1 and new.fingerprint != old.fingerprint
     assert [v.version for v in networks.versions("mine")] == [1]
 
 

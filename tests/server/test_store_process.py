@@ -18,7 +18,7 @@ import pytest
 from apphelpers import client_for, create, settings_for
 
 from core.errors import StorageError, UnknownRunError
-from core.networks import Precondition, ReadOnlyNetworkError, StaleVersionError
+from core.networks import ExpectedVersion, ReadOnlyNetworkError, StaleVersionError
 from server.persistence import process as process_module
 from server.persistence.process import StoreProcess, StoreProcessError
 
@@ -57,8 +57,8 @@ def test_errors_cross_the_process_boundary_with_their_type_and_fields(
     assert read_only.value.network == "innate" and "built in" in str(read_only.value)
     networks.create("mine", description="a copy")
     with pytest.raises(StaleVersionError) as stale:
-        networks.delete("mine", expected=Precondition(version=99))
-    assert stale.value.current == 1 and stale.value.etag
+        networks.delete("mine", expected=ExpectedVersion(version=99))
+    assert stale.value.current == 1 and stale.value.fingerprint
 
 
 def test_sigint_leaves_the_store_process_serving(clean_store_process: StoreProcess) -> None:

@@ -20,8 +20,9 @@ from fastapi.exceptions import RequestValidationError
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog, Source
-from core.networks import Precondition, ReadOnlyNetworkError, StoredNetwork
+from core.networks import ExpectedVersion, ReadOnlyNetworkError, StoredNetwork
 from core.ports import NetworkPair, NetworkRepository
+from server.api import etags
 from server.api.deps import NetworksDep, StateDep, WriteGuard
 from server.api.errors import ErrorPublic, StalePublic
 from server.api.routes.runs import Limit, Offset
@@ -98,7 +99,7 @@ _ETAG = {
 }
 
 
-async def _precondition(
+async def _expected(
     if_match: Annotated[
         str | None,
         Header(
@@ -117,23 +118,12 @@ async def _precondition(
             description="write only if the network is still at this version; 412 otherwise",
         ),
     ] = None,
-) -> Precondition | None:
+) -> ExpectedVersion | None:
     """What a write expects of the network: If-Match's tags and/or a version."""
-    if if_match is None and expected_version is None:
-        return None
-    tags = None
-    if if_match is not None:
-        tags = tuple(
-            _quoted(t.strip().removeprefix("W/")) for t in if_match.split(",") if t.strip()
-        )
-    return Precondition(version=expected_version, etags=tags)
+    return etags.expected(if_match, expected_version)
 
 
-def _quoted(tag: str) -> str:
-    return tag if tag == "*" or (len(tag) > 1 and tag[0] == tag[-1] == '"') else f'"{tag}"'
-
-
-Expected = Annotated[Precondition | None, Depends(_precondition)]
+Expected = Annotated[ExpectedVersion | None, Depends(_expected)]
 
 
 async def _service(state: StateDep) -> NetworkService:
@@ -159,7 +149,7 @@ def _answers() -> Iterator[None]:
 
 
 def _tag(response: Response, network: StoredNetwork) -> None:
-    response.headers["ETag"] = network.etag
+    response.headers["ETag"] = etags.etag(network.fingerprint)
 
 
 def _association(p: NetworkPair) -> AssociationPublic:
@@ -501,7 +491,7 @@ async def remove_association(
         )
     network = written.edit.network
     headers = {
-        "ETag": network.etag,
+        "ETag": etags.etag(network.fingerprint),
         VERSION_HEADER: str(network.version),
         LIVE_RUNS_HEADER: ",".join(map(str, written.live_runs)),
     }
