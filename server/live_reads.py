@@ -3,9 +3,10 @@
 `LiveRun.read` and `LiveRun.control` take a function of the run. With the engines in a
 process of their own, the function is pickled there and unpickling it imports its module.
 These functions live here, in a module that imports neither FastAPI nor viser, and the
-engines' process loads it at its start (`server.engine_process.PRELOADED`): a route's first
-read of a run used to import its route module, FastAPI with it, on the engines' loop,
-holding every ticking run for some 170 ms (three overruns of a 20 Hz run).
+engines' process loads it at its start (`server.engine_process.PRELOADED`): a function of a
+route module would import that module, FastAPI with it, on the engines' loop at a route's
+first read of a run, holding every ticking run for some 170 ms (three overruns of a 20 Hz
+run).
 """
 
 from __future__ import annotations
