@@ -59,7 +59,7 @@ RESULTS_GOAL_S = 30 * 60
 ROOT = Path(__file__).resolve().parents[1]
 
 REFERENCE_BARE = 38_080
-"""Bare pymunk's ticks/s on this project's machine when the goals were set (2026-11-28)."""
+"""Bare pymunk's ticks/s on this project's machine at the speed the goals were set at."""
 
 
 def _report(title: str, results: Sequence[TaskResult], elapsed: float, jobs: int, bare: float,

@@ -1,6 +1,6 @@
 """A sweep's wall time on local processes and on Ray with as many local workers, in one run.
 
-Run as ``.venv/bin/python -m bench.sweep`` (``make bench``). It runs the issue's sweep, 5
+Run as ``.venv/bin/python -m bench.sweep`` (``make bench``). It runs a sweep of 5
 values of epsilon x kp, qlambda x 20 seeds x 50 episodes (200 tasks, none shared),
 ``--rounds`` times, each round in turn:
 

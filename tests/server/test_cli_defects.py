@@ -1,4 +1,4 @@
-"""The CLI defects of issue 18, one test each: progress, choices, tables, plain lines, CIs."""
+"""The CLI's output and arguments, one test each: progress, choices, tables, plain lines, CIs."""
 
 from __future__ import annotations
 

@@ -7,8 +7,8 @@ never sends: wrong types, NaN, infinities, huge and negative numbers, options no
 has, other properties than the value; then ids of no element, message types a client does
 not send, and frames viser cannot read. The service must stay up, tell that page each value
 it refused, change neither the run's rate nor its rewards, still take a well-formed value,
-and log no traceback: issue 17 found such values left "Task exception was never retrieved"
-in the log, and this found they did more (server/viewer/inbound.py says what).
+and log no traceback: unchecked, such values leave "Task exception was never retrieved" in
+the log, and some do more (server/viewer/inbound.py says what).
 """
 
 from __future__ import annotations

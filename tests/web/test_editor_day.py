@@ -1,4 +1,4 @@
-"""A DP programmer's day in the editor (issue 18), in real Chromium against a live service.
+"""A DP programmer's day in the editor, in real Chromium against a live service.
 
 The editor fits from 1024 px; keystrokes save on commit, not per key; an edit made while
 the service is away is kept and sent, version-checked, when it is back; every stimulus,

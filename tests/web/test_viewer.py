@@ -213,8 +213,8 @@ def test_two_viewers_watch_different_runs_without_steering_each_other(
 def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
     browser: Browser, tmp_path: Path
 ) -> None:
-    # Issue 18, defect 7: viser's page reconnects by itself after a restart, as a new
-    # viewer; on / it would follow the newest run, on /run/<id> it gets its run back.
+    # viser's page reconnects by itself after a restart, as a new viewer; on / it would
+    # follow the newest run, on /run/<id> it gets its run back.
     database = tmp_path / "restart.db"
     env = {"SRLAB_VISER_PORT": str(free_port())}  # the same view port after the restart
     first = start_server(database, env=env)
