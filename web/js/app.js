@@ -3,7 +3,7 @@
 
 import { get, onReachability, setToken, token } from "./api.js";
 import * as console_ from "./console.js";
-import * as editor from "./editor.js";
+import * as editor from "./editor/editor.js";
 import { $, $$, toast, typing } from "./ui.js";
 
 const RETRY_MS = 1500;

@@ -4,8 +4,8 @@
 // or network on the same seeds and shows the paired difference with its CI, computed by
 // the server (GET /api/comparisons, core.stats).
 
-import { get, post, ApiError } from "./api.js";
-import { $, el, toast } from "./ui.js";
+import { get, post, ApiError } from "../api.js";
+import { $, el, toast } from "../ui.js";
 
 const POLL_MS = 700;
 const ENDED = new Set(["finished", "stopped", "failed", "interrupted"]);
