@@ -14,13 +14,14 @@ import { loadRuns, showRun } from "./status.js";
 import { closeStream, follow, loadStored, resetLive } from "./stream.js";
 import { drawRewards, drawTimeline } from "./timeline.js";
 import { reward, undoLast } from "./train.js";
+import { RunStatus, StimulusLevel } from "../generated/enums.js";
 
 const POLL_MS = 2000;
 const LAST_KEY = "srlab.console.run"; // the run this browser's console showed last
 
 export function init(catalog) {
   state.catalog = catalog;
-  state.high = new Set(catalog.stimuli.filter((s) => s.level === "high").map((s) => s.name));
+  state.high = new Set(catalog.stimuli.filter((s) => s.level === StimulusLevel.high).map((s) => s.name));
   state.known = new Set(catalog.behaviours.map((b) => b.name));
   $("#run-select").addEventListener("change", (e) => {
     location.hash = `#/console/${e.target.value}`;
@@ -188,7 +189,7 @@ function onKey(event) {
   if (plus) reward(1);
   else if (minus) reward(-1);
   else if (state.run) {
-    if (state.run.status === "running") control("pause");
-    else if (state.run.status === "paused") control("resume");
+    if (state.run.status === RunStatus.running) control("pause");
+    else if (state.run.status === RunStatus.paused) control("resume");
   }
 }

@@ -3,6 +3,7 @@
 // of them this browser sent, for the undo.
 
 import { state } from "./state.js";
+import { RewardSource } from "../generated/enums.js";
 
 const MINE_KEY = "srlab.mine";
 export const KEEP_REWARDS = 3000; // the newest rewards the page holds (a fast rp run logs thousands)
@@ -51,6 +52,6 @@ export const undoOf = (r) => {
 export function undoable() {
   const ids = mine();
   const undone = new Set(state.rewards.map(undoOf).filter((x) => x !== null));
-  return [...state.rewards].reverse().find((r) => r.source === "trainer" && r.id !== undefined
+  return [...state.rewards].reverse().find((r) => r.source === RewardSource.trainer && r.id !== undefined
     && ids.has(r.id) && undoOf(r) === null && !undone.has(r.id)) || null;
 }

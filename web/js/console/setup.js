@@ -5,6 +5,7 @@ import { get, post } from "../api.js";
 import { $, attempt, el, toast } from "../ui.js";
 import { state } from "./state.js";
 import { aboutRewards, showRun } from "./status.js";
+import { Condition } from "../generated/enums.js";
 
 export function fillNetworks(networks) {
   const select = $("#new-run-form").network;
@@ -31,12 +32,12 @@ export async function fillConditions() {
   if (!list) return;
   state.conditions = new Map(list.map((c) => [c.name, c]));
   const select = $("#new-run-form").condition;
-  const chosen = select.value || "trainer";
-  const tag = (c) => (c.name === "trainer" ? " · you give the rewards (at the keyboard)"
+  const chosen = select.value || Condition.trainer;
+  const tag = (c) => (c.name === Condition.trainer ? " · you give the rewards (at the keyboard)"
     : c.trainer ? ` · a reward program (${c.trainer}) rewards too` : c.learning ? "" : " · does not learn");
-  const ordered = [...list].sort((a, b) => (b.name === "trainer") - (a.name === "trainer"));
+  const ordered = [...list].sort((a, b) => (b.name === Condition.trainer) - (a.name === Condition.trainer));
   select.replaceChildren(...ordered.map((c) => el("option", { value: c.name, text: `${c.name}${tag(c)}`, title: c.description })));
-  select.value = state.conditions.has(chosen) ? chosen : "trainer";
+  select.value = state.conditions.has(chosen) ? chosen : Condition.trainer;
   describeCondition();
   if (state.run) showRun(state.run);
 }

@@ -1,8 +1,10 @@
 // What the console holds: the run it shows, what it read of the run's log and memory, and
 // the live stream it follows.
 
+import { RunStatus } from "../generated/enums.js";
+
 /** The statuses in which a run ticks (or may again, from where it is): the stream is followed. */
-export const LIVE = new Set(["running", "paused"]);
+export const LIVE = new Set([RunStatus.running, RunStatus.paused]);
 
 export const state = {
   catalog: null,

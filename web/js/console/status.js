@@ -5,16 +5,17 @@ import { getAll } from "../api.js";
 import { $, $$, attempt, el } from "../ui.js";
 import { undoable } from "./rewards.js";
 import { LIVE, state } from "./state.js";
+import { Condition, RunMode, RunStatus } from "../generated/enums.js";
 
 export function aboutRewards(c) {
   if (!c.learning) return `${c.description} Rewards are logged but change nothing.`;
   if (c.trainer) return `${c.description} Its reward program rewards by itself: for you alone at the keyboard, use trainer.`;
-  if (c.name === "trainer") return `${c.description} Use it to train the robot yourself.`;
+  if (c.name === Condition.trainer) return `${c.description} Use it to train the robot yourself.`;
   return c.description;
 }
 
 function label(r) {
-  const mode = r.mode === "realtime" ? `realtime ${r.hz} Hz` : "fast";
+  const mode = r.mode === RunMode.realtime ? `realtime ${r.hz} Hz` : "fast";
   const setup = r.world || r.sensors ? ` · ${r.world || "?"}/${r.sensors || "?"}` : "";
   return `#${r.id} · ${r.condition}${r.network ? ` (${r.network})` : ""}${setup} · ${mode} · ${r.status} · ${r.successes}/${r.episodes_done} ok`;
 }
@@ -53,19 +54,19 @@ export function showRun(run) {
   badge.className = `badge ${status}`;
   // One play button at a time: Resume a paused run (from the tick it paused at), Continue
   // a stopped or interrupted one (from its last stored episode's end), Start a new one.
-  const paused = status === "paused";
-  const going = paused || status === "running"; // Pause's counterpart is Resume
+  const paused = status === RunStatus.paused;
+  const going = paused || status === RunStatus.running; // Pause's counterpart is Resume
   $("#run-start").hidden = going;
   $("#run-resume").hidden = !going;
-  $("#run-start").disabled = !run || !["created", "stopped", "interrupted"].includes(status);
-  $("#run-start").textContent = run && status !== "created" ? "▶ Continue" : "▶ Start";
-  $("#run-start").title = run && status !== "created"
+  $("#run-start").disabled = !run || ![RunStatus.created, RunStatus.stopped, RunStatus.interrupted].includes(status);
+  $("#run-start").textContent = run && status !== RunStatus.created ? "▶ Continue" : "▶ Start";
+  $("#run-start").title = run && status !== RunStatus.created
     ? "Go on from the end of its last stored episode (the episode it stopped in runs again from its start)"
     : "Start the run";
-  $("#run-pause").disabled = !run || status !== "running";
+  $("#run-pause").disabled = !run || status !== RunStatus.running;
   $("#run-resume").disabled = !run || !paused;
   $("#run-stop").disabled = !run || !LIVE.has(status);
-  const canReward = Boolean(run) && status === "running";
+  const canReward = Boolean(run) && status === RunStatus.running;
   for (const button of $$(".reward-buttons button.reward")) button.disabled = !canReward;
   $("#reward-undo").disabled = !canReward || !undoable();
   const condition = run ? state.conditions.get(run.condition) : null;

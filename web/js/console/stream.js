@@ -10,6 +10,7 @@ import { LIVE, state } from "./state.js";
 import { showRun } from "./status.js";
 import { loadRewards, syncRewards } from "./timeline.js";
 import { onReward } from "./train.js";
+import { AssociationChange, How, Lamp, Outcome } from "../generated/enums.js";
 
 const TICK_HZ = 10;
 
@@ -64,9 +65,9 @@ export function resetLive() {
 
 /** How a tick's behaviour came to run: "released by Corner (designed)", "default". */
 function why(t) {
-  const parts = t.how === "released" && t.released_by ? [] : [t.how];
+  const parts = t.how === How.released && t.released_by ? [] : [t.how];
   if (t.released_by) {
-    const verb = t.how === "released" || t.how === "continued" ? "released by" : "answering";
+    const verb = t.how === How.released || t.how === How.continued ? "released by" : "answering";
     parts.push(`${verb} ${t.released_by}`);
   }
   let text = parts.join(", ");
@@ -81,7 +82,7 @@ function onTick(t) {
   $("#st-tick").textContent = t.tick;
   const lamp = $("#st-lamp");
   lamp.textContent = t.lamp;
-  lamp.style.color = { red: "#c0262d", yellow: "#a15c00", green: "#17803d" }[t.lamp] || "";
+  lamp.style.color = { [Lamp.red]: "#c0262d", [Lamp.yellow]: "#a15c00", [Lamp.green]: "#17803d" }[t.lamp] || "";
   $("#st-progress").textContent = `${fmt(t.progress_m, 1)} m`;
   $("#st-stimuli").replaceChildren(...(t.stimuli.length
     ? t.stimuli.map((s) => el("span", { class: `chip${state.high.has(s) ? " high" : ""}`, text: s }))
@@ -118,7 +119,7 @@ function onEpisode(e) {
   if (!state.episodes.has(e.episode)) {
     keepEpisode(e);
     if (state.run) {
-      const ok = e.outcome === "success" ? 1 : 0;
+      const ok = e.outcome === Outcome.success ? 1 : 0;
       showRun({ ...state.run, episodes_done: state.run.episodes_done + 1, successes: state.run.successes + ok });
     }
   }
@@ -129,7 +130,7 @@ function onEpisode(e) {
 
 function onAssociation(a) {
   const li = el("li", { class: a.change },
-    `${a.change === "promoted" ? "+" : "−"} ${a.stimulus} → ${a.behaviour} `,
+    `${a.change === AssociationChange.promoted ? "+" : "−"} ${a.stimulus} → ${a.behaviour} `,
     el("span", { class: "muted", text: `(${fmt(a.reliability)})` }));
   $("#assoc-feed").prepend(li);
   while ($("#assoc-feed").children.length > 50) $("#assoc-feed").lastElementChild.remove();

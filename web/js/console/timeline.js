@@ -2,12 +2,13 @@
 // rewards in a list.
 
 import { get } from "../api.js";
-import { $, attempt, el, throttle } from "../ui.js";
+import { $, attempt, el, svg, throttle } from "../ui.js";
 import { KEEP_REWARDS, addReward, mine, undoOf, undoable } from "./rewards.js";
 import { state } from "./state.js";
+import { RewardSource, RunStatus } from "../generated/enums.js";
 
 const TIMELINE_TICKS = 2000;
-const SOURCES = ["trainer", "program", "task"];
+const SOURCES = Object.values(RewardSource); // one lane each, in this order
 
 /** The newest `KEEP_REWARDS` of the run's reward log. */
 export async function loadRewards() {
@@ -37,19 +38,10 @@ export async function syncRewards() {
 export function drawRewards() {
   drawTimeline();
   drawMine();
-  if (state.run) $("#reward-undo").disabled = state.run.status !== "running" || !undoable();
+  if (state.run) $("#reward-undo").disabled = state.run.status !== RunStatus.running || !undoable();
 }
 
 export const redrawRewards = throttle(drawRewards, 300);
-
-const NS = "http://www.w3.org/2000/svg";
-
-function svgEl(tag, attrs = {}, text) {
-  const node = document.createElementNS(NS, tag);
-  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, String(v));
-  if (text !== undefined) node.textContent = text;
-  return node;
-}
 
 /** Every reward of the last `TIMELINE_TICKS` ticks, one lane per source, up good, down bad. */
 export function drawTimeline() {
@@ -72,25 +64,25 @@ export function drawTimeline() {
   const pad = { l: 70, r: 14, t: 4, b: 8 };
   const height = pad.t + lane * SOURCES.length + pad.b;
   const x = (t) => pad.l + ((t - from) / Math.max(1, now - from)) * (width - pad.l - pad.r);
-  const root = svgEl("svg", { viewBox: `0 0 ${width} ${height}`, role: "img", "aria-label": "Rewards by tick and source" });
+  const root = svg("svg", { viewBox: `0 0 ${width} ${height}`, role: "img", "aria-label": "Rewards by tick and source" });
   SOURCES.forEach((src, i) => {
     const mid = pad.t + lane * i + lane / 2;
-    root.append(svgEl("line", { x1: pad.l, x2: width - pad.r, y1: mid, y2: mid, stroke: "#e3e6eb" }));
-    root.append(svgEl("text", { x: pad.l - 8, y: mid + 4, "text-anchor": "end", "font-size": 11, fill: "#5d6675" }, src));
+    root.append(svg("line", { x1: pad.l, x2: width - pad.r, y1: mid, y2: mid, stroke: "#e3e6eb" }));
+    root.append(svg("text", { x: pad.l - 8, y: mid + 4, "text-anchor": "end", "font-size": 11, fill: "#5d6675" }, src));
   });
-  root.append(svgEl("text", { x: width - pad.r, y: height - 1, "text-anchor": "end", "font-size": 10, fill: "#5d6675" }, `ticks ${from}–${now}`));
-  const marks = svgEl("g", { class: "marks" });
+  root.append(svg("text", { x: width - pad.r, y: height - 1, "text-anchor": "end", "font-size": 10, fill: "#5d6675" }, `ticks ${from}–${now}`));
+  const marks = svg("g", { class: "marks" });
   for (const r of state.rewards) {
     if (r.tick < from) continue;
     const i = Math.max(0, SOURCES.indexOf(r.source));
     const mid = pad.t + lane * i + lane / 2;
     const h = Math.max(2, Math.abs(r.value) * (lane / 2 - 3));
-    const mark = svgEl("rect", {
+    const mark = svg("rect", {
       x: x(r.tick) - 1.5, width: 3, y: r.value >= 0 ? mid - h : mid, height: h,
       fill: r.value >= 0 ? "#17803d" : "#c0262d", class: `mark ${r.source}`,
       "data-source": r.source, "data-value": r.value,
     });
-    mark.append(svgEl("title", {}, `${r.id !== undefined ? `#${r.id} ` : ""}${r.source} ${r.value > 0 ? "+" : ""}${r.value} at tick ${r.tick}${r.note ? `: ${r.note}` : ""}${r.credited !== undefined ? ` · credited ${r.credited}` : ""}`));
+    mark.append(svg("title", {}, `${r.id !== undefined ? `#${r.id} ` : ""}${r.source} ${r.value > 0 ? "+" : ""}${r.value} at tick ${r.tick}${r.note ? `: ${r.note}` : ""}${r.credited !== undefined ? ` · credited ${r.credited}` : ""}`));
     marks.append(mark);
   }
   root.append(marks);
@@ -101,7 +93,7 @@ export function drawTimeline() {
 function drawMine() {
   const ids = mine();
   const undone = new Map(state.rewards.filter((r) => undoOf(r) !== null).map((r) => [undoOf(r), r]));
-  const items = state.rewards.filter((r) => r.source === "trainer").slice(-100).reverse();
+  const items = state.rewards.filter((r) => r.source === RewardSource.trainer).slice(-100).reverse();
   $("#my-rewards").replaceChildren(...items.map((r) => {
     const by = undone.get(r.id);
     return el("li", { class: by ? "undone" : "", dataset: { id: r.id ?? "" } },

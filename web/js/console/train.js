@@ -7,6 +7,7 @@ import { refreshMemory } from "./memory.js";
 import { addReward, rememberMine, rewardKey, undoable } from "./rewards.js";
 import { state } from "./state.js";
 import { drawRewards, redrawRewards } from "./timeline.js";
+import { RewardSource, RunStatus } from "../generated/enums.js";
 
 export function onReward(r) {
   refreshMemory();
@@ -15,7 +16,7 @@ export function onReward(r) {
   const kept = addReward({ tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
   if (!seen) state.logTotal += 1; // in the log too, not read from it yet
   redrawRewards();
-  if (r.source !== "trainer") return;
+  if (r.source !== RewardSource.trainer) return;
   state.lastReward = r;
   state.credited.add(`${r.tick}:${r.value}`);
   showEffect(r, kept, previous);
@@ -77,7 +78,7 @@ function whyNothing(r, previous) {
   if (previous && previous.episode === r.episode) {
     const what = `${previous.id !== undefined ? `#${previous.id} ` : "the reward "}(${previous.source}, ${previous.value > 0 ? "+" : ""}${previous.value}) at tick ${previous.tick}`;
     const took = previous.credited ? `, which took the records before it (${previous.credited})` : "";
-    const program = previous.source === "program"
+    const program = previous.source === RewardSource.program
       ? " In this condition a reward program rewards by itself; in trainer only you and the task do."
       : "";
     return `Nothing in STM to credit: ${recorded}, and none was recorded since ${what}${took}.${program}`;
@@ -93,7 +94,7 @@ export async function reward(value, note) {
     button.classList.add("pressed");
     setTimeout(() => button.classList.remove("pressed"), 150);
   }
-  if (run.status !== "running") {
+  if (run.status !== RunStatus.running) {
     toast(`Run ${run.id} is ${run.status}: rewards go to a running run.`, "error");
     return;
   }
@@ -105,7 +106,7 @@ export async function reward(value, note) {
   if (note === undefined) input.value = "";
   rememberMine(ack.id);
   // The log's id joins the stream's copy of the same reward (the stream has none).
-  const logged = { id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: "trainer", note: text };
+  const logged = { id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: RewardSource.trainer, note: text };
   if (!state.rewardIndex.has(rewardKey(logged))) state.logTotal += 1;
   addReward(logged);
   drawRewards();

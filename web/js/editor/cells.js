@@ -8,6 +8,7 @@ import { $, $$, toast } from "../ui.js";
 import { draw } from "./draw.js";
 import { shown, state } from "./state.js";
 import { lockRefusal, same } from "./sync.js";
+import { AssociationSource } from "../generated/enums.js";
 
 function selectedCell() {
   if (!state.selected) return null;
@@ -54,7 +55,7 @@ export function fillInspector() {
   $("#cell-meaning").textContent = x && x.description ? `${sel.s}: ${x.description}.` : "";
   form.strength.value = a ? a.strength : 1;
   form.strength_range.value = form.strength.value;
-  form.source.value = a ? a.source : "dp";
+  form.source.value = a ? a.source : AssociationSource.dp;
   form.locked.checked = a ? a.locked : false;
   $("#cell-remove").disabled = !a || state.net.builtin;
   $("#cell-save").textContent = a ? "Save" : "Add";
@@ -86,7 +87,7 @@ export function onMatrixKey(event) {
   } else if (/^[0-9]$/.test(k)) {
     event.preventDefault();
     const strength = k === "0" ? 1 : Number(k) / 10;
-    stage((cur) => ({ strength, source: cur ? cur.source : "dp", locked: cur ? cur.locked : false }));
+    stage((cur) => ({ strength, source: cur ? cur.source : AssociationSource.dp, locked: cur ? cur.locked : false }));
   } else if (k === "l" || k === "L") {
     event.preventDefault();
     stage((cur) => {
@@ -112,7 +113,7 @@ export function onMatrixKey(event) {
 
 /** Add a full-strength association to the selected cell, or remove the one there. */
 export function toggle() {
-  stage((cur) => (cur ? null : { strength: 1, source: "dp", locked: false }));
+  stage((cur) => (cur ? null : { strength: 1, source: AssociationSource.dp, locked: false }));
 }
 
 export function onSaveCell(event) {

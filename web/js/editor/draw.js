@@ -5,9 +5,15 @@
 import { columns, render, rows } from "../matrix.js";
 import { $, fmt } from "../ui.js";
 import { shown, state } from "./state.js";
+import { AssociationSource } from "../generated/enums.js";
 
 const SOURCE_INK = {
-  innate: "#6b7a90", dp: "#245fd6", learned: "#17803d", kp: "#7b3fc4", expert: "#b35c00", designed: "#0f7f86",
+  [AssociationSource.innate]: "#6b7a90",
+  [AssociationSource.dp]: "#245fd6",
+  [AssociationSource.learned]: "#17803d",
+  [AssociationSource.kp]: "#7b3fc4",
+  [AssociationSource.expert]: "#b35c00",
+  [AssociationSource.designed]: "#0f7f86",
 };
 
 /** A strength as a cell shows it: "1", ".4", ".25", "0" (never ".00"). */
