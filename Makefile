@@ -58,9 +58,19 @@ run: install-run
 	@echo "CLI: $(BIN)/srlab (or \`source $(BIN)/activate\` for plain \`srlab\`, or \`uv run --no-dev srlab\`)"
 	$(BIN)/srlab serve
 
-lint: install
+# ESLint for web/ (eslint.config.js) at package-lock.json's versions, into node_modules/
+# from the npm registry; node and npm are Debian's (scripts/node-deps.sh).
+NODE_SYNCED := node_modules/.synced
+
+$(NODE_SYNCED): package.json package-lock.json
+	bash scripts/node-deps.sh
+	npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
+
+lint: install $(NODE_SYNCED)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	node_modules/.bin/eslint --max-warnings 0
 
 typecheck: install
 	$(BIN)/mypy
@@ -85,8 +95,8 @@ test: lint typecheck
 	bash scripts/pg-test-server.sh run -- $(BIN)/pytest -n $(WORKERS) --dist loadfile --cov --cov-report=
 	@echo "branch coverage of core/ and server/: $$($(BIN)/coverage report --format=total)%"
 
-# The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL or Docker.
-UNIT := not slow and not browser and not reliability and not pg and not docker
+# The quick tests (docs/testing.md): no live server, subprocess, browser, PostgreSQL, Docker or node.
+UNIT := not slow and not browser and not reliability and not pg and not docker and not node
 test-unit: install
 	$(BIN)/pytest -m "$(UNIT)" -n 2 -q
 
@@ -147,4 +157,4 @@ down:
 	$(COMPOSE) down
 
 clean: pg-stop
-	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache .pg
+	rm -rf $(VENV) .tools .mypy_cache .ruff_cache .pytest_cache .pg node_modules

@@ -13,5 +13,6 @@ service is made of), `config.py` (settings), `schemas.py` (the HTTP models), `as
 ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
 and small helpers of the service and the commands: `runspec.py` (a run's spec from a
 request, a command line or a row), `probe_cache.py` (the placement probe's results on
-disk) and `tuning.py` (the interpreter set up for engines).
+disk), `tuning.py` (the interpreter set up for engines) and `web_enums.py` (writes the
+web client's enums module from the OpenAPI document).
 """

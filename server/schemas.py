@@ -22,6 +22,7 @@ from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import CoreSchema
 
 from core.brain.catalog import Source, load_catalog, sensor_definitions
+from core.commands import RewardSource
 from core.conditions import CONDITIONS
 from core.engine import HZ_MAX, HZ_MIN
 from core.text import unstorable
@@ -417,7 +418,7 @@ class RewardPublic(BaseModel):
     tick: int
     episode: int
     value: float
-    source: str
+    source: RewardSource
     note: str
     applied: bool
     credited: int
@@ -768,7 +769,7 @@ class RewardEvent(BaseModel):
     tick: int
     episode: int
     value: float
-    source: str
+    source: RewardSource
     note: str
     credits: list[CreditEvent]
     credited: int

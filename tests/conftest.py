@@ -270,12 +270,14 @@ def page(browser: Browser) -> Iterator[Page]:
 
 
 # --- markers, and the order of a parallel run ----------------------------------------
-# The markers are registered in pyproject.toml; `make test-unit` deselects all five. Most are
+# The markers are registered in pyproject.toml; `make test-unit` deselects all six. Most are
 # given here, by directory, module or fixture; a slow test in an otherwise quick module
 # carries `@pytest.mark.slow` itself.
 
 TESTS = Path(__file__).resolve().parent
 DIRECTORY_MARKERS = {"web": "browser", "reliability": "reliability", "deploy": "docker"}
+MODULE_MARKERS = {"web/test_node.py": "node"}
+"""Modules marked otherwise than their directory: the web client's node tests need no Chromium."""
 PG_FIXTURES = frozenset(
     {"postgres_url", "postgres_database", "postgres_engine", "clean_postgres_engine"}
 )
@@ -314,7 +316,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         module = item.path.resolve().relative_to(TESTS).as_posix()
         params = getattr(item, "callspec", None)
         names = set(getattr(item, "fixturenames", ()))
-        if marker := DIRECTORY_MARKERS.get(module.split("/", 1)[0]):
+        if marker := MODULE_MARKERS.get(module) or DIRECTORY_MARKERS.get(module.split("/", 1)[0]):
             item.add_marker(marker)
         if names & PG_FIXTURES or (params and "postgresql" in params.params.values()):
             item.add_marker("pg")

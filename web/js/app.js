@@ -2,8 +2,8 @@
 // and recovery when the service restarts.
 
 import { get, onReachability, setToken, token } from "./api.js";
-import * as console_ from "./console.js";
-import * as editor from "./editor.js";
+import * as console_ from "./console/console.js";
+import * as editor from "./editor/editor.js";
 import { $, $$, toast, typing } from "./ui.js";
 
 const RETRY_MS = 1500;

@@ -1,13 +1,7 @@
 // The learning curve: each episode's outcome and the success rate of the last `window`.
 
-const NS = "http://www.w3.org/2000/svg";
-
-function svg(tag, attrs = {}, text) {
-  const node = document.createElementNS(NS, tag);
-  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, String(v));
-  if (text !== undefined) node.textContent = text;
-  return node;
-}
+import { svg } from "./ui.js";
+import { Outcome } from "./generated/enums.js";
 
 /**
  * Draw `episodes` ([{episode, outcome}], any order) into `container` as an SVG, each at
@@ -44,7 +38,7 @@ export function learningCurve(container, episodes, { window = 10 } = {}) {
   const dots = svg("g", { class: "dots" });
   const r = span > 300 ? 1.5 : 3;
   for (const e of sorted) {
-    const ok = e.outcome === "success";
+    const ok = e.outcome === Outcome.success;
     const dot = svg("circle", {
       cx: x(e.episode), cy: y(ok ? 1 : 0) + (ok ? 6 : -6), r,
       fill: ok ? "#17803d" : "#c0262d", opacity: 0.55, "data-episode": e.episode,
@@ -57,18 +51,18 @@ export function learningCurve(container, episodes, { window = 10 } = {}) {
   let wins = 0;
   let lo = 0;
   const points = sorted.map((e, i) => {
-    wins += e.outcome === "success" ? 1 : 0;
+    wins += e.outcome === Outcome.success ? 1 : 0;
     while (sorted[lo].episode <= e.episode - window) {
-      wins -= sorted[lo].outcome === "success" ? 1 : 0;
+      wins -= sorted[lo].outcome === Outcome.success ? 1 : 0;
       lo += 1;
     }
     const rate = wins / (i - lo + 1);
     return `${x(e.episode).toFixed(1)},${y(rate).toFixed(1)}`;
   });
   root.append(svg("polyline", { points: points.join(" "), fill: "none", stroke: "#245fd6", "stroke-width": 2.5, class: "rate" }));
-  const total = sorted.filter((e) => e.outcome === "success").length;
+  const total = sorted.filter((e) => e.outcome === Outcome.success).length;
   const recent = sorted.slice(lo);
-  const recentWins = recent.filter((e) => e.outcome === "success").length;
+  const recentWins = recent.filter((e) => e.outcome === Outcome.success).length;
   const missing = span + 1 - n;
   root.append(svg("text", { x: width - pad.r, y: pad.t + 12, "text-anchor": "end", "font-size": 12, fill: "#1b1f27", class: "summary" },
     `${total}/${n} successes · last ${recent.length}: ${Math.round((recentWins / recent.length) * 100)}%${missing > 0 ? ` · ${missing} not loaded yet` : ""}`));

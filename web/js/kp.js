@@ -5,7 +5,8 @@
 // the run dropdown, and polls while the console is shown, so console.js needs no hook.
 
 import { ApiError, get } from "./api.js";
-import { $, el, fmt } from "./ui.js";
+import { $, el, fmt, svg } from "./ui.js";
+import { KpResolution } from "./generated/enums.js";
 
 const POLL_MS = 1000;
 const SHOWN_RUNS = 8;
@@ -54,7 +55,6 @@ function rstmBlock(body) {
  */
 function vectors(p) {
   const w = 160, h = 120, pad = 8;
-  const NS = "http://www.w3.org/2000/svg";
   const unit = (d) => [Math.cos((d * Math.PI) / 180), Math.sin((d * Math.PI) / 180)];
   const chain = [[0, 0]];
   for (const s of p.sources) {
@@ -71,45 +71,33 @@ function vectors(p) {
   const scale = Math.min((w - 2 * pad) / Math.max(maxX - minX, 1e-9), (h - 2 * pad) / Math.max(maxY - minY, 1e-9));
   const X = (x) => pad + (x - minX) * scale;
   const Y = (y) => h - pad - (y - minY) * scale;
-  const svg = document.createElementNS(NS, "svg");
-  svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
-  svg.setAttribute("class", "kp-vectors");
-  svg.setAttribute("role", "img");
-  svg.setAttribute("aria-label", `${p.sources.length} source headings summing to ${deg(p.heading_deg)}; snapped to ${p.nearest}`);
-  const line = ([x1, y1], [x2, y2], cls) => {
-    const l = document.createElementNS(NS, "line");
-    l.setAttribute("x1", X(x1)); l.setAttribute("y1", Y(y1));
-    l.setAttribute("x2", X(x2)); l.setAttribute("y2", Y(y2));
-    l.setAttribute("class", cls);
-    svg.append(l);
-  };
+  const root = svg("svg", {
+    viewBox: `0 0 ${w} ${h}`, class: "kp-vectors", role: "img",
+    "aria-label": `${p.sources.length} source headings summing to ${deg(p.heading_deg)}; snapped to ${p.nearest}`,
+  });
+  const line = ([x1, y1], [x2, y2], cls) => root.append(svg("line", { x1: X(x1), y1: Y(y1), x2: X(x2), y2: Y(y2), class: cls }));
   line([0, 0], snap, "snap");
   for (let i = 1; i < chain.length; i += 1) line(chain[i - 1], chain[i], "src");
   line([0, 0], [p.sum_x, p.sum_y], "sum");
-  return svg;
+  return root;
 }
 
 function history(points) {
   if (!points.length) return el("p", { class: "muted small", text: "No RLTM steps in this engine's life." });
   const w = 160, h = 40;
-  const NS = "http://www.w3.org/2000/svg";
-  const svg = document.createElementNS(NS, "svg");
-  svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
-  svg.setAttribute("class", "kp-history");
   const xs = points.map((_, i) => (points.length === 1 ? w / 2 : (i * (w - 4)) / (points.length - 1) + 2));
-  const path = document.createElementNS(NS, "polyline");
-  path.setAttribute("points", points.map((p, i) => `${xs[i]},${h - 2 - p.after * (h - 4)}`).join(" "));
-  svg.append(path);
+  const root = svg("svg", { viewBox: `0 0 ${w} ${h}`, class: "kp-history" });
+  root.append(svg("polyline", { points: points.map((p, i) => `${xs[i]},${h - 2 - p.after * (h - 4)}`).join(" ") }));
   const last = points.slice(-6).map((p) =>
     `${fmt(p.before)}→${fmt(p.after)} (reward ${fmt(p.reward, 1)} after tick ${p.after_tick})`);
-  return el("div", { class: "kp-hist" }, svg, el("p", { class: "small", text: last.join("; ") }));
+  return el("div", { class: "kp-hist" }, root, el("p", { class: "small", text: last.join("; ") }));
 }
 
 function provenanceBlock(p) {
   const made = {
-    snapped: `snapped to the primitive ${p.nearest} (${deg(p.nearest_heading_deg)})`,
-    synthesized: `synthesised ${p.behaviour} (nearest primitive ${p.nearest}, ${deg(p.nearest_heading_deg)})`,
-    reused: `reused the synthesised ${p.behaviour} (nearest primitive ${p.nearest})`,
+    [KpResolution.snapped]: `snapped to the primitive ${p.nearest} (${deg(p.nearest_heading_deg)})`,
+    [KpResolution.synthesized]: `synthesised ${p.behaviour} (nearest primitive ${p.nearest}, ${deg(p.nearest_heading_deg)})`,
+    [KpResolution.reused]: `reused the synthesised ${p.behaviour} (nearest primitive ${p.nearest})`,
   }[p.resolution];
   return el("div", { class: "kp-prov" },
     table(["tick", "sonar stimulus", "source behaviour", "heading"],

@@ -12,9 +12,10 @@
 
 import { get, post } from "./api.js";
 import { $, attempt, el, fmt } from "./ui.js";
+import { Lamp, RunMode, RunStatus } from "./generated/enums.js";
 
 const MARGIN_PX = 12;
-const LAMP = { red: "#dc2626", yellow: "#facc15", green: "#16a34a", none: "#6b7280" };
+const LAMP = { [Lamp.red]: "#dc2626", [Lamp.yellow]: "#facc15", [Lamp.green]: "#16a34a", [Lamp.none]: "#6b7280" };
 const FLOOR = "#b0b4ba";
 const GROUND = "#f5f5f0"; // style.css paints the canvas the same, before its first frame
 const WALL = "#475569";
@@ -99,19 +100,19 @@ function onTick(t) {
 function controls() {
   if (!view.card) return;
   const run = view.run;
-  const live = Boolean(run) && (run.status === "running" || run.status === "paused");
-  const realtime = Boolean(run) && run.mode === "realtime";
+  const live = Boolean(run) && (run.status === RunStatus.running || run.status === RunStatus.paused);
+  const realtime = Boolean(run) && run.mode === RunMode.realtime;
   const toggle_ = $("#view2d-toggle");
   toggle_.disabled = view.busy || !live;
-  toggle_.textContent = run && run.status === "paused" ? "▶ Resume" : "❚❚ Pause";
-  $("#view2d-step").disabled = view.busy || !run || run.status !== "paused" || !realtime;
+  toggle_.textContent = run && run.status === RunStatus.paused ? "▶ Resume" : "❚❚ Pause";
+  $("#view2d-step").disabled = view.busy || !run || run.status !== RunStatus.paused || !realtime;
   $("#view2d-hz").disabled = !live || !realtime;
   $("#view2d-rate-set").disabled = !live || !realtime;
   const t = view.tick;
   $("#view2d-caption").textContent = !run
     ? "Pick a run."
     : t
-      ? `run #${run.id} · episode ${t.episode} · tick ${t.tick} · lamp ${t.lamp}${run.status === "paused" ? " · paused" : ""}`
+      ? `run #${run.id} · episode ${t.episode} · tick ${t.tick} · lamp ${t.lamp}${run.status === RunStatus.paused ? " · paused" : ""}`
       : `run #${run.id} · ${run.status}: no tick seen yet`;
 }
 
@@ -126,7 +127,7 @@ function announce(run) {
 async function toggle() {
   const run = view.run;
   if (!run) return;
-  const action = run.status === "paused" ? "resume" : "pause";
+  const action = run.status === RunStatus.paused ? "resume" : "pause";
   view.busy = true;
   controls();
   const updated = await attempt(() => post(`/runs/${run.id}/${action}`), `${action[0].toUpperCase()}${action.slice(1)} run ${run.id}`);
@@ -229,7 +230,7 @@ function draw() {
   ctx.stroke();
   const t = view.tick;
   const [lx, ly] = world.lamp;
-  ctx.fillStyle = LAMP[t ? t.lamp : "none"] || LAMP.none;
+  ctx.fillStyle = LAMP[t ? t.lamp : Lamp.none] || LAMP[Lamp.none];
   ctx.strokeStyle = "#111827";
   ctx.lineWidth = 2;
   ctx.beginPath();

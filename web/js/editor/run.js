@@ -4,13 +4,13 @@
 // or network on the same seeds and shows the paired difference with its CI, computed by
 // the server (GET /api/comparisons, core.stats).
 
-import { get, post, ApiError } from "./api.js";
-import { $, el, toast } from "./ui.js";
+import { get, post, ApiError } from "../api.js";
+import { $, el, svg, toast } from "../ui.js";
+import { Condition, Outcome, RunMode, RunStatus } from "../generated/enums.js";
 
 const POLL_MS = 700;
-const ENDED = new Set(["finished", "stopped", "failed", "interrupted"]);
+const ENDED = new Set([RunStatus.finished, RunStatus.stopped, RunStatus.failed, RunStatus.interrupted]);
 const INK = { a: "#245fd6", b: "#b35c00" };
-const NS = "http://www.w3.org/2000/svg";
 
 const state = {
   current: () => null,
@@ -32,7 +32,7 @@ export async function init(catalog, current) {
     state.conditions = [];
   }
   form.condition.replaceChildren(...state.conditions.map((c) => el("option", { value: c.name, text: c.name })));
-  form.condition.value = state.conditions.some((c) => c.name === "dp") ? "dp" : (state.conditions[0] || {}).name || "";
+  form.condition.value = state.conditions.some((c) => c.name === Condition.dp) ? Condition.dp : (state.conditions[0] || {}).name || "";
   describeCondition();
 }
 
@@ -99,7 +99,7 @@ async function onStart(event) {
     for (const side of sides) {
       const runs = [];
       for (let seed = 0; seed < seeds; seed++) {
-        const body = { condition, mode: "fast", episodes, seed, network: side.network };
+        const body = { condition, mode: RunMode.fast, episodes, seed, network: side.network };
         if (side.network_version) body.network_version = side.network_version;
         const run = await post("/runs", body);
         runs.push({ id: run.id, seed, status: run.status, episodes: [], count: 0 });
@@ -122,7 +122,7 @@ async function onStop() {
   if (!batch) return;
   clearTimeout(batch.timer);
   batch.stopped = true;
-  const live = batch.sides.flatMap((s) => s.runs).filter((r) => r.status === "running" || r.status === "paused");
+  const live = batch.sides.flatMap((s) => s.runs).filter((r) => r.status === RunStatus.running || r.status === RunStatus.paused);
   await Promise.all(live.map((r) => post(`/runs/${r.id}/stop`).catch(() => null)));
   setBusy(false);
 }
@@ -138,7 +138,7 @@ async function poll(batch) {
   const runs = batch.sides.flatMap((s) => s.runs);
   let waiting = 0;
   try {
-    const created = runs.filter((r) => r.status === "created");
+    const created = runs.filter((r) => r.status === RunStatus.created);
     // After a refusal (SRLAB_MAX_RUNS, or the write rate) wait a while before asking again.
     if (created.length && Date.now() >= (batch.retryAt || 0)) {
       for (const r of created) {
@@ -152,11 +152,11 @@ async function poll(batch) {
         }
       }
     }
-    waiting = runs.filter((r) => r.status === "created").length;
+    waiting = runs.filter((r) => r.status === RunStatus.created).length;
     batch.note = waiting
       ? `${waiting} run${waiting > 1 ? "s" : ""} waiting for a free run slot (the service runs at most SRLAB_MAX_RUNS at once); they start as others end.`
       : "";
-    await Promise.all(runs.filter((r) => r.status !== "created").map(async (r) => {
+    await Promise.all(runs.filter((r) => r.status !== RunStatus.created).map(async (r) => {
       if (ENDED.has(r.status) && r.count >= batch.episodes) return;
       const run = await get(`/runs/${r.id}`);
       r.status = run.status;
@@ -207,7 +207,7 @@ function render() {
   for (const side of batch.sides) {
     const done = side.runs.reduce((n, r) => n + r.count, 0);
     const total = side.runs.length * batch.episodes;
-    const failed = side.runs.filter((r) => r.status === "failed");
+    const failed = side.runs.filter((r) => r.status === RunStatus.failed);
     const e = stats && stats[side.key];
     parts.push(el("div", { class: `run-side side-${side.key}`, dataset: { side: side.key } },
       el("div", { class: "run-side-head" },
@@ -250,7 +250,7 @@ function causes(side) {
   const counts = new Map();
   for (const r of side.runs) {
     for (const e of r.episodes) {
-      if (e.outcome !== "success") counts.set(e.cause || e.outcome, (counts.get(e.cause || e.outcome) || 0) + 1);
+      if (e.outcome !== Outcome.success) counts.set(e.cause || e.outcome, (counts.get(e.cause || e.outcome) || 0) + 1);
     }
   }
   if (!counts.size) return el("p", { class: "muted small causes", text: "No failures yet." });
@@ -258,13 +258,6 @@ function causes(side) {
   return el("table", { class: "causes" },
     el("caption", { class: "muted small", text: "failures by cause" }),
     sorted.map(([cause, n]) => el("tr", {}, el("td", { text: cause.replaceAll("_", " ") }), el("td", { class: "n", text: String(n) }))));
-}
-
-function svg(tag, attrs = {}, text) {
-  const node = document.createElementNS(NS, tag);
-  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, String(v));
-  if (text !== undefined) node.textContent = text;
-  return node;
 }
 
 /** Success per episode number, as the share of seeds that succeeded, smoothed over 5. */
@@ -287,7 +280,7 @@ function curve(batch) {
     for (let i = 0; i < n; i++) {
       const seen = side.runs.map((r) => r.episodes[i]).filter(Boolean);
       if (!seen.length) break;
-      rates.push(seen.filter((e) => e.outcome === "success").length / seen.length);
+      rates.push(seen.filter((e) => e.outcome === Outcome.success).length / seen.length);
     }
     const points = rates.map((_, i) => {
       const from = Math.max(0, i - 4);

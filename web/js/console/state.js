@@ -1,0 +1,32 @@
+// What the console holds: the run it shows, what it read of the run's log and memory, and
+// the live stream it follows.
+
+import { RunStatus } from "../generated/enums.js";
+
+/** The statuses in which a run ticks (or may again, from where it is): the stream is followed. */
+export const LIVE = new Set([RunStatus.running, RunStatus.paused]);
+
+export const state = {
+  catalog: null,
+  high: new Set(),
+  known: new Set(),
+  runs: [],
+  run: null,
+  episodes: new Map(),
+  conditions: new Map(),
+  rewards: [],
+  rewardIndex: new Map(),
+  logCount: 0,
+  logTotal: 0,
+  contiguous: 0,
+  memory: new Map(),
+  network: new Map(),
+  flashing: new Map(),
+  source: null,
+  poll: null,
+  active: false,
+  viserPort: null,
+  lastReward: null,
+  credited: new Set(),
+  tick: null,
+};
