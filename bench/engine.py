@@ -3,9 +3,8 @@
 Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one run:
 
 1. ticks/s of the plain headless loop (`core.runner.run`) against the engine in fast mode
-   committing everything to SQLite, with the store in the engine's process (worker
-   threads) and in a store process as `srlab serve` has it
-   (`server.persistence.process`), seed by seed in alternating order: each seed's ratio,
+   committing everything to SQLite, the store in the engine's process (worker threads)
+   as `srlab serve` has it, seed by seed in alternating order: each seed's ratio,
    their mean with a 95% bootstrap interval (goal: at least 0.8);
 2. a realtime run at 20 Hz for ``--seconds`` (default 60) with storage writes going on (the
    reinforcement program's rewards, trainer rewards injected 5 times a second, episodes),
@@ -37,39 +36,31 @@ from core.ports import Mode, RunSpec, RunStore
 from core.runner import run
 from core.stats import Estimate, bootstrap_mean
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
-from server.persistence.process import StoreProcess
 from server.tuning import configure_process, freeze_heap
 
-STORES = ("threads", "process", "sessions")
-"""Where the store runs: in the engine's process (its worker threads) or in a store process;
-``sessions`` is ``threads`` with every write through a SQLAlchemy session instead of SQLite's
-driver (`server.persistence.driver`), for comparison."""
+STORES = ("threads", "sessions")
+"""How the store writes: ``threads`` on SQLite's driver in the engine's worker threads, as it
+runs; ``sessions`` with every write through a SQLAlchemy session instead
+(`server.persistence.driver`), for comparison."""
 UNTRACED = ", no trace"
 """Marks the engine run without recording episodes' traces (`--untraced`)."""
 
 
 class Stores:
-    """One SQLite database per store kind; the store processes stop on `close`."""
+    """One SQLite database per store kind and name."""
 
     def __init__(self, folder: Path) -> None:
         self.folder = folder
-        self.processes: list[StoreProcess] = []
 
     def open(self, kind: str, name: str) -> RunStore:
         """A store of `kind` on a new, migrated database `name`."""
         url = f"sqlite:///{self.folder / f'{kind}-{name}'}"
         upgrade(url)
-        if kind == "process":
-            process = StoreProcess(url)
-            self.processes.append(process)
-            return process.runs
         sessions = make_sessionmaker(make_engine(url))
         return SqlAlchemyRunStore(sessions, driver=kind != "sessions")
 
     def close(self) -> None:
-        """Stop the store processes."""
-        for process in self.processes:
-            process.stop()
+        """Nothing to stop: the stores are this process's."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -198,8 +189,8 @@ def main() -> None:
     parser.add_argument("--busy", type=int, default=0, help="spinning processes beside")
     parser.add_argument(
         "--stores",
-        default="threads,process",
-        help=f"comma-separated, of {', '.join(STORES)} (default: threads,process)",
+        default="threads",
+        help=f"comma-separated, of {', '.join(STORES)} (default: threads)",
     )
     parser.add_argument(
         "--untraced",

@@ -100,7 +100,7 @@ def _listening_sockets(port: int) -> set[str]:
     return {inode for _, bound, inode in _listeners() if bound == port}
 
 
-def _family(pid: int) -> set[int]:
+def family(pid: int) -> set[int]:
     """`pid` and its descendants (a wrapper command may start the server as a child)."""
     children: dict[int, list[int]] = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
@@ -141,7 +141,7 @@ def listening(pid: int) -> set[tuple[str, int]]:
     open files: every listening socket they hold, whoever opened it. Empty where those
     cannot be read (not Linux).
     """
-    held = {link for p in _family(pid) for link in _links(Path(f"/proc/{p}/fd"))}
+    held = {link for p in family(pid) for link in _links(Path(f"/proc/{p}/fd"))}
     return {
         (_address(address), port)
         for address, port, inode in _listeners()
@@ -168,7 +168,7 @@ def listens_on(pid: int, port: int) -> bool:
     if not TCP_TABLES[0].exists():
         return True
     wanted = {f"socket:[{inode}]" for inode in _listening_sockets(port)}
-    return any(_links(Path(f"/proc/{p}/fd")) & wanted for p in _family(pid))
+    return any(_links(Path(f"/proc/{p}/fd")) & wanted for p in family(pid))
 
 
 def _links(folder: Path) -> set[str]:

@@ -558,6 +558,8 @@ class Server:
     """More SRLAB_* settings (by default the 3D view on a free port, not on 8080)."""
     placement: ClassVar[str] = "process"
     """Where servers tick their runs unless `env` says (``--engines``)."""
+    extra: ClassVar[dict[str, str]] = {}
+    """Settings for every server (``--env``), before `env`'s own."""
 
     @property
     def log(self) -> Path:
@@ -580,6 +582,7 @@ class Server:
             SRLAB_REWARD_RATE_PER_S=str(REWARD_LIMIT),
             SRLAB_REWARD_BURST=str(REWARD_LIMIT),
         )
+        env.update(self.extra)
         env.update(self.env)
         script = Path(sys.executable).with_name("srlab")
         command = [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
@@ -1538,6 +1541,14 @@ def main() -> None:
     )
     parser.add_argument("--rounds", type=int, default=2, help="--part engines' rounds (2)")
     parser.add_argument(
+        "--env",
+        action="append",
+        default=[],
+        metavar="SRLAB_NAME=VALUE",
+        help="a setting for every server the bench starts (repeatable), e.g. "
+        "SRLAB_STORE_PROCESS=false",
+    )
+    parser.add_argument(
         "--engines",
         choices=list(PLACEMENTS),
         default="process",
@@ -1558,11 +1569,14 @@ def main() -> None:
         parser.error("--connections must be at least 1, --warmup(-run) not negative")
     if args.episodes <= 50 or min(args.old_ticks, args.samples, args.streams, args.runs) < 1:
         parser.error("--episodes must be over 50; --old-ticks, --samples, --streams, --runs >= 1")
+    if bad := [item for item in args.env if not item.startswith("SRLAB_") or "=" not in item]:
+        parser.error(f"--env takes SRLAB_NAME=VALUE, not {bad[0]!r}")
 
     # SIGTERM ends the bench as Ctrl-C does: through the finally that stops the server.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     with tempfile.TemporaryDirectory(prefix="srlab-bench-") as tmp:
         Server.placement = args.engines
+        Server.extra = dict(item.split("=", 1) for item in args.env)
         server = Server(Path(tmp))
         started = time.perf_counter()
         try:

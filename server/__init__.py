@@ -1,7 +1,7 @@
 """srlab's adapters around the pure core: the HTTP service, storage, the 3D view, the CLI.
 
 The rooms: `api/` (the HTTP API's routes and its contract), `services/` (live network
-edits), `persistence/` (SQLAlchemy, migrations, the store process), `runtime/` (the runs'
+edits), `persistence/` (SQLAlchemy, migrations), `runtime/` (the runs'
 host, where they tick, and the service's side of them), `viewer/` (the viser
 3D view), `cli/` (the `srlab` command, a module a command), `reports/` (the markdown,
 JSON and plots the experiment commands write) and `backends/` (where experiment tasks

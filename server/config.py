@@ -50,11 +50,6 @@ class Settings(BaseSettings):
             ignores those headers. Behind a proxy, this is what keeps each trainer's reward
             rate limit their own instead of one shared by everybody behind the proxy. Set,
             it makes the token required (`reachable_through`).
-        store_process: run the database work in a process of its own
-            (`server.persistence.process`), so it takes another core than the event loop
-            that paces realtime ticks. `srlab serve` turns it on unless
-            ``SRLAB_STORE_PROCESS`` says otherwise; `create_app` alone keeps storage in the
-            service's process (quick to start, as tests want).
         engines: where the runs tick: ``local``, on the service's own event loop (quick
             to start, as tests want: `create_app`'s default), or ``process``, in a process
             of their own (`server.runtime.process`), where the ticks get a GIL and a core
@@ -87,7 +82,6 @@ class Settings(BaseSettings):
     viser_port: int = Field(8080, ge=1, le=65535)
     viser_max_viewers: int = Field(16, ge=1)
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
-    store_process: bool = False
     engines: Literal["local", "process"] = "local"
     service_nice: int = Field(0, ge=0, le=19)
 

@@ -69,12 +69,8 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         overrides["host"] = host
     if port is not None:
         overrides["port"] = port
-    # Storage in a process of its own (another core than the ticks' loop), unless the
-    # environment says otherwise.
-    if "SRLAB_STORE_PROCESS" not in os.environ:
-        overrides["store_process"] = True
-    # The runs tick in a process of their own (a GIL and a core apart from HTTP, the 3D
-    # view and the store: `bench.service`, docs/benchmarks.md), unless the environment
+    # The runs tick in a process of their own (a GIL and a core apart from HTTP and the 3D
+    # view: `bench.service`, docs/benchmarks.md), unless the environment
     # keeps them on the service's loop.
     if "SRLAB_ENGINES" not in os.environ:
         overrides["engines"] = "process"

@@ -7,7 +7,6 @@ import contextlib
 import ctypes
 import functools
 import gc
-import multiprocessing
 import os
 import platform
 import sys
@@ -119,13 +118,12 @@ def freeze_heap() -> None:
 
     Modules, classes, the catalogue, the app and its routes live as long as the process,
     yet each of CPython's full collections scans them all again: 80-110 ms in the service
-    (about 170,000 objects), 10-70 ms in the engines' and the store's processes, and
+    (about 170,000 objects), 10-70 ms in the engines' process, and
     the event loop, with every run it ticks, stands still meanwhile (a 20 Hz run's period
     is 50 ms). `gc.freeze` moves every object alive now to a generation no collection
     scans, so a later one looks only at what came after. Called once a process is set up:
-    the service and the engines' process at their warm-up (`warm_up`),
-    the store process, `srlab run`. What it freezes is never freed, so the garbage goes
-    first.
+    the service and the engines' process at their warm-up (`warm_up`), `srlab run`. What
+    it freezes is never freed, so the garbage goes first.
     """
     gc.collect()
     gc.freeze()
@@ -146,24 +144,19 @@ def _lower(who: int, increment: int) -> None:
 
 
 def step_back(increment: int) -> None:
-    """Lower this process's CPU priority by `increment` (nice), and its store process's.
+    """Lower this process's CPU priority by `increment` (nice).
 
     For a service whose runs tick in the engines' process (`service_nice`): called once
-    that process runs, so it and the store process it starts keep the default priority,
-    and on a busy machine the ticks get a core before requests do. Linux gives each
-    thread its own nice value, so every thread of this process is lowered (threads made
-    later inherit it from the thread that makes them); elsewhere the process is. Children
-    started by `multiprocessing` (the service's store process) are lowered too. Raising
-    a priority needs privileges, so this cannot be undone in the process.
+    that process runs, so it keeps the default priority, and on a busy machine the ticks
+    get a core before requests do. Linux gives each thread its own nice value, so every
+    thread of this process is lowered (threads made later inherit it from the thread that
+    makes them); elsewhere the process is. Raising a priority needs privileges, so this
+    cannot be undone in the process.
     """
     if increment <= 0:
         return
     for tid in threads("self") or [0]:
         _lower(tid, increment)
-    for child in multiprocessing.active_children():
-        if child.pid is not None:
-            for tid in threads(child.pid) or [child.pid]:
-                _lower(tid, increment)
 
 
 async def warm_up(kernel: bool = True) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import shutil
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -25,7 +24,6 @@ from bench.liveserver import LiveServer, live_server, servers
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
-from server.persistence.process import StoreProcess
 
 # CI runs the property tests on the same examples every time (seeded from each test), so a
 # submission is judged on its code, not on the examples a random search happened to draw;
@@ -158,41 +156,11 @@ def clean_postgres_engine(postgres_engine: Engine) -> Engine:
     return postgres_engine
 
 
-@pytest.fixture(scope="module")
-def store_process(
-    migrated_sqlite: Path, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[StoreProcess]:
-    """A store process (as `srlab serve` runs) on a copy of the migrated SQLite database."""
-    path = tmp_path_factory.mktemp("store-process") / "srlab.db"
-    shutil.copyfile(migrated_sqlite, path)
-    process = StoreProcess(f"sqlite:///{path}")
-    yield process
-    process.stop()
-
-
-@pytest.fixture
-def clean_store_process(store_process: StoreProcess) -> StoreProcess:
-    """The module's store process with no run or network an earlier test made."""
-    engine = make_engine(store_process.url)
-    with engine.begin() as c:
-        c.execute(text("DELETE FROM runs"))
-        c.execute(text("DELETE FROM networks WHERE NOT builtin"))
-    engine.dispose()
-    return store_process
-
-
-@pytest.fixture(params=["memory", "sqlite", "postgresql", "sqlite-process"])
+@pytest.fixture(params=["memory", "sqlite", "postgresql"])
 def store(request: pytest.FixtureRequest, catalog: Catalog) -> InspectableRunStore:
-    """Each implementation of `RunStore`, for the one contract suite they all pass.
-
-    ``sqlite-process``: the SQL store through the store process's proxy, as `srlab serve`
-    uses it (every argument, result and error crosses a process boundary).
-    """
+    """Each implementation of `RunStore`, for the one contract suite they all pass."""
     if request.param == "memory":
         return InMemoryRunStore(catalog)
-    if request.param == "sqlite-process":
-        process: StoreProcess = request.getfixturevalue("clean_store_process")
-        return process.runs
     engine_fixture = "sqlite_engine" if request.param == "sqlite" else "clean_postgres_engine"
     engine: Engine = request.getfixturevalue(engine_fixture)
     return SqlAlchemyRunStore(make_sessionmaker(engine))
@@ -302,7 +270,6 @@ SLOW_MODULES = frozenset(
         "server/test_ray_backend.py",
         "server/test_schemathesis.py",
         "server/test_slow_clients.py",
-        "server/test_store_process.py",  # kills and restarts store processes
         "server/test_viewer_malformed.py",
         "server/test_viewer_serve.py",
     }

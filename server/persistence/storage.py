@@ -1,4 +1,4 @@
-"""How a process opens the service's storage: SQLAlchemy in it, or in a store process.
+"""How a process opens the service's storage: SQLAlchemy, in that process.
 
 The service's composition root (`server.bootstrap`) and the engines' process
 (`server.runtime.process`) both open storage from the settings; this module is what they
@@ -15,7 +15,6 @@ from core.ports import NetworkRepository, RunQueries
 from server.config import Settings
 from server.persistence.db import DatabaseCheck, make_engine, make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
-from server.persistence.process import StoreProcess
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
 
 
@@ -36,22 +35,14 @@ class Storage:
     database: DatabaseProbe
     close: Callable[[], None]
     """Blocking: called once, after the last write."""
-    process: StoreProcess | None = None
-    """The store process, when storage runs in one (its supervisor says when it is down)."""
 
 
 StorageFactory = Callable[[Settings], Storage]
 """Blocking: opens the storage `settings` name (called in a thread)."""
 
 
-def open_storage(settings: Settings, *, name: str = "the service's store process") -> Storage:
-    """SQLAlchemy on `settings.database_url`, in a store process if `store_process`.
-
-    `name` is what the store process's errors and log lines call it.
-    """
-    if settings.store_process:
-        process = StoreProcess(settings.database_url, name=name)
-        return Storage(process.runs, process.networks, process.database, process.stop, process)
+def open_storage(settings: Settings) -> Storage:
+    """SQLAlchemy on `settings.database_url`, in this process."""
     engine = make_engine(settings.database_url)
     sessions = make_sessionmaker(engine)
     return Storage(

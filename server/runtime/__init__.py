@@ -26,7 +26,7 @@ async def open_runs(settings: Settings, store: RunStore, stack: contextlib.Async
     """The service's runs, on the host `settings.engines` names; let go with `stack`.
 
     `store` is the service's own storage. The engines' process opens its own from the
-    settings (`database_url`, `store_process`).
+    settings (`database_url`).
     """
     runs = Runs(
         store,
@@ -36,9 +36,7 @@ async def open_runs(settings: Settings, store: RunStore, stack: contextlib.Async
     if settings.engines == "process":
         link = ProcessLink(runs)
         runs.link = link
-        await link.start_process(
-            settings.model_dump(include={"database_url", "store_process", "max_runs"})
-        )
+        await link.start_process(settings.model_dump(include={"database_url", "max_runs"}))
         stack.push_async_callback(link.close)
     else:
         runs.link = LocalLink(runs, store, settings.max_runs, QUERIES)

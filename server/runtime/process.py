@@ -4,8 +4,8 @@ CPython runs one thread of Python at a time in a process: on the service's loop,
 wait behind every request's Python. With ``SRLAB_ENGINES=process`` (`srlab serve`'s
 default) the service starts one **engines' process** (`main`, a new interpreter) that runs
 a `RunHost` (every run's tick, reward and writer tasks) on its own event loop, with its
-own storage, and the service's process keeps HTTP, the 3D view and the books of which runs
-tick (`server.runtime.runs.Runs`).
+own storage (SQLAlchemy in its threads), and the service's process keeps HTTP, the 3D view
+and the books of which runs tick (`server.runtime.runs.Runs`).
 
 The child's stdin and stdout carry length-prefixed pickles, in order, each way, and only
 the message set of `core.engine.messages` and the host's outlet: no function crosses.
@@ -28,10 +28,6 @@ starts a new child (after `RESPAWN_FIRST_S`, then twice as long, at least a seco
 each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and the failed ones
 can be started again from their checkpoints. The new child is started by the service's
 process, so it shares the service's lowered priority (`server.tuning.step_back`).
-
-The child's own store process is started again by its supervisor when it dies
-(`server.persistence.process`); the child tells the service each time it goes down and
-serves again, so `outage` (and `/api/health`) says so without asking the child.
 """
 
 from __future__ import annotations
@@ -57,7 +53,7 @@ from server.runtime.host import RunHost
 from server.runtime.runs import Runs
 
 if TYPE_CHECKING:
-    from server.persistence.process import StoreProcess
+    pass
 
 log = logging.getLogger("srlab.engines")
 
@@ -113,8 +109,6 @@ class ProcessLink:
         self._closing = False
         self._config: dict[str, Any] = {}
         self._respawner: asyncio.Task[None] | None = None
-        self._store_down: str | None = None
-        """Why the child's store process is down, as the child last said (None: it serves)."""
 
     # --- the child ------------------------------------------------------------------
 
@@ -145,7 +139,6 @@ class ProcessLink:
         if ready != "ready":
             raise EngineProcessError(f"the engines' process did not start: {ready}")
         self._gone = None
-        self._store_down = None  # a new child's store process serves: it said ready
         self._pump = asyncio.create_task(self._receive(proc.stdout), name="engines' process")
 
     @property
@@ -226,8 +219,6 @@ class ProcessLink:
             case ("closed", sub_id):
                 if (sub := self._subs.get(sub_id)) is not None:
                     sub.close()
-            case ("storage", down):
-                self._store_down = down
 
     async def _lost(self) -> None:
         """The child is gone: fail what waits on it, end every run and stream here."""
@@ -292,14 +283,8 @@ class ProcessLink:
         return len(self._starting) + sum(1 for r in self.runs.engines() if not r.done.is_set())
 
     def outage(self) -> str | None:
-        """The engines' process or its store process down (None: both serve).
-
-        Read from what is known here, without asking the child: its death is seen on the
-        pipe, and the child says when its store process goes down and comes back.
-        """
-        if self._gone is not None:
-            return str(self._gone)
-        return self._store_down
+        """The engines' process gone (None: it serves), seen on the pipe without asking."""
+        return None if self._gone is None else str(self._gone)
 
     def subscribe(
         self, run_id: int, maxsize: int, tick_hz: float, *, next_start: bool = True
@@ -367,17 +352,6 @@ class _Serve:
 
     def run_ended(self, run_id: int, state: RunState, let_go: bool) -> None:
         self.send(("ended", run_id, state, let_go))
-
-    def watch_storage(self, process: StoreProcess) -> None:
-        """Tell the service each time the store process goes down or serves again."""
-        loop = asyncio.get_running_loop()
-
-        def changed(down: StorageError | None) -> None:  # on the supervisor's thread
-            with contextlib.suppress(RuntimeError):  # the loop closed: we are stopping
-                said = None if down is None else str(down)
-                loop.call_soon_threadsafe(self.send, ("storage", said))
-
-        process.watch(changed)
 
     # --- the service's messages -----------------------------------------------------
 
@@ -468,9 +442,7 @@ async def _child(read_fd: int, write_fd: int) -> None:
     config = await _read(reader)
     try:
         settings = Settings(**config)
-        storage = await asyncio.to_thread(
-            partial(open_storage, settings, name="the engines' store process")
-        )
+        storage = await asyncio.to_thread(open_storage, settings)
     except Exception as e:
         writer.write(_frame(f"{type(e).__name__}: {e}"))
         await writer.drain()
@@ -480,8 +452,6 @@ async def _child(read_fd: int, write_fd: int) -> None:
         serve.host = RunHost(storage.runs, settings.max_runs, serve, QUERIES)
         await warm_up()
         serve.send("ready")
-        if storage.process is not None:
-            serve.watch_storage(storage.process)
         try:
             await serve.serve(reader)
         finally:

@@ -27,24 +27,17 @@ from core.networks import (
 from core.ports import NetworkPair, NetworkRepository
 from server.persistence import make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
-from server.persistence.process import StoreProcess
 from server.persistence.seed import SEEDED_NOTE
 
 RED_STOP = NetworkPair("Red", "stop", 0.8, "dp")
 CORNER = ("Corner", "leftturn90")
 
 
-@pytest.fixture(params=["memory", "sqlite", "postgresql", "sqlite-process"])
+@pytest.fixture(params=["memory", "sqlite", "postgresql"])
 def networks(request: pytest.FixtureRequest, catalog: Catalog) -> NetworkRepository:
-    """Each implementation of `NetworkRepository`, seeded with the catalogue's networks.
-
-    ``sqlite-process``: the SQL adapter through the store process, as `srlab serve` has it.
-    """
+    """Each implementation of `NetworkRepository`, seeded with the catalogue's networks."""
     if request.param == "memory":
         return InMemoryNetworkRepository(catalog)
-    if request.param == "sqlite-process":
-        process: StoreProcess = request.getfixturevalue("clean_store_process")
-        return process.networks
     if request.param == "sqlite":
         engine: Engine = request.getfixturevalue("sqlite_engine")
     else:

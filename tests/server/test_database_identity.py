@@ -11,14 +11,12 @@ from apphelpers import client_for, create, settings_for, until
 pytestmark = pytest.mark.anyio
 
 
-@pytest.mark.parametrize("store_process", [False, True], ids=["in-process", "store-process"])
+@pytest.mark.parametrize("engines", ["local", "process"])
 @pytest.mark.parametrize("fault", ["deleted", "replaced"])
 async def test_a_lost_database_file_fails_the_run_and_health_and_no_reward_is_acked(
-    tmp_path: Path, fault: str, store_process: bool
+    tmp_path: Path, fault: str, engines: str
 ) -> None:
-    settings = settings_for(
-        tmp_path, reward_rate_per_s=1000.0, reward_burst=1000, store_process=store_process
-    )
+    settings = settings_for(tmp_path, reward_rate_per_s=1000.0, reward_burst=1000, engines=engines)
     database = tmp_path / "api.db"
     async with client_for(settings) as (client, _):
         run = await create(client, condition="rp", mode="realtime", hz=100)

@@ -3,7 +3,7 @@
 A page on another loopback origin found viser's own port (ephemeral, behind the 3D view's
 gate) by a `fetch(no-cors)` scan, opened viser's websocket there and rewarded and re-paced
 runs. So this asks the kernel which TCP sockets the whole process tree listens on (the
-service, its store process, the engines' process and theirs: whatever it opened, not a
+service and the engines' process: whatever they opened, not a
 list of ports written here) and sends each a websocket handshake from another origin and
 a request with a foreign Host: none may answer 101 or 2xx. The service's output (stdout
 and stderr) must name no port but the API's and the view's.

@@ -23,7 +23,7 @@ import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
 from fakes import InMemoryRunStore
 
-from bench.liveserver import children, live_server, wait_status
+from bench.liveserver import children, family, live_server, wait_status
 from core.engine import StatusChanged
 from core.engine.messages import Latest, LatestTick
 from server.config import Settings
@@ -303,9 +303,35 @@ def _loads_numba(pid: int) -> bool:
     return "/numba/" in Path(f"/proc/{pid}/maps").read_text()
 
 
+def _interpreters(pid: int) -> dict[int, str]:
+    """Process `pid` and its descendants that run Python, with their command lines."""
+    found = {}
+    for p in family(pid):
+        try:
+            exe = os.readlink(f"/proc/{p}/exe")
+            command = Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:  # gone meanwhile
+            continue
+        if "python" in Path(exe).name:
+            found[p] = command.decode(errors="replace")
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
+def test_srlab_serve_runs_in_two_interpreters(tmp_path: Path) -> None:
+    """The service and the engines' process: no store process, no resource tracker."""
+    with live_server(tmp_path / "count.db", env={"SRLAB_VISER": "false"}) as server:
+        run = server.client.post("/api/runs", json={"condition": "rp", "episodes": 1}).json()
+        assert server.client.post(f"/api/runs/{run['id']}/start").status_code == 200
+        assert wait_status(server.client, run["id"], "finished")["episodes_done"] == 1
+        found = _interpreters(server.process.pid)
+        assert len(found) == 2, found
+        assert sum("server.runtime.process" in cmd for cmd in found.values()) == 1, found
+
+
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux's /proc")
 def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
-    """The service's threads and its store process yield to the ticks; the ticks' side not.
+    """The service's threads yield to the ticks; the engines' process does not.
 
     `srlab serve` with the engines in their own process lowers its own priority by
     SRLAB_SERVICE_NICE (10 unless set) once that process runs, so on a busy machine the
@@ -317,21 +343,13 @@ def test_srlab_serve_steps_back_for_the_engines_process(tmp_path: Path) -> None:
         service = server.process.pid
         found = children(service)
         (engines,) = [pid for pid, cmd in found.items() if "server.runtime.process" in cmd]
-        stores = [pid for pid, cmd in found.items() if "spawn_main" in cmd]
-        assert stores, f"the service's store process, among {found}"
         assert _nices(service) == {min(19, base + 10)}
-        for store in stores:
-            assert _nices(store) == {min(19, base + 10)}
         assert _nices(engines) == {base}
-        engines_stores = [p for p, cmd in children(engines).items() if "spawn_main" in cmd]
-        assert engines_stores, "the engines' own store process"
-        for store in engines_stores:
-            assert _nices(store) == {base}
 
 
 @pytest.mark.skipif(not slice_ns(), reason="the kernel reports no slices (Linux 6.12+ does)")
 def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path: Path) -> None:
-    """Each thread of the service, the engines' process and their store processes.
+    """Each thread of the service and of the engines' process.
 
     So that beside busy processes a tick's or a storage thread's wake-up is let in at once
     rather than at the end of another process's slice (`server.tuning.ask_short_slices`).
@@ -341,9 +359,7 @@ def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path:
         service = server.process.pid
         found = children(service)
         (engines,) = [pid for pid, cmd in found.items() if "server.runtime.process" in cmd]
-        stores = [pid for pid, cmd in {**found, **children(engines)}.items() if "spawn_main" in cmd]
-        assert len(stores) == 2, f"the service's and the engines' store processes: {found}"
-        for pid in (service, engines, *stores):
+        for pid in (service, engines):
             assert _slices(pid) == {SHORT_SLICE_NS}, f"process {pid}"
 
 

@@ -1,4 +1,4 @@
-"""Whether runs can start and store: the database, the engines' process, the stores."""
+"""Whether runs can start and store: the database and the engines' process."""
 
 from __future__ import annotations
 
@@ -16,9 +16,8 @@ router = resource_router(tag="health")
 def health(state: StateDep) -> Health:
     """Whether runs can start and store: 200 "ok", or 503 saying what is down.
 
-    The service's database is read (through its store process when it has one: a store
-    process down, restarting, answers at once); the engines' process and its store process
-    are as last heard (`Engines.outage`), so a poll costs no trip to them. A SQLite file
+    The service's database is read; the engines' process is as last heard (`Runs.outage`:
+    its death is seen on its pipe), so a poll costs no trip to it. A SQLite file
     deleted or replaced since the service opened it, or its WAL index cut, is a 503 that
     says which: the runs fail with the same error, and no write is taken.
     """
