@@ -29,6 +29,9 @@ class InjectReward:
     _: KW_ONLY
     note: str = ""
     source: RewardSource = RewardSource.TRAINER
+    uid: str = ""
+    """The reward's own id from its arrival on: kept in the log, its event and the console
+    ("": the engine gives it one)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

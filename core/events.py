@@ -54,6 +54,8 @@ class RewardApplied:
     source: str
     note: str
     credits: tuple[Credit, ...]
+    uid: str = ""
+    """The reward's id from its arrival (`core.commands.InjectReward.uid`)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -161,6 +161,8 @@ class RewardRecord:
     value: float
     source: str
     note: str = ""
+    uid: str = ""
+    """The id the reward got on arrival (`core.commands.InjectReward.uid`)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -208,6 +208,7 @@ class Simulation:
             r.source,
             r.note,
             outcome.credits,
+            r.uid,
         )
         return event, outcome
 

@@ -411,6 +411,10 @@ class RewardAccepted(BaseModel):
     tick: int
     episode: int
     value: float
+    uid: str = Field(
+        description="the reward's id from its arrival: its 202, its log entry and its event "
+        "on the run's stream carry it (the log's `id` is the database's)"
+    )
 
 
 class RewardPublic(BaseModel):
@@ -420,6 +424,10 @@ class RewardPublic(BaseModel):
     value: float
     source: RewardSource
     note: str
+    uid: str = Field(
+        description="the reward's id from its arrival: its 202, its log entry and its event "
+        "on the run's stream carry it (the log's `id` is the database's)"
+    )
     applied: bool
     credited: int
 
@@ -773,6 +781,10 @@ class RewardEvent(BaseModel):
     note: str
     credits: list[CreditEvent]
     credited: int
+    uid: str = Field(
+        description="the reward's id from its arrival: its 202, its log entry and its event "
+        "on the run's stream carry it (the log's `id` is the database's)"
+    )
 
 
 class EpisodeEvent(BaseModel):

@@ -156,6 +156,18 @@ def clean_postgres_engine(postgres_engine: Engine) -> Engine:
     return postgres_engine
 
 
+@pytest.fixture(params=["local", pytest.param("process", marks=pytest.mark.slow)])
+def each_link(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Runs the test once with the runs' host on the service's loop and once in a process.
+
+    `settings_for` reads ``SRLAB_ENGINES`` as `srlab serve` does: a module whose tests use
+    this (`pytestmark`) drives the same API over both links (`server.runtime`). The process
+    link's copy is slow: each test starts an engines' process.
+    """
+    monkeypatch.setenv("SRLAB_ENGINES", request.param)
+    return str(request.param)
+
+
 @pytest.fixture(params=["memory", "sqlite", "postgresql"])
 def store(request: pytest.FixtureRequest, catalog: Catalog) -> InspectableRunStore:
     """Each implementation of `RunStore`, for the one contract suite they all pass."""

@@ -157,6 +157,8 @@ class RunEngine:
             self._replayed.set()
         self._steps: deque[asyncio.Future[int]] = deque()
         """Single-tick steps asked of the paused run, answered with the tick they ran."""
+        self._arrivals = 0
+        """Rewards this engine took from outside (the last part of a `uid` it makes)."""
         self._status_waiters: list[asyncio.Future[RunStatus]] = []
         """`next_status` futures, answered by the next status change."""
 
@@ -340,11 +342,18 @@ class RunEngine:
         self.bus.end(StatusChanged(self.run_id, self.status, self.error))
 
     async def reward(
-        self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
+        self,
+        value: float,
+        *,
+        note: str = "",
+        source: RewardSource = RewardSource.TRAINER,
+        uid: str = "",
     ) -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
+        `uid` is its id from its arrival on ("": one made of its source, episode, boundary
+        and how many rewards this engine took).
         """
         # Refused before it is queued: a note no database stores would fail the writer
         # that logs it, and with it the run. (A logged note is replayed as it was.)
@@ -356,10 +365,13 @@ class RunEngine:
             await self._replayed.wait()
             self._check_running()
         next_boundary = self.sim.tick_count + 1
+        stamp = self._boundary.stamp(next_boundary)
+        self._arrivals += 1
+        uid = uid or f"{source.value}-{self.sim.episode}-{stamp}-{self._arrivals}"
         job = RewardJob(
-            self._boundary.stamp(next_boundary),
+            stamp,
             self.sim.episode,
-            InjectReward(value, note=note, source=source),
+            InjectReward(value, note=note, source=source, uid=uid),
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
@@ -792,7 +804,9 @@ class RunEngine:
         )
 
     def _enqueue_internal(self, e: RewardDue) -> None:
-        reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source))
+        # Made again alike when the run is replayed.
+        uid = f"{e.source}-{e.episode}-{e.tick}"
+        reward = InjectReward(e.value, note=e.note, source=RewardSource(e.source), uid=uid)
         job = RewardJob(e.tick, e.episode, reward, False)
         if self._replay is not None:
             self._replay.match(job)

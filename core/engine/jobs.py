@@ -26,6 +26,8 @@ class RewardAck:
     tick: int
     episode: int
     value: float
+    uid: str = ""
+    """The reward's id from its arrival (its log `id` is the database's)."""
 
 
 @dataclass(eq=False)

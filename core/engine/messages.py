@@ -93,8 +93,8 @@ async def perform(
     if allowed is not None and engine.status not in allowed:
         raise RunStateError(f"run {engine.run_id} is {engine.status.value}")
     match command:
-        case InjectReward(value=value, note=note, source=source):
-            return await engine.reward(value, note=note, source=source)
+        case InjectReward(value=value, note=note, source=source, uid=uid):
+            return await engine.reward(value, note=note, source=source, uid=uid)
         case EditAssociation():
             return await engine.edit(command)
         case EditBatch(edits=edits):

@@ -53,7 +53,10 @@ class ReplayLog:
                     r.record.tick,
                     r.record.episode,
                     InjectReward(
-                        r.record.value, note=r.record.note, source=RewardSource(r.record.source)
+                        r.record.value,
+                        note=r.record.note,
+                        source=RewardSource(r.record.source),
+                        uid=r.record.uid,
                     ),
                     external=True,
                     logged_id=r.id,

@@ -49,7 +49,7 @@ WRITE_BATCH_MAX = 256
 def reward_record(job: RewardJob) -> RewardRecord:
     """A reward as the log keeps it."""
     r = job.reward
-    return RewardRecord(job.stamp, job.episode, r.value, r.source, r.note)
+    return RewardRecord(job.stamp, job.episode, r.value, r.source, r.note, r.uid)
 
 
 class RunWriter:
@@ -230,5 +230,7 @@ class RunWriter:
             if job.ack is not None and not job.ack.done():
                 self.stats.reward_ack_s.add(time.perf_counter() - job.arrived)
                 job.ack.set_result(
-                    RewardAck(job.logged_id, job.stamp, job.episode, job.reward.value)
+                    RewardAck(
+                        job.logged_id, job.stamp, job.episode, job.reward.value, job.reward.uid
+                    )
                 )

@@ -303,6 +303,8 @@ class RewardRow(Base):
     value: Mapped[float]
     source: Mapped[str] = mapped_column(String(40))
     note: Mapped[str] = mapped_column(Text, default="")
+    uid: Mapped[str] = mapped_column(String(64), server_default=text("''"))
+    """The reward's id from its arrival (`core.commands.InjectReward.uid`)."""
     applied: Mapped[bool] = mapped_column(server_default=false())
     credited: Mapped[int] = mapped_column(server_default=text("0"))
     created_at: Mapped[datetime] = _created()

@@ -697,6 +697,7 @@ def _reward_row(run_id: int, r: RewardRecord, applied: bool, credited: int) -> d
         "value": r.value,
         "source": r.source,
         "note": r.note,
+        "uid": r.uid,
         "applied": applied,
         "credited": credited,
     }
@@ -730,20 +731,23 @@ def _spec(run: RunRow) -> RunSpec:
     )
 
 
-def _rewards(*where: ColumnElement[bool]) -> Select[int, int, int, float, str, str, bool, int]:
+def _rewards(
+    *where: ColumnElement[bool],
+) -> Select[int, int, int, float, str, str, str, bool, int]:
     """Reward log rows in log order, as plain columns.
 
     Not ORM objects: their identity map, change tracking and the unused `created_at`
     (parsed from SQLite's text) cost more than the rows' values.
     """
     r = RewardRow
-    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.applied, r.credited)
+    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.applied, r.credited)
     return select(*columns).where(*where).order_by(r.id)
 
 
-def _reward(row: Row[int, int, int, float, str, str, bool, int]) -> StoredReward:
-    id_, tick, episode, value, source, note, applied, credited = row
-    return StoredReward(id_, RewardRecord(tick, episode, value, source, note), applied, credited)
+def _reward(row: Row[int, int, int, float, str, str, str, bool, int]) -> StoredReward:
+    id_, tick, episode, value, source, note, uid, applied, credited = row
+    record = RewardRecord(tick, episode, value, source, note, uid)
+    return StoredReward(id_, record, applied, credited)
 
 
 def _commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import uuid
 from collections.abc import Iterable
 from dataclasses import replace
 from typing import Any, Protocol, TypeVar
@@ -134,8 +135,13 @@ class LiveRun:
     async def reward(
         self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
     ) -> RewardAck:
-        """A reward, answered once it is in the reward log."""
-        ack: RewardAck = await self.send(InjectReward(value, note=note, source=source))
+        """A reward, answered once it is in the reward log.
+
+        It gets its id (`uid`) here, as it arrives: the answer, the log, its event on the
+        stream and the console all name it by that.
+        """
+        reward = InjectReward(value, note=note, source=source, uid=uuid.uuid4().hex)
+        ack: RewardAck = await self.send(reward)
         return ack
 
     async def edit_all(self, edits: Iterable[EditAssociation]) -> list[int | BaseException]:

@@ -14,6 +14,7 @@ from alembic.script import ScriptDirectory
 from conftest import fresh_postgres_database
 from sqlalchemy import inspect, text
 
+from core.ports import RewardRecord
 from server.persistence import (
     Base,
     SqlAlchemyRunStore,
@@ -188,6 +189,42 @@ def test_runs_stored_before_0003_keep_the_network_made_before_them(sqlite_url: s
         with engine.begin() as connection:
             connection.execute(text("DELETE FROM networks WHERE id = 7"))
         assert [r.spec.network_id for r in store.list_runs()] == [None] * 4
+    finally:
+        engine.dispose()
+    assert drift(sqlite_url) == []
+
+
+def test_rewards_logged_before_0004_read_with_no_uid(sqlite_url: str) -> None:
+    command.upgrade(alembic_config(sqlite_url), "0003")
+    engine = make_engine(sqlite_url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO runs (id, condition, seed, mode, hz, params, status, created_at) "
+                    "VALUES (1, 'kp', 1, 'fast', 10.0, '{}', 'stopped', '2026-02-01 00:00:00')"
+                )
+            )
+            connection.execute(
+                text(
+                    "INSERT INTO rewards (run_id, tick, episode, value, source, note, applied, "
+                    "credited, created_at) VALUES "
+                    "(1, 5, 0, 1.0, 'trainer', 'old', 1, 3, '2026-02-01 00:00:01')"
+                )
+            )
+    finally:
+        engine.dispose()
+
+    upgrade(sqlite_url, seed=False)
+
+    engine = make_engine(sqlite_url)
+    try:
+        store = SqlAlchemyRunStore(make_sessionmaker(engine))
+        (old,) = store.rewards(1)
+        assert (old.record.note, old.record.uid, old.credited) == ("old", "", 3)
+        new = store.log_reward(1, RewardRecord(6, 0, -1.0, "trainer", "new", "abc123"))
+        assert [r.record.uid for r in store.rewards(1)] == ["", "abc123"]
+        assert new > old.id
     finally:
         engine.dispose()
     assert drift(sqlite_url) == []

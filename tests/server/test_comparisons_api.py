@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from apphelpers import client_for, create, settings_for, until
 
-pytestmark = pytest.mark.anyio
+pytestmark = [pytest.mark.anyio, pytest.mark.usefixtures("each_link")]  # over both links
 
 
 async def test_compare_runs_of_two_versions_on_the_same_seeds(tmp_path: Path) -> None:

@@ -12,7 +12,7 @@ from apphelpers import client_for, create, settings_for
 
 from core.brain.propagation import KpConfig
 
-pytestmark = pytest.mark.anyio
+pytestmark = [pytest.mark.anyio, pytest.mark.usefixtures("each_link")]  # over both links
 HANG_GUARD_S = 300
 """Not a timing: how long a busy machine may take before the test is called hung."""
 

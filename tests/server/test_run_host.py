@@ -35,6 +35,7 @@ from core.engine.messages import (
     Step,
     Stop,
 )
+from core.events import RewardApplied
 from server.runtime import Runs
 from server.runtime.local import LocalLink
 from server.runtime.reads import InspectKp
@@ -242,3 +243,32 @@ def test_a_subscription_is_woken_from_another_thread() -> None:
         return got
 
     assert asyncio.run(main()) == [0, 1, 2]
+
+
+@pytest.mark.parametrize("engines", ["local", "process"])
+async def test_a_reward_keeps_the_id_it_got_on_arrival(tmp_path: Path, engines: str) -> None:
+    # The trainer's answer, the stream's event and the log name the reward alike, and a run
+    # resumed from its log keeps it: nothing has to match rewards by what they look like.
+    async with client_for(settings_for(tmp_path, engines=engines)) as (client, app):
+        run_id = await started_realtime(client)
+        sub = _runs(app).subscribe(run_id, maxsize=512, tick_hz=0.0)
+        answers = [
+            (await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1.0})).json()
+            for _ in range(2)
+        ]
+        uids = [a["uid"] for a in answers]
+        assert len(set(uids)) == 2 and all(len(u) == 32 for u in uids)  # alike but two
+        streamed: dict[str, int] = {}
+        async with asyncio.timeout(30):  # a hang guard: both come within a few ticks
+            while len(streamed) < 2:
+                event = await sub.get()
+                if isinstance(event, RewardApplied) and event.source == "trainer":
+                    streamed[event.uid] = event.tick
+        assert set(streamed) == set(uids)
+        _runs(app).unsubscribe(run_id, sub)
+        await client.post(f"/api/runs/{run_id}/stop")
+        log = (await client.get(f"/api/runs/{run_id}/rewards")).json()["data"]
+        mine = {r["uid"]: r["id"] for r in log if r["source"] == "trainer"}
+        assert mine == {a["uid"]: a["id"] for a in answers}
+        own = [r["uid"] for r in log if r["source"] != "trainer"]
+        assert all(own) and len(set(own)) == len(own)  # the run's own rewards have theirs

@@ -16,7 +16,7 @@ from server.runtime import Runs
 from server.runtime.local import LocalLink
 from server.schemas import TickEvent
 
-pytestmark = pytest.mark.anyio
+pytestmark = [pytest.mark.anyio, pytest.mark.usefixtures("each_link")]  # over both links
 
 
 async def _paused_realtime_run(client: Any, hz: float = 5.0) -> int:
@@ -70,6 +70,7 @@ async def test_steps_asked_together_each_run_one_tick(tmp_path: Path) -> None:
         await client.post(f"/api/runs/{run_id}/stop")
 
 
+@pytest.mark.parametrize("each_link", ["local"], indirect=True)  # reaches into the engine
 async def test_a_pending_step_is_answered_when_the_run_stops(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, app):
         run_id = await _paused_realtime_run(client)

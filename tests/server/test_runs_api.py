@@ -16,7 +16,7 @@ from core.ports import RunStatus
 from server.runtime.reads import run_of_state
 from server.schemas import EpisodeDetail
 
-pytestmark = pytest.mark.anyio
+pytestmark = [pytest.mark.anyio, pytest.mark.usefixtures("each_link")]  # over both links
 
 
 async def test_create_run_and_run_it_in_fast_mode(tmp_path: Path) -> None:

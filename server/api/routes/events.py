@@ -90,7 +90,7 @@ def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None
                  "d_k": c.d_k, "before": c.before, "after": c.after}
                 for c in event.credits[:200]
             ],
-            "credited": len(event.credits),
+            "credited": len(event.credits), "uid": event.uid,
         }  # fmt: skip
     if isinstance(event, EpisodeEnded):
         return "episode", {

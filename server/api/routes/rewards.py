@@ -61,7 +61,9 @@ async def inject_reward(
             status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
         )
     ack = await engine.reward(body.value, note=body.note, source=RewardSource.TRAINER)
-    return RewardAccepted(id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value)
+    return RewardAccepted(
+        id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value, uid=ack.uid
+    )
 
 
 @router.get("")
@@ -81,6 +83,7 @@ def list_rewards(
         RewardPublic(
             id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
             source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
+            uid=r.record.uid,
         )
         for r in page
     ]  # fmt: skip

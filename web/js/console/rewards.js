@@ -8,9 +8,13 @@ import { RewardSource } from "../generated/enums.js";
 const MINE_KEY = "srlab.mine";
 export const KEEP_REWARDS = 3000; // the newest rewards the page holds (a fast rp run logs thousands)
 
-/** A reward as the timeline keeps it, from the log or the stream. */
+/**
+ * A reward as the timeline keeps it, from the log, the stream or a POST's answer: by the id
+ * it got on arrival (`uid`), which all three carry; a reward logged before rewards had one
+ * by what it is.
+ */
 export function rewardKey(r) {
-  return `${r.tick}|${r.source}|${r.value}|${r.note}`;
+  return r.uid ? r.uid : `${r.tick}|${r.source}|${r.value}|${r.note}`;
 }
 
 export function addReward(r) {

@@ -13,12 +13,12 @@ export function onReward(r) {
   refreshMemory();
   const previous = [...state.rewards].reverse().find((x) => x.tick < r.tick || (x.tick === r.tick && rewardKey(x) !== rewardKey(r)));
   const seen = state.rewardIndex.has(rewardKey(r));
-  const kept = addReward({ tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
+  const kept = addReward({ uid: r.uid, tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
   if (!seen) state.logTotal += 1; // in the log too, not read from it yet
   redrawRewards();
   if (r.source !== RewardSource.trainer) return;
   state.lastReward = r;
-  state.credited.add(`${r.tick}:${r.value}`);
+  state.credited.add(rewardKey(r));
   showEffect(r, kept, previous);
 }
 
@@ -105,13 +105,13 @@ export async function reward(value, note) {
   if (!ack) return;
   if (note === undefined) input.value = "";
   rememberMine(ack.id);
-  // The log's id joins the stream's copy of the same reward (the stream has none).
-  const logged = { id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: RewardSource.trainer, note: text };
+  // The log's id joins the stream's copy of the same reward, found by the reward's uid.
+  const logged = { uid: ack.uid, id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: RewardSource.trainer, note: text };
   if (!state.rewardIndex.has(rewardKey(logged))) state.logTotal += 1;
   addReward(logged);
   drawRewards();
   // The stream may have shown its credit before the acknowledgement came back.
-  if (state.credited.has(`${ack.tick}:${ack.value}`)) return;
+  if (state.credited.has(rewardKey(logged))) return;
   const sign = ack.value > 0 ? "+" : "−";
   $("#reward-effect").replaceChildren(el("div", { class: "head" },
     `${sign}${Math.abs(ack.value)} logged as reward #${ack.id} at tick ${ack.tick} (episode ${ack.episode}); crediting…`));
