@@ -21,8 +21,8 @@ WORKDIR /app
 # The dependencies first, in their own layer: a change to the code does not reinstall them.
 COPY pyproject.toml uv.lock ./
 RUN uv sync --frozen --no-dev --no-install-project
-# Then srlab itself. The install is editable on purpose: the migrations and alembic.ini
-# are found beside the source (server/persistence/migrate.py), not in site-packages.
+# Then srlab itself, editable: the migrations and alembic.ini are found beside the source
+# (server/persistence/migrate.py's find_migrations; a wheel carries them as shared data).
 COPY README.md alembic.ini ./
 COPY core core
 COPY server server

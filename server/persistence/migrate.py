@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import sysconfig
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sqlalchemy import exc as sa_exc
 
+import server
 from core.errors import StorageError
 from server.persistence.db import database_url, make_engine, make_sessionmaker, parse_database_url
 from server.persistence.seed import SeedReport, seed_catalog
@@ -17,8 +20,27 @@ if TYPE_CHECKING:
 # Alembic is imported where it is used: every process that stores runs imports this
 # package, and only the ones that migrate need Alembic (0.8 s of start-up here).
 
-ROOT = Path(__file__).resolve().parents[2]
-"""The repository: alembic.ini and migrations/ live there."""
+SOURCE_TREE = Path(server.__file__).resolve().parent.parent
+"""The folder holding the `server` package: a checkout's root, with alembic.ini and
+migrations/ beside it."""
+SHARED_DATA = Path(sysconfig.get_path("data")) / "share" / "srlab"
+"""Where a wheel of srlab installs alembic.ini and migrations/ (pyproject's shared-data)."""
+
+
+def find_migrations(places: Sequence[Path] = (SOURCE_TREE, SHARED_DATA)) -> Path:
+    """The first of `places` that holds migrations/ (with its env.py): a checkout or a wheel.
+
+    `StorageError` naming where it looked when none does.
+    """
+    for place in places:
+        if (place / "migrations" / "env.py").is_file():
+            return place
+    looked = ", ".join(str(p) for p in places)
+    raise StorageError(f"srlab's migrations are not installed: no migrations/env.py in {looked}")
+
+
+ROOT = find_migrations()
+"""Where alembic.ini and migrations/ live."""
 
 
 def alembic_config(url: str | None = None) -> Config:
