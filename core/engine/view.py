@@ -10,19 +10,66 @@ so what is read between two awaits is one consistent state.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from core.brain.catalog import Catalog
 from core.brain.network import BehaviourNetwork
 from core.brain.propagation import KnowledgePropagation
 from core.brain.selection import Selector
+from core.engine.bus import EventBus
 from core.engine.stats import EngineStats
 from core.ports import RunSpec, RunStatus, RunTotals
 from core.sim.world import WorldConfig
-from core.simulation import Snapshot
+from core.simulation import Simulation, Snapshot
 
-if TYPE_CHECKING:
-    from core.engine.engine import RunEngine
+
+class Viewed(Protocol):
+    """What a view reads of an engine (`core.engine.engine.RunEngine` is one)."""
+
+    @property
+    def run_id(self) -> int:
+        """The run's id."""
+        ...
+
+    @property
+    def spec(self) -> RunSpec:
+        """What the run was started with."""
+        ...
+
+    @property
+    def status(self) -> RunStatus:
+        """The run's status."""
+        ...
+
+    @property
+    def error(self) -> str | None:
+        """Why it failed (None: it has not)."""
+        ...
+
+    @property
+    def hz(self) -> float:
+        """The realtime tick rate."""
+        ...
+
+    @property
+    def totals(self) -> RunTotals:
+        """Episodes, successes and ticks so far."""
+        ...
+
+    @property
+    def stats(self) -> EngineStats:
+        """Pacing and storage figures."""
+        ...
+
+    @property
+    def sim(self) -> Simulation:
+        """The run's simulation."""
+        ...
+
+    @property
+    def bus(self) -> EventBus:
+        """The run's subscriptions."""
+        ...
 
 
 class RunView:
@@ -30,7 +77,7 @@ class RunView:
 
     __slots__ = ("_engine",)
 
-    def __init__(self, engine: RunEngine) -> None:
+    def __init__(self, engine: Viewed) -> None:
         self._engine = engine
 
     @property
