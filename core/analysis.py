@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -30,9 +30,7 @@ from core.conditions import CONDITIONS, get_condition
 from core.errors import UnknownNameError
 from core.events import Cause, Outcome
 from core.stats import holm, mean_interval, paired_difference, t_quantile
-
-if TYPE_CHECKING:
-    from core.experiment import TaskResult
+from core.tasks import TaskResult
 
 CRITERION_WINDOW = 10
 CRITERION_RATE = 0.8

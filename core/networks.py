@@ -32,13 +32,23 @@ from core.errors import (
     RunStateError,
     UnknownNameError,
 )
-from core.ports import NetworkPair
 
 NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 """A network's name: a slug of letters, digits, - and _, 1 to 64 characters."""
 _NAME = re.compile(NAME_PATTERN)
 Key = tuple[str, str]
 """An association's (stimulus, behaviour)."""
+
+
+@dataclass(frozen=True, slots=True)
+class NetworkPair:
+    """An association of a run's behaviour network, by names."""
+
+    stimulus: str
+    behaviour: str
+    strength: float
+    source: str
+    locked: bool = False
 
 
 # --- errors ------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from functools import cache
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import data_dir
@@ -23,8 +23,50 @@ from core.conditions import Condition, get_condition
 from core.errors import CatalogError, CoreError, UnknownNameError
 from core.trainer import MAX_DELAY_CV, MAX_DELAY_S, Imperfections
 
-if TYPE_CHECKING:
-    from core.qlambda import QLambdaConfig
+
+@dataclass(frozen=True, slots=True)
+class QLambdaConfig:
+    """Hyper-parameters of Watkins Q(lambda).
+
+    The defaults are the best of the sweep `srlab qlambda-sweep` runs (alpha x lambda x
+    epsilon on seeds the experiments do not use); see the README.
+
+    Attributes:
+        alpha: step size.
+        gamma: discount per decision.
+        lam: trace decay (lambda).
+        epsilon: exploration rate of the epsilon-greedy behaviour policy.
+        prior: the knowledge set the robot keeps as built-in behaviour (the KP condition's
+            design by default, so Q(lambda) and KP start from the same knowledge).
+        defer: give the learner the environment's "defer" action (let the built-in
+            behaviour answer), preferred while nothing is learned (see `defer_prior`).
+        defer_prior: the initial value of "defer" in every state, above the 0 of every
+            other action: the learner starts by doing what the robot already does, and
+            overrides it only where it has learned better.
+        per_encounter: draw exploration once per encounter (a stimulus becoming the open
+            one), as the architecture does, and keep the choice while the same stimulus
+            stays open; otherwise at every decision.
+        epsilon_half_life: episodes over which the exploration rate halves
+            (`epsilon_at`); 0 (the default) keeps it at `epsilon` for ever.
+    """
+
+    alpha: float = 0.3
+    gamma: float = 0.99
+    lam: float = 0.5
+    epsilon: float = 0.1
+    prior: str = "kp"
+    defer: bool = False
+    defer_prior: float = 1e-3
+    per_encounter: bool = False
+    epsilon_half_life: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "gamma", "lam", "epsilon"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1]")
+        if not (math.isfinite(self.epsilon_half_life) and self.epsilon_half_life >= 0.0):
+            raise ValueError("epsilon_half_life must be 0 or more")
+
 
 ParamValue = float | int | bool
 Params = tuple[tuple[str, ParamValue], ...]
@@ -351,7 +393,6 @@ def qlambda_config(
 ) -> QLambdaConfig:
     """Q(lambda)'s hyper-parameters with `params` set (its defaults otherwise)."""
     # Imported here: the engine uses this module and needs neither Q(lambda) nor Gymnasium.
-    from core.qlambda import QLambdaConfig
 
     values = dict(params)
     normalise(values)

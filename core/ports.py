@@ -11,18 +11,18 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
-if TYPE_CHECKING:  # core.networks imports this module's values
-    from core.networks import (
-        AssociationChange,
-        ExpectedVersion,
-        NetworkEdit,
-        NetworkSnapshot,
-        NetworkSummary,
-        NetworkVersion,
-        StoredNetwork,
-    )
+from core.networks import (
+    AssociationChange,
+    ExpectedVersion,
+    NetworkEdit,
+    NetworkSnapshot,
+    NetworkSummary,
+    NetworkVersion,
+    StoredNetwork,
+)
+from core.networks import NetworkPair as NetworkPair  # its home is core.networks
 
 
 class RunStatus(StrEnum):
@@ -82,17 +82,6 @@ class RunSpec:
     world: str = ""
     sensors: str = ""
     network_id: int | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class NetworkPair:
-    """An association of a run's behaviour network, by names."""
-
-    stimulus: str
-    behaviour: str
-    strength: float
-    source: str
-    locked: bool = False
 
 
 @dataclass(frozen=True, slots=True)
