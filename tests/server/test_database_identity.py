@@ -11,7 +11,7 @@ from apphelpers import client_for, create, settings_for, until
 pytestmark = pytest.mark.anyio
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", ["local", pytest.param("process", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("fault", ["deleted", "replaced"])
 async def test_a_lost_database_file_fails_the_run_and_health_and_no_reward_is_acked(
     tmp_path: Path, fault: str, engines: str

@@ -45,6 +45,9 @@ pytestmark = pytest.mark.anyio
 BLOCK_S = 0.5
 """How long a test holds the service's loop: many 50 Hz periods on any machine."""
 
+LINKS = ["local", pytest.param("process", marks=pytest.mark.slow)]
+"""Both links; the process link's tests each start an engines' process."""
+
 SENT = (
     InjectReward(0.5, note="good"),
     EditAssociation("Corner", "leftturn90", 0.7),
@@ -100,6 +103,7 @@ print(" ".join(m for m in ("fastapi", "starlette", "viser") if m in sys.modules)
 """
 
 
+@pytest.mark.slow  # a subprocess
 def test_the_engines_process_has_loaded_what_a_message_unpickles() -> None:
     # Unpickling imports a message's module: on the engines' loop, while runs tick, a
     # route module (FastAPI with it) once held every run for 170 ms.
@@ -132,7 +136,7 @@ async def test_a_blocked_service_loop_stops_the_ticks_of_the_local_host(tmp_path
         await until(client, run_id, "stopped")
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_a_control_checks_and_acts_in_one_step(tmp_path: Path, engines: str) -> None:
     async with client_for(settings_for(tmp_path, engines=engines)) as (client, _):
         run_id = await started_realtime(client)
@@ -143,7 +147,7 @@ async def test_a_control_checks_and_acts_in_one_step(tmp_path: Path, engines: st
         assert (await client.post(f"/api/runs/{run_id}/stop")).json()["status"] == "stopped"
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_a_stream_carries_the_runs_events_and_ends_with_it(
     tmp_path: Path, engines: str
 ) -> None:
@@ -169,7 +173,7 @@ async def test_a_stream_carries_the_runs_events_and_ends_with_it(
         assert runs.streams() == 0
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_a_subscription_made_as_its_run_ends_is_closed_not_left_open(
     tmp_path: Path, engines: str
 ) -> None:
@@ -185,7 +189,7 @@ async def test_a_subscription_made_as_its_run_ends_is_closed_not_left_open(
             await asyncio.wait_for(late.get(), 30)
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_a_query_reads_one_state_of_the_run(tmp_path: Path, engines: str) -> None:
     async with client_for(settings_for(tmp_path, engines=engines)) as (client, app):
         run_id = await started_realtime(client)
@@ -203,7 +207,7 @@ async def test_a_query_reads_one_state_of_the_run(tmp_path: Path, engines: str) 
         await client.post(f"/api/runs/{run_id}/stop")
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_an_answer_comes_after_the_state_it_changed(tmp_path: Path, engines: str) -> None:
     # What the service says of a run without asking is never older than an answer.
     async with client_for(settings_for(tmp_path, engines=engines)) as (client, app):
@@ -245,7 +249,7 @@ def test_a_subscription_is_woken_from_another_thread() -> None:
     assert asyncio.run(main()) == [0, 1, 2]
 
 
-@pytest.mark.parametrize("engines", ["local", "process"])
+@pytest.mark.parametrize("engines", LINKS)
 async def test_a_reward_keeps_the_id_it_got_on_arrival(tmp_path: Path, engines: str) -> None:
     # The trainer's answer, the stream's event and the log name the reward alike, and a run
     # resumed from its log keeps it: nothing has to match rewards by what they look like.

@@ -285,6 +285,7 @@ async def test_the_gate_answers_what_visers_server_cannot_take(raw: bytes, statu
         assert not seen and gate.refused == 1
 
 
+@pytest.mark.slow  # the refused handshake's close waits out the client's close timeout
 async def test_past_max_viewers_a_socket_and_a_page_get_503_and_retry_after() -> None:
     async with gate_on_a_fake_viser(max_viewers=2) as (gate, seen):
         url = f"ws://127.0.0.1:{gate.port}/"
