@@ -10,7 +10,7 @@ its description and its version. Its rules live here, pure:
 - every change makes the next version, a `Revision` (a value); an edit that changes
   nothing makes none.
 
-Storage (`server/persistence/networks.py`, `tests/fakes.py`) loads a `Network`, asks it
+Storage (`server/persistence/networks.py`, `tests/fakes/`) loads a `Network`, asks it
 for a `Revision` and saves that, all in one transaction; it implements
 `core.ports.NetworkRepository`. Messages here name no request of the API: it adds its own.
 """

@@ -1,7 +1,7 @@
 """What the engine needs from the outside: storage and event sinks, as Protocols.
 
 `server/persistence` implements `RunStore` and `NetworkRepository` with SQLAlchemy;
-`tests/fakes.py` with memory.
+`tests/fakes/` with memory.
 Every method is synchronous and durable when it returns; the engine calls them from a
 worker thread so the event loop never blocks on I/O.
 """

@@ -4,7 +4,7 @@
 this process, or in a store process as `srlab serve` runs it), then the runs' manager
 (`server.runtime`: the runs' host on this process's event loop, or in a process of its
 own), the reward rate limiter and the 3D view over it. Tests give
-another `storage` factory, e.g. the in-memory fakes of `tests/fakes.py`, and drive the
+another `storage` factory, e.g. the in-memory fakes of `tests/fakes/`, and drive the
 same routes and engines.
 """
 

@@ -1,7 +1,7 @@
 """Pacing: the realtime tick rate's bounds, the clock the tick task reads, and exact sleeps.
 
 The engine never reads the wall clock itself: a realtime run reads a `Pacer` (the engine's
-clock), so tests drive it with a clock that moves only when they say (`tests/fakes.py`'s
+clock), so tests drive it with a clock that moves only when they say (`tests/fakes/`'s
 `ManualPacer`); fast runs never sleep.
 """
 
