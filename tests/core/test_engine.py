@@ -4,73 +4,33 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import math
-import threading
 import weakref
-from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import replace
-from typing import Any
 
 import pytest
+from enginehelpers import CATALOG, drive, fast, headless_ltm, realtime, wait_ticks
 from fakes import InMemoryRunStore, ManualPacer
 
-from core.brain.catalog import Catalog, load_catalog
-from core.commands import EditAssociation, InjectReward, RewardSource
+from core.commands import EditAssociation
 from core.conditions import get_condition
 from core.engine import (
-    HZ_MAX,
-    HZ_MIN,
     RewardAck,
     RunEngine,
     StatusChanged,
     Subscription,
     SubscriptionClosed,
     TickPublished,
-    sleep_until,
 )
-from core.errors import RunStateError, StorageError
+from core.errors import RunStateError
 from core.events import EpisodeEnded, RewardApplied
 from core.ports import (
-    CommandRecord,
     LearningUpdate,
     Mode,
-    RewardCommit,
-    RewardRecord,
-    RunSpec,
     RunStatus,
-    StoredReward,
 )
 from core.runner import run as headless_run
-from core.simulation import Simulation, Snapshot, TickInputs
+from core.simulation import Snapshot
 from core.trace import unpack
-
-LtmByName = dict[tuple[str, str], float]
-
-CATALOG: Catalog = load_catalog()
-
-
-def fast(condition: str, seed: int, episodes: int, **params: Any) -> RunSpec:
-    return RunSpec(condition, seed, episodes, Mode.FAST, params=params)
-
-
-def realtime(condition: str, seed: int, hz: float = 200.0) -> RunSpec:
-    return RunSpec(condition, seed, None, Mode.REALTIME, hz=hz)
-
-
-async def drive(
-    engine: RunEngine, script: Callable[[RunEngine], Coroutine[Any, Any, None]]
-) -> RunStatus:
-    """Run the engine and a script beside it; the script must stop the engine."""
-    async with asyncio.TaskGroup() as tg:
-        runner = tg.create_task(engine.run())
-        tg.create_task(script(engine))
-    return runner.result()
-
-
-async def wait_ticks(engine: RunEngine, n: int) -> None:
-    target = engine.sim.tick_count + n
-    while engine.sim.tick_count < target:
-        await asyncio.sleep(0.001)
 
 
 @pytest.mark.parametrize("condition", ["kp", "rp", "delayed", "dp"])
@@ -397,105 +357,6 @@ def test_a_full_subscription_keeps_the_newest_events() -> None:
         Subscription(maxsize=0)
 
 
-class FailingStore(InMemoryRunStore):
-    """A store whose disk fills up at the n-th commit of rewards' learning."""
-
-    def __init__(self, fail_at: int) -> None:
-        super().__init__(CATALOG)
-        self.fail_at = fail_at
-        self.commits = 0
-        self.committed = 0
-        """Rewards in the commits that succeeded."""
-
-    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
-        self.commits += 1
-        if self.commits >= self.fail_at:
-            raise StorageError("database or disk is full")
-        ids = super().commit_rewards(run_id, rewards)
-        self.committed += len(ids)
-        return ids
-
-
-def test_a_storage_error_ends_the_run_with_a_clear_error_and_keeps_what_was_committed() -> None:
-    store = FailingStore(fail_at=3)
-    engine = RunEngine.create(fast("delayed", 1, 200), store, catalog=CATALOG)
-    with pytest.raises(StorageError, match="disk is full"):
-        asyncio.run(engine.run())
-    assert engine.status is RunStatus.FAILED
-    assert engine.error is not None and "disk is full" in engine.error
-    # The two commits before the failing one are kept whole, however many rewards each held.
-    applied = [r for r in store.rewards(engine.run_id) if r.applied]
-    assert store.commits == 3 and len(applied) == store.committed > 0
-    # Episodes are written behind in batches: what was committed is whole and consistent.
-    stored = store.load_run(engine.run_id)
-    assert stored.status is RunStatus.FAILED
-    assert stored.totals.episodes == len(store.episodes(engine.run_id))
-
-
-class SlowDiskStore(InMemoryRunStore):
-    """A store whose first commit of rewards' learning waits until it is let go."""
-
-    def __init__(self) -> None:
-        super().__init__(CATALOG)
-        self.go = threading.Event()
-        self.batches: list[int] = []
-
-    def commit_rewards(self, run_id: int, rewards: Sequence[RewardCommit]) -> tuple[int, ...]:
-        if not self.batches:
-            self.go.wait(30)
-        self.batches.append(len(rewards))
-        return super().commit_rewards(run_id, rewards)
-
-
-def test_ticks_never_wait_for_a_commit_and_what_queued_meanwhile_goes_in_one() -> None:
-    store = SlowDiskStore()
-    engine = RunEngine.create(fast("rp", 4, 60), store, catalog=CATALOG)
-
-    async def main() -> None:
-        runner = asyncio.create_task(engine.run())
-        try:
-            async with asyncio.timeout(20):
-                while engine.sim.tick_count < 4000:  # the first commit is still waiting
-                    await asyncio.sleep(0.001)
-        finally:
-            store.go.set()
-            await runner
-
-    asyncio.run(main())
-    plain = headless_run(get_condition("rp"), 4, 60, catalog=CATALOG)
-    assert store.batches[1] > 1, store.batches
-    assert sum(store.batches) == len(store.rewards(engine.run_id))
-    assert len(store.rewards(engine.run_id)) == sum(e.rewards for e in plain.episodes)
-    assert engine.sim.brain.ltm.as_dict() == plain.ltm
-
-
-class CommandFailingStore(InMemoryRunStore):
-    """A store that cannot log a command."""
-
-    def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
-        raise StorageError("database or disk is full")
-
-
-def test_an_edit_that_cannot_be_stored_is_answered_with_the_error_not_left_waiting() -> None:
-    engine = RunEngine.create(fast("kp", 2, 500), CommandFailingStore(CATALOG), catalog=CATALOG)
-    answered: list[BaseException] = []
-
-    async def main() -> None:
-        runner = asyncio.create_task(engine.run())
-        await wait_ticks(engine, 50)
-        async with asyncio.timeout(30):  # a hang fails the test instead of stalling it
-            try:
-                await engine.edit(EditAssociation("Red", "stop", 1.0, "dp"))
-            except StorageError as e:
-                answered.append(e)
-            with pytest.raises(StorageError, match="disk is full"):
-                await runner
-
-    asyncio.run(main())
-    assert [str(e) for e in answered] == ["the edit was not stored: database or disk is full"]
-    assert engine.status is RunStatus.FAILED
-
-
 def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
     store = InMemoryRunStore(CATALOG)
     spec = fast("kp", 9, 16)
@@ -515,29 +376,6 @@ def test_an_interrupted_run_resumes_from_its_last_committed_state() -> None:
     assert resumed.sim.brain.ltm.as_dict() == whole.sim.brain.ltm.as_dict()
     assert resumed.totals == whole.totals
     assert len(store.episodes(engine.run_id)) == 16
-
-
-def headless_ltm(condition: str, seed: int, rewards: Sequence[StoredReward]) -> LtmByName:
-    """The LTM of the plain headless loop given a run's log up to its last stamp.
-
-    Trainers' rewards go in at the boundaries they were stamped with; the run's own come
-    from the ticks, as in a resumed run's replay.
-    """
-    sim = Simulation(get_condition(condition), seed, catalog=CATALOG)
-    sim.reset()
-    last = max(r.record.tick for r in rewards)
-    while sim.tick_count < last:
-        if sim.snapshot.done:
-            sim.reset()
-        boundary = sim.tick_count + 1
-        due = tuple(
-            InjectReward(r.record.value, note=r.record.note, source=r.record.source)
-            for r in rewards
-            if r.record.source is RewardSource.TRAINER and r.record.tick == boundary
-        )
-        sim.tick(TickInputs(rewards=due))
-    cat = sim.brain.catalog
-    return {(cat.stimuli[s].name, cat.behaviours[b].name): v for (s, b), v in sim.brain.ltm.items()}
 
 
 @pytest.mark.parametrize("arrival", ["after the end", "while the end settles"])
@@ -606,146 +444,6 @@ def test_a_finished_run_cannot_be_resumed_and_unknown_params_are_refused() -> No
         RunEngine.create(fast("qlambda", 1, 1), store, catalog=CATALOG)
 
 
-def test_realtime_pacing_is_measured() -> None:
-    engine = RunEngine.create(realtime("delayed", 1, hz=100.0), InMemoryRunStore(CATALOG))
-
-    async def script(e: RunEngine) -> None:
-        await wait_ticks(e, 20)
-        e.set_rate(200.0)
-        assert e.hz == 200.0
-        with pytest.raises(ValueError):
-            e.set_rate(0.0)
-        await wait_ticks(e, 10)
-        e.stop()
-
-    asyncio.run(drive(engine, script))
-    assert len(engine.stats.lateness_s) >= 30
-    assert engine.stats.lateness_s.min >= 0.0
-
-
-@pytest.mark.parametrize("hz", [0.0, 1e-300, 0.05, HZ_MIN - 1e-9, HZ_MAX + 1, math.inf, math.nan])
-def test_a_tick_rate_out_of_bounds_is_refused(hz: float) -> None:
-    store = InMemoryRunStore(CATALOG)
-    with pytest.raises(ValueError, match=r"hz must be a number from 0\.5 to 1000"):
-        RunEngine.create(realtime("delayed", 1, hz=hz), store)
-    engine = RunEngine.create(realtime("delayed", 1, hz=HZ_MIN), store)
-    with pytest.raises(ValueError, match="hz must be"):
-        engine.set_rate(hz)
-    assert engine.hz == HZ_MIN
-
-
-def test_a_run_stored_with_a_tiny_rate_ticks_at_the_slowest_bounded_one() -> None:
-    store = InMemoryRunStore(CATALOG)
-    engine = RunEngine.create(realtime("delayed", 1, hz=HZ_MIN), store)
-    store._runs[engine.run_id].spec = replace(engine.spec, hz=1e-300)
-    assert RunEngine.restore(engine.run_id, store).hz == HZ_MIN
-
-
-def sleepy(pacer: ManualPacer) -> RunEngine:
-    """A realtime run at the slowest rate on `pacer`'s clock."""
-    return RunEngine.create(
-        realtime("delayed", 1, hz=HZ_MIN), InMemoryRunStore(CATALOG), pacer=pacer
-    )
-
-
-async def _asleep_after_first_tick(
-    pacer: ManualPacer, engine: RunEngine
-) -> asyncio.Task[RunStatus]:
-    task = asyncio.create_task(engine.run())
-    await pacer.until(lambda: engine.stats.ticks == 1 and pacer.sleeping == 1)
-    return task
-
-
-@pytest.mark.parametrize("how", ["stop", "interrupt"])
-def test_stopping_wakes_a_run_sleeping_through_its_tick_period(how: str) -> None:
-    # At 0.5 Hz the run sleeps 2 s after its first tick; the pacer's clock never moves, so
-    # the run can only end if the stop wakes it.
-    pacer = ManualPacer()
-    engine = sleepy(pacer)
-
-    async def main() -> RunStatus:
-        task = await _asleep_after_first_tick(pacer, engine)
-        getattr(engine, how)()
-        async with asyncio.timeout(30):  # a hang guard: with the clock still, it never ends
-            return await task
-
-    status = asyncio.run(main())
-    assert status is (RunStatus.STOPPED if how == "stop" else RunStatus.INTERRUPTED)
-    assert (pacer.time, engine.stats.ticks) == (0.0, 1)
-
-
-def test_pause_and_resume_wake_a_sleeping_run() -> None:
-    pacer = ManualPacer()
-    engine = sleepy(pacer)
-
-    async def main() -> None:
-        task = await _asleep_after_first_tick(pacer, engine)
-        async with asyncio.timeout(30):
-            engine.pause()
-            await pacer.until(lambda: pacer.sleeping == 0)  # waiting for resume, not the clock
-            assert engine.status is RunStatus.PAUSED
-            engine.resume()  # ticks at once: the pause reset the deadline
-            await pacer.until(lambda: engine.stats.ticks == 2)
-            engine.stop()
-            await task
-
-    asyncio.run(main())
-    assert pacer.time == 0.0
-
-
-def test_a_rate_change_wakes_a_sleeping_run_and_paces_from_its_last_tick() -> None:
-    pacer = ManualPacer()
-    engine = sleepy(pacer)
-
-    async def main() -> None:
-        task = await _asleep_after_first_tick(pacer, engine)
-        async with asyncio.timeout(30):
-            engine.set_rate(10.0)  # next tick due 0.1 s after the first, not 2 s
-            await pacer.until(lambda: pacer.sleeping == 1)
-            pacer.advance(0.05)
-            await asyncio.sleep(0)
-            assert engine.stats.ticks == 1
-            pacer.advance(0.05)
-            await pacer.until(lambda: engine.stats.ticks == 2)
-            engine.stop()
-            await task
-
-    asyncio.run(main())
-    assert pacer.time == pytest.approx(0.1)
-
-
-def overshooting_sleep(start: float, overshoot_s: float) -> tuple[list[float], Any, Any]:
-    """A clock at `start`, and a sleep whose first call overshoots by `overshoot_s` (as
-    uvloop's does when the loop iteration goes on running after the timer is set)."""
-    now = [start]
-    asked: list[float] = []
-
-    async def sleep(seconds: float) -> None:
-        asked.append(seconds)
-        now[0] += seconds + (overshoot_s if len(asked) == 1 else 0.0)
-
-    return asked, lambda: now[0], sleep
-
-
-@pytest.mark.parametrize(
-    ("start", "overshoot", "asked", "woke"),
-    [
-        (0.0, 0.003, [0.045, 0.002], 0.050),  # the short sleep absorbs the overshoot
-        (0.0, 0.0, [0.045, 0.005], 0.050),
-        (0.0, 0.007, [0.045], 0.052),  # overshot past the deadline: no second sleep
-        (0.047, 0.0, [0.003], 0.050),  # already within the approach: one sleep
-        (0.051, 0.0, [], 0.051),  # already late: no sleep
-    ],
-)
-def test_a_tick_sleeps_to_near_its_deadline_then_the_rest(
-    start: float, overshoot: float, asked: list[float], woke: float
-) -> None:
-    sleeps, clock, sleep = overshooting_sleep(start, overshoot)
-    asyncio.run(sleep_until(0.050, 0.005, clock, sleep))
-    assert sleeps == pytest.approx(asked)
-    assert clock() == pytest.approx(woke)
-
-
 def test_episode_end_events_reach_subscribers() -> None:
     engine = RunEngine.create(fast("expert", 2, 3), InMemoryRunStore(CATALOG), catalog=CATALOG)
     sub = engine.subscribe(maxsize=100)
@@ -797,93 +495,6 @@ def test_a_stream_of_rewards_never_holds_a_boundary_open() -> None:
     asyncio.run(drive(engine, script))
     stamps = [r.record.tick for r in store.rewards(engine.run_id)]
     assert stamps == sorted(stamps)
-
-
-class HeldLog(InMemoryRunStore):
-    """A store whose second reward log write waits until released, then fails if `fail`."""
-
-    def __init__(self, fail: bool) -> None:
-        super().__init__(CATALOG)
-        self.fail = fail
-        self.calls = 0
-        self.stuck = threading.Event()
-        self.release = threading.Event()
-
-    def log_reward(self, run_id: int, reward: RewardRecord) -> int:
-        self.calls += 1
-        if self.calls == 2:
-            self.stuck.set()
-            self.release.wait(30)
-            if self.fail:
-                raise StorageError("database is locked")
-        return super().log_reward(run_id, reward)
-
-
-def test_an_episode_ending_while_a_reward_waits_for_its_log_resumes_to_the_same_ltm() -> None:
-    """The reward is in the episode's state before it has a log id: its checkpoint waits
-    for the log entry and names it, so a resumed run does not apply the reward twice."""
-    store = HeldLog(fail=False)
-    engine = RunEngine.create(realtime("rp", 7, hz=1000.0), store, catalog=CATALOG)
-    held: list[int] = []
-
-    async def script(e: RunEngine) -> None:
-        await wait_ticks(e, 40)
-        await e.reward(1.0)
-        slow = asyncio.create_task(e.reward(-0.5))
-        while not store.stuck.is_set():
-            await asyncio.sleep(0.001)
-        stored = len(store.episodes(e.run_id))
-        ended = e.totals.episodes
-        while e.totals.episodes == ended:  # an episode ends while the reward waits
-            await asyncio.sleep(0.001)
-        await asyncio.sleep(0.3)  # the episode writer gathers for 50 ms, then writes
-        held.append(len(store.episodes(e.run_id)) - stored)
-        store.release.set()
-        await slow
-        await wait_ticks(e, 20)
-        e.stop()
-
-    assert asyncio.run(drive(engine, script)) is RunStatus.STOPPED
-    assert held == [0], "the episode's checkpoint waited for the reward's log entry"
-    ticks = engine.sim.tick_count
-    store.set_status(engine.run_id, RunStatus.INTERRUPTED)
-    again = RunEngine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
-    assert asyncio.run(again.run(until_tick=ticks)) is RunStatus.STOPPED
-    assert again.sim.tick_count == ticks
-    assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
-
-
-def test_ticks_go_on_while_the_log_is_stuck_and_its_failure_answers_every_reward() -> None:
-    """A reward is applied at its boundary though its log entry is not written yet (a slow
-    disk must not hold the ticks), and is committed only as that entry: when the write
-    fails, the run fails, the reward and those acknowledged after it get the error, and
-    nothing of it is stored."""
-    store = HeldLog(fail=True)
-    engine = RunEngine.create(realtime("rp", 1), store, catalog=CATALOG)
-
-    async def scenario() -> tuple[int, list[RewardAck | BaseException]]:
-        run = asyncio.create_task(engine.run())
-        await wait_ticks(engine, 5)
-        await engine.reward(1.0, note="first")
-        stuck = asyncio.create_task(engine.reward(1.0, note="stuck"))
-        while not store.stuck.is_set():
-            await asyncio.sleep(0.001)
-        at = engine.sim.tick_count
-        after = [asyncio.create_task(engine.reward(0.5, note=f"after {i}")) for i in range(3)]
-        await wait_ticks(engine, 5)  # the ticks go on past the stuck reward's boundary
-        ticked = engine.sim.tick_count - at
-        store.release.set()
-        with pytest.raises(StorageError):
-            await run
-        async with asyncio.timeout(10):  # a guard against hanging, not a speed goal
-            answers = await asyncio.gather(stuck, *after, return_exceptions=True)
-        return ticked, answers
-
-    ticked, answers = asyncio.run(scenario())
-    assert ticked >= 5
-    assert engine.status is RunStatus.FAILED
-    assert all(isinstance(a, StorageError) for a in answers), answers
-    assert [r.record.note for r in store.rewards(engine.run_id)] == ["first"]
 
 
 def test_next_status_answers_each_change_and_a_cancelled_wait_is_skipped() -> None:
