@@ -13,17 +13,15 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import httpx
 import pytest
 from apphelpers import client_for, settings_for
-from fastapi import FastAPI
+from gatehelpers import start_run, viewer_of
 
 from bench.liveserver import free_port
 from core.brain.selection import ORIGINS
 from core.ports import RunStatus
 from core.worlds import default_world, load_world, world_names
 from server.main import create_app
-from server.viewer import Viewer
 from server.viewer.render import REWARD_NOTE
 from server.viewer.scene import static_scene, why
 from server.viewer.state import (
@@ -45,20 +43,6 @@ async def until(check: Callable[[], object], timeout: float = 20.0, what: str = 
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what or check}")
         await asyncio.sleep(0.01)
-
-
-def viewer_of(app: FastAPI) -> Viewer:
-    viewer = app.state.srlab.viewer
-    assert isinstance(viewer, Viewer)
-    return viewer
-
-
-async def start_run(client: httpx.AsyncClient, **body: object) -> int:
-    r = await client.post("/api/runs", json=body)
-    assert r.status_code == 201, r.text
-    run_id = int(r.json()["id"])
-    assert (await client.post(f"/api/runs/{run_id}/start")).status_code == 200
-    return run_id
 
 
 async def test_health_names_the_views_port_and_null_without_it(tmp_path: Path) -> None:
