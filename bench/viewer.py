@@ -57,20 +57,10 @@ from pathlib import Path
 from typing import Any
 
 from bench.browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
-from bench.figures import percentile
-from bench.service import (
-    HOST,
-    RawClient,
-    Server,
-    call,
-    cpu_seconds,
-    free_port,
-    live_ms,
-    machine_busy_s,
-    ms,
-    stop_run,
-    wait_healthy,
-)
+from bench.figures import live_ms, ms, percentile
+from bench.liveserver import free_port
+from bench.service import HOST, RawClient, Server, call, stop_run, wait_healthy
+from bench.service.cpu import cpu_seconds, machine_busy_s
 
 TICK = re.compile(r"Episode (\d+), tick (\d+)")
 
