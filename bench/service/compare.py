@@ -8,8 +8,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from bench.procs import tree_cpu_seconds
 from bench.service.clients import RawClient
-from bench.service.cpu import tree_cpu_seconds
 from bench.service.day import event_streams, many_runs
 from bench.service.harness import (
     CONTROL_TIMEOUT_S,

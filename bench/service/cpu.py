@@ -5,46 +5,8 @@ from __future__ import annotations
 import os
 import resource
 import time
-from pathlib import Path
 
-
-def cpu_seconds(pid: int) -> float | None:
-    """User plus system CPU time of a running process (Linux), None if unknown."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def tree_cpu_seconds(pid: int) -> float | None:
-    """`cpu_seconds` of a process and every process under it (its store and engines' ones)."""
-    parents: dict[int, int] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        parents[int(stat.parent.name)] = int(fields[1])
-    tree, grew = {pid}, True
-    while grew:
-        below = {child for child, parent in parents.items() if parent in tree} - tree
-        tree |= below
-        grew = bool(below)
-    own = cpu_seconds(pid)
-    if own is None:
-        return None
-    return own + sum(cpu_seconds(p) or 0.0 for p in tree - {pid})
-
-
-def machine_busy_s() -> float | None:
-    """CPU time the whole machine spent busy, summed over its cores (Linux)."""
-    try:
-        fields = Path("/proc/stat").read_text().splitlines()[0].split()
-    except (OSError, IndexError):
-        return None
-    user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields[1:9])
-    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+from bench.procs import machine_busy_s, tree_cpu_seconds
 
 
 class CpuMeter:
