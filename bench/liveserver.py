@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import ipaddress
 import os
 import secrets
 import signal
@@ -11,13 +10,15 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 import httpx
+
+from bench.procs import descendants
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -78,7 +79,7 @@ TCP_TABLES = (Path("/proc/net/tcp"), Path("/proc/net/tcp6"))
 LISTEN = "0A"
 
 
-def _listeners() -> Iterator[tuple[str, int, str]]:
+def listeners() -> Iterator[tuple[str, int, str]]:
     """Every listening TCP socket in the kernel's tables.
 
     Each as its address (as the table writes it), its port and its inode.
@@ -97,67 +98,12 @@ def _listeners() -> Iterator[tuple[str, int, str]]:
 
 def _listening_sockets(port: int) -> set[str]:
     """The inodes of the sockets listening on `port`, from the kernel's TCP tables."""
-    return {inode for _, bound, inode in _listeners() if bound == port}
+    return {inode for _, bound, inode in listeners() if bound == port}
 
 
 def family(pid: int) -> set[int]:
     """`pid` and its descendants (a wrapper command may start the server as a child)."""
-    children: dict[int, list[int]] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            text = stat.read_text()
-        except OSError:
-            continue
-        ppid = int(text.rsplit(")", 1)[1].split()[1])
-        children.setdefault(ppid, []).append(int(stat.parent.name))
-    family, todo = set(), [pid]
-    while todo:
-        p = todo.pop()
-        family.add(p)
-        todo.extend(children.get(p, ()))
-    return family
-
-
-def children(pid: int) -> dict[int, str]:
-    """The processes whose parent is `pid`, with their command lines (a zombie's is '')."""
-    found = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-            command = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
-        except OSError:
-            continue
-        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-            found[int(entry)] = command.decode(errors="replace")
-    return found
-
-
-def listening(pid: int) -> set[tuple[str, int]]:
-    """The TCP addresses (host, port) that `pid` and its descendants listen on.
-
-    Read from the kernel's tables (`/proc/net/tcp`, `/proc/net/tcp6`) and the processes'
-    open files: every listening socket they hold, whoever opened it. Empty where those
-    cannot be read (not Linux).
-    """
-    held = {link for p in family(pid) for link in _links(Path(f"/proc/{p}/fd"))}
-    return {
-        (_address(address), port)
-        for address, port, inode in _listeners()
-        if f"socket:[{inode}]" in held
-    }
-
-
-def _address(hexed: str) -> str:
-    """An address as the kernel's TCP tables write it, in text.
-
-    The tables write it in 32-bit words in the machine's byte order: little-endian, as on
-    every machine srlab runs on.
-    """
-    words = bytes.fromhex(hexed)
-    raw = b"".join(words[i : i + 4][::-1] for i in range(0, len(words), 4))
-    return str(ipaddress.ip_address(raw))
+    return {pid} | descendants(pid)
 
 
 def listens_on(pid: int, port: int) -> bool:
@@ -168,10 +114,10 @@ def listens_on(pid: int, port: int) -> bool:
     if not TCP_TABLES[0].exists():
         return True
     wanted = {f"socket:[{inode}]" for inode in _listening_sockets(port)}
-    return any(_links(Path(f"/proc/{p}/fd")) & wanted for p in family(pid))
+    return any(links(Path(f"/proc/{p}/fd")) & wanted for p in family(pid))
 
 
-def _links(folder: Path) -> set[str]:
+def links(folder: Path) -> set[str]:
     """What the links in `folder` point to (a process's open files); none if it is gone."""
     links = set()
     with contextlib.suppress(OSError):
@@ -304,46 +250,3 @@ def live_server(database: Path | str, env: dict[str, str] | None = None) -> Iter
         yield server
     finally:
         stop_server(server)
-
-
-def kill_server(server: LiveServer) -> None:
-    """SIGKILL the server if it still runs, and close its client: no check, no leak."""
-    server.client.close()
-    if server.process.poll() is None:
-        server.process.kill()
-    server.process.communicate()
-
-
-@contextmanager
-def servers() -> Iterator[Callable[..., LiveServer]]:
-    """`start_server`, with every server it started killed on the way out if still running.
-
-    For a test that starts several in turn: one a failed assertion leaves running is not
-    left to the garbage collector, whose warnings would fail whichever test runs next.
-    """
-    started: list[LiveServer] = []
-
-    def start(*args: Any, **kwargs: Any) -> LiveServer:
-        server = start_server(*args, **kwargs)
-        started.append(server)
-        return server
-
-    try:
-        yield start
-    finally:
-        for server in started:
-            kill_server(server)
-
-
-def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60) -> dict[str, Any]:
-    """Poll a run until it has `status`."""
-    deadline = time.monotonic() + timeout
-    run: dict[str, Any] = {}
-    while time.monotonic() < deadline:
-        r = api.get(f"/api/runs/{run_id}")
-        assert r.status_code == 200, f"GET run {run_id}: {r.status_code} {r.text}"
-        run = r.json()
-        if run["status"] == status:
-            return run
-        time.sleep(0.05)
-    raise AssertionError(f"run {run_id} never became {status}: {run}")

@@ -57,62 +57,13 @@ from pathlib import Path
 from typing import Any
 
 from bench.browser import CHROMIUM, FLAGS  # the flags DEVELOPERS.md prescribes
-from bench.figures import percentile
-from bench.service import (
-    HOST,
-    RawClient,
-    Server,
-    call,
-    cpu_seconds,
-    free_port,
-    live_ms,
-    machine_busy_s,
-    ms,
-    stop_run,
-    wait_healthy,
-)
+from bench.figures import live_ms, ms, percentile
+from bench.liveserver import free_port
+from bench.pinning import browser_root, chromium_command, chromium_cpu_s, confined, pin_process
+from bench.procs import cpu_seconds, descendants, machine_busy_s
+from bench.service import HOST, RawClient, Server, call, stop_run, wait_healthy
 
 TICK = re.compile(r"Episode (\d+), tick (\d+)")
-
-
-def parent_of(pid: int) -> int | None:
-    """The parent process id of `pid` (Linux /proc), None if it is gone."""
-    try:
-        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def descendants(root: int) -> set[int]:
-    """Every process below `root` (Linux /proc)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        ppid = parent_of(int(entry.name))
-        if ppid is not None:
-            children.setdefault(ppid, []).append(int(entry.name))
-    found: set[int] = set()
-    todo = [root]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            if child not in found:
-                found.add(child)
-                todo.append(child)
-    return found
-
-
-def chromium_cpu_s(server_pid: int) -> float:
-    """CPU seconds of this bench's Chromium processes so far."""
-    total = 0.0
-    for pid in descendants(os.getpid()) - descendants(server_pid) - {server_pid}:
-        try:
-            comm = Path(f"/proc/{pid}/comm").read_text().strip()
-        except OSError:
-            continue
-        if comm.startswith("chrom") or comm.startswith("headless"):
-            total += cpu_seconds(pid) or 0.0
-    return total
 
 
 @dataclass
@@ -243,66 +194,6 @@ def spread(values: list[float]) -> str:
     if not values:
         return "-"
     return f"{statistics.median(values):.2f} / {percentile(values, 99):.2f} / {max(values):.2f}"
-
-
-def chromium_command(folder: Path, nice: int, cpu: int | None) -> Path:
-    """A wrapper that starts Chromium `nice`d and pinned to `cpu` (its children inherit)."""
-    wrapper = folder / f"chromium-{nice}-{cpu}"
-    pin = f"taskset -c {cpu} " if cpu is not None else ""
-    wrapper.write_text(f'#!/bin/sh\nexec {pin}nice -n {nice} "{CHROMIUM}" "$@"\n')
-    wrapper.chmod(0o755)
-    return wrapper
-
-
-def pin_process(pid: int, cpu: int) -> None:
-    """Pin every thread of a process to one CPU (threads it starts later inherit it)."""
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        with contextlib.suppress(OSError):
-            os.sched_setaffinity(int(task.name), {cpu})
-
-
-def confine(root: int, cpu: int, nice: int) -> int:
-    """Put every thread of `root` and its descendants on `cpu` at niceness `nice`.
-
-    Starting Chromium under ``taskset`` and ``nice`` is not enough: SwiftShader pins its
-    rendering workers (``Thread<00>``, ``Thread<01>`` in the GPU process) to cores 0 and
-    1 itself, and Chromium sets its threads' priorities itself (to -8 for its compositor
-    and IO threads when it may). Those workers then render on the server's core at the
-    server's priority. Returns how many threads were found off `cpu` or at another
-    niceness (and were moved).
-    """
-    moved = 0
-    for pid in {root} | descendants(root):
-        with contextlib.suppress(OSError):
-            for task in Path(f"/proc/{pid}/task").iterdir():
-                tid = int(task.name)
-                with contextlib.suppress(OSError):
-                    changed = False
-                    if os.sched_getaffinity(tid) != {cpu}:
-                        os.sched_setaffinity(tid, {cpu})
-                        changed = True
-                    if os.getpriority(os.PRIO_PROCESS, tid) != nice:
-                        os.setpriority(os.PRIO_PROCESS, tid, nice)
-                        changed = True
-                    moved += changed
-    return moved
-
-
-async def confined(root: int, cpu: int, nice: int, every_s: float, counts: list[int]) -> None:
-    """`confine` now and every `every_s` (threads Chromium starts later escape too)."""
-    while True:
-        counts.append(confine(root, cpu, nice))
-        await asyncio.sleep(every_s)
-
-
-def browser_root(before: set[int], after: set[int]) -> int:
-    """The browser process a launch started: the new process whose parent is not new."""
-    new = after - before
-    for pid in sorted(new):
-        ppid = parent_of(pid)
-        if ppid is not None and ppid not in new:
-            return pid
-    raise RuntimeError("could not find the Chromium that was just started")
 
 
 async def warm_up(client: RawClient) -> None:

@@ -13,6 +13,7 @@ from apphelpers import migrated_copy, migrated_template
 from browser import chromium
 from fakes import InMemoryRunStore, InspectableRunStore
 from hypothesis import settings
+from liveharness import servers
 from playwright.sync_api import Browser, ConsoleMessage, Error, Page, expect
 from sqlalchemy import Engine, create_engine, text
 from sqlalchemy.engine import make_url
@@ -20,7 +21,7 @@ from xdist.remote import Producer
 from xdist.scheduler import LoadScopeScheduling
 from xdist.scheduler.protocol import Scheduling
 
-from bench.liveserver import LiveServer, live_server, servers
+from bench.liveserver import LiveServer, live_server
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.sensors import StimulusDetector, compile_detector
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade

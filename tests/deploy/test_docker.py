@@ -26,10 +26,11 @@ from typing import Any
 
 import pytest
 import yaml
+from liveharness import wait_status
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
-from bench.liveserver import free_port, start_server, stop_server, wait_status
+from bench.liveserver import free_port, start_server, stop_server
 from server.config import Settings
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -25,9 +25,10 @@ from typing import Any, NoReturn
 import httpx
 import pytest
 import yaml
+from liveharness import wait_status
 from test_docker import PASSWORD, ROOT, TOKEN, dockerfile, env_file
 
-from bench.liveserver import free_port, wait_status
+from bench.liveserver import free_port
 
 # Each test builds or starts containers: more than a few seconds, even with every layer cached.
 pytestmark = pytest.mark.slow

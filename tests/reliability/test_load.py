@@ -35,9 +35,10 @@ from pathlib import Path
 
 import httpx
 from harness import rss_kib
+from liveharness import wait_status
 from reliability_report import count, record
 
-from bench.liveserver import live_server, wait_status
+from bench.liveserver import live_server
 from bench.service import RawClient
 
 SECONDS = float(os.environ.get("SRLAB_LOAD_SECONDS", "5"))

@@ -29,10 +29,11 @@ from pathlib import Path
 
 import httpx
 from harness import RewardTraffic, rss_kib
+from liveharness import wait_status
 from reliability_report import count, record
 
 from bench.figures import percentile
-from bench.liveserver import live_server, start_server, wait_status
+from bench.liveserver import live_server, start_server
 from bench.service import store_episodes
 
 EPISODES = int(os.environ.get("SRLAB_DAY_EPISODES", "300"))

@@ -24,9 +24,10 @@ from pathlib import Path
 import httpx
 import pytest
 from harness import RewardTraffic, check_log, integrity, replay_ltm
+from liveharness import wait_status
 from reliability_report import count, record
 
-from bench.liveserver import LiveServer, stop_server, wait_status
+from bench.liveserver import LiveServer, stop_server
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 KILLS = {

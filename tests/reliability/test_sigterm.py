@@ -21,9 +21,10 @@ from pathlib import Path
 
 import httpx
 from harness import RewardTraffic, check_log, replay_ltm
+from liveharness import wait_status
 from reliability_report import count, record
 
-from bench.liveserver import LiveServer, wait_status
+from bench.liveserver import LiveServer
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 SIGTERMS = int(os.environ.get("SRLAB_SIGTERMS", "2"))

@@ -29,11 +29,12 @@ from typing import Any
 
 import httpx
 from harness import RewardTraffic, check_log, replay_ltm
+from liveharness import wait_status
 from reliability_report import count, record
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import Connection, make_url
 
-from bench.liveserver import LiveServer, live_server, wait_status
+from bench.liveserver import LiveServer, live_server
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 
 CONDITION, SEED = "rp", 11

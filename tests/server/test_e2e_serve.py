@@ -9,8 +9,9 @@ from typing import Any
 
 import httpx
 import pytest
+from liveharness import wait_status
 
-from bench.liveserver import live_server, wait_status
+from bench.liveserver import live_server
 
 
 @pytest.fixture(scope="module")

@@ -20,9 +20,10 @@ from pathlib import Path
 
 import pytest
 import viser
+from liveharness import listening
 from reliability_report import record
 
-from bench.liveserver import LiveServer, listening, stop_server
+from bench.liveserver import LiveServer, stop_server
 
 pytestmark = pytest.mark.slow
 FOREIGN = "http://127.0.0.2:8000"

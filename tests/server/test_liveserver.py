@@ -16,9 +16,10 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 import pytest
+from liveharness import servers
 
 import bench.liveserver as liveserver
-from bench.liveserver import PortTakenError, listens_on, servers, start_server, stop_server
+from bench.liveserver import PortTakenError, listens_on, start_server, stop_server
 
 
 class _Healthy(BaseHTTPRequestHandler):

@@ -22,8 +22,9 @@ from pathlib import Path
 import pytest
 from apphelpers import client_for, create, settings_for, started_realtime, until
 from fakes import InMemoryRunStore
+from liveharness import children, wait_status
 
-from bench.liveserver import children, family, live_server, wait_status
+from bench.liveserver import family, live_server
 from core.engine import StatusChanged
 from core.engine.messages import Latest, LatestTick
 from server.config import Settings

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import httpx
 import pytest
+from liveharness import wait_status
 
-from bench.liveserver import ROOT, free_port, live_server, wait_status
+from bench.liveserver import ROOT, free_port, live_server
 
 LIMIT = {"SRLAB_REWARD_RATE_PER_S": "0.05", "SRLAB_REWARD_BURST": "2"}
 TOKEN = "proxy-test-token"

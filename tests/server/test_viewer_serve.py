@@ -12,8 +12,9 @@ import time
 from pathlib import Path
 
 import httpx
+from liveharness import servers
 
-from bench.liveserver import ROOT, free_port, servers, start_server, stop_server
+from bench.liveserver import ROOT, free_port, start_server, stop_server
 
 
 def test_a_taken_view_port_stops_srlab_serve_with_a_clear_message(tmp_path: Path) -> None:

@@ -14,10 +14,11 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 import pytest
 import viser
 from conftest import BROWSER_WAIT_MS
+from liveharness import wait_status
 from playwright.sync_api import Browser
 from reliability_report import record
 
-from bench.liveserver import LiveServer, free_port, wait_status
+from bench.liveserver import LiveServer, free_port
 
 ATTACK = """<!doctype html><html><body>
 <iframe name="sink"></iframe>

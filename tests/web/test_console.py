@@ -8,10 +8,11 @@ from typing import Any
 
 import pytest
 from browser import artifact
+from liveharness import wait_status
 from playwright.sync_api import Browser, Page, expect
 from webpage import cell, eventually, open_view
 
-from bench.liveserver import LiveServer, start_server, stop_server, wait_status
+from bench.liveserver import LiveServer, start_server, stop_server
 
 
 def create_run(server: LiveServer, **body: Any) -> int:

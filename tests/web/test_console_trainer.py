@@ -15,10 +15,11 @@ from typing import Any
 import pytest
 from browser import artifact
 from conftest import sized_page
+from liveharness import wait_status
 from playwright.sync_api import Browser, Page, Route, expect
 from webpage import eventually, open_view
 
-from bench.liveserver import LiveServer, start_server, stop_server, wait_status
+from bench.liveserver import LiveServer, start_server, stop_server
 
 WIDTHS = [1024, 1440]
 

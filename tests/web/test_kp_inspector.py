@@ -5,10 +5,11 @@ from __future__ import annotations
 from typing import Any
 
 from browser import artifact
+from liveharness import wait_status
 from playwright.sync_api import Page, expect
 from webpage import eventually, open_view
 
-from bench.liveserver import LiveServer, wait_status
+from bench.liveserver import LiveServer
 
 
 def propagated(server: LiveServer, run_id: int) -> dict[str, Any] | None:

@@ -12,10 +12,11 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
+from liveharness import wait_status
 from playwright.sync_api import Browser, Page, expect
 from webpage import open_view
 
-from bench.liveserver import LiveServer, wait_status
+from bench.liveserver import LiveServer
 
 WIDTHS = (1024, 1280, 1920)
 OVERFLOWING = """() => [...document.querySelectorAll('.view:not([hidden]) *')].filter((e) => {

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 from browser import artifact
 from conftest import sized_page
+from liveharness import wait_status
 from PIL import Image
 from playwright.sync_api import Browser, FloatRect, Page, expect
 from webpage import eventually, open_view
 
-from bench.liveserver import LiveServer, wait_status
+from bench.liveserver import LiveServer
 
 WINDOWS = [(1024, 768), (1440, 768), (1440, 900)]
 """Window sizes (width, height) a trainer uses: from 1024 px wide, typical heights."""

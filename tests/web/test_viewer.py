@@ -19,11 +19,12 @@ import numpy as np
 import pytest
 from browser import artifact
 from conftest import BROWSER_WAIT_MS
+from liveharness import wait_status
 from PIL import Image
 from playwright.sync_api import Browser, Page
 from webpage import eventually
 
-from bench.liveserver import LiveServer, free_port, start_server, stop_server, wait_status
+from bench.liveserver import LiveServer, free_port, start_server, stop_server
 from server.viewer.render import REWARD_NOTE
 
 VIEWPORT = {"width": 1280, "height": 800}
