@@ -56,7 +56,7 @@ def prepare(app: FastAPI) -> None:
 
     FastAPI builds the OpenAPI document at its first `GET /openapi.json` (or `/docs`):
     180 ms of CPU, during which every run on the service's loop stood still (32 runs
-    under load each lost a few periods, `bench/service.py --engines loop`). Built here,
+    under load each lost a few periods, `python -m bench.service --engines loop`). Built here,
     before the lifespan starts any run, it is served from memory.
     """
     app.openapi()
