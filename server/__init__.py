@@ -8,7 +8,7 @@ JSON and plots the experiment commands write) and `backends/` (where experiment 
 run besides local processes: Ray).
 
 At the top, the service's own wiring: `main.py` (`create_app`), `bootstrap.py` (what the
-service is made of), `config.py` (settings), `schemas.py` (the HTTP models), `asgi.py`,
+service is made of), `config.py` (settings), `schemas/` (the HTTP models, by area), `asgi.py`,
 `serve.py` (uvicorn), the protections of both
 ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
 and small helpers of the service and the commands: `runspec.py` (a run's spec from a

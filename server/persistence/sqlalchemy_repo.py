@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import AbstractContextManager, contextmanager
-from dataclasses import replace
+from contextlib import contextmanager
 from typing import Any, TypeVar
 
-from sqlalchemy import ColumnElement, Engine, Row, Select, bindparam, delete, func, insert, select
+from sqlalchemy import Engine, bindparam, delete, func, insert, select
 from sqlalchemy import update as sql_update
 from sqlalchemy.dialects import postgresql, sqlite
-from sqlalchemy.orm import Session, aliased, sessionmaker
+from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.sql import Executable
 
 from core.errors import CatalogError, StorageError, UnknownNameError, UnknownRunError
@@ -29,18 +27,8 @@ from core.ports import (
     RunSpec,
     RunStatus,
     RunTotals,
-    StoredCommand,
-    StoredReward,
-    StoredRun,
 )
-from server.persistence.db import transaction
-from server.persistence.driver import (
-    ConnectionSql,
-    DriverStatement,
-    Sql,
-    driver_transaction,
-    drives,
-)
+from server.persistence.driver import DriverStatement, Sql, driver_transaction, drives
 from server.persistence.orm import (
     BehaviourRow,
     EpisodeRow,
@@ -53,7 +41,8 @@ from server.persistence.orm import (
     StimulusRow,
     motion_columns,
 )
-from server.runspec import run_spec
+from server.persistence.run_reads import SqlAlchemyRunReads
+from server.persistence.run_rows import json_values, reward_values, session_sql
 
 _FINAL = frozenset({RunStatus.FINISHED, RunStatus.STOPPED, RunStatus.INTERRUPTED, RunStatus.FAILED})
 _Pair = tuple[str, str]
@@ -81,19 +70,7 @@ def _upsert(dialect: str, table: Any) -> Any:
     return module.insert(table)
 
 
-def _on(session: Session) -> ConnectionSql:
-    """`Sql` on a session's connection (inside its transaction)."""
-    return ConnectionSql(session.connection())
-
-
-def _json(value: Mapping[str, Any]) -> dict[str, Any]:
-    """`value` as JSON will give it back (tuples become lists); TypeError if it cannot."""
-    out: dict[str, Any] = json.loads(json.dumps(value, allow_nan=False))
-    return out
-
-
-_RUN_EXISTS = select(RunRow.id).where(RunRow.id == bindparam("b_run"))
-"""The hot path's statements are built once: building one costs more than running it."""
+# The hot path's statements are built once: building one costs more than running it.
 _INSERT_REWARD = insert(RewardRow).returning(RewardRow.id)
 _INSERT_REWARDS_IN_ORDER = insert(RewardRow).returning(RewardRow.id, sort_by_parameter_order=True)
 _MARK_APPLIED = (
@@ -168,7 +145,7 @@ class _Names:
             self._synth[name] = behaviour_id
 
 
-class SqlAlchemyRunStore:
+class SqlAlchemyRunStore(SqlAlchemyRunReads):
     """Runs, their learning, episodes and reward log in a SQL database.
 
     Stimuli and behaviours are rows (seeded by `server.persistence.seed`); the ports speak
@@ -178,10 +155,11 @@ class SqlAlchemyRunStore:
     touched and nothing half-written remains. On a SQLite file, the writes run their
     statements straight on the driver (`server.persistence.driver`), unless ``driver`` is
     False (every write through a session, as `bench.engine --stores sessions` measures).
+    Its reads are `SqlAlchemyRunReads`'s (`server.persistence.run_reads`).
     """
 
     def __init__(self, sessions: Callable[[], Session], *, driver: bool = True) -> None:
-        self._sessions = sessions
+        super().__init__(sessions)
         self._stimuli: dict[str, int] = {}
         self._behaviours: dict[str, int] = {}
         self._upserts: dict[tuple[str, str], Any] = {}
@@ -198,7 +176,7 @@ class SqlAlchemyRunStore:
                 yield sql
         else:
             with self._transaction(what, write=True) as s:
-                yield _on(s)
+                yield session_sql(s)
 
     def _upsert_stmt(self, sql: Sql, table: Any, values: tuple[str, ...]) -> Any:
         """An INSERT ... ON CONFLICT DO UPDATE for executemany, built once per dialect."""
@@ -223,21 +201,6 @@ class SqlAlchemyRunStore:
         if refresh or not self._behaviours:
             self._behaviours = dict(sql.rows(_CATALOGUE_BEHAVIOUR_IDS, {}))
         return self._behaviours
-
-    def _transaction(self, what: str, *, write: bool) -> AbstractContextManager[Session]:
-        return transaction(self._sessions, what, write=write)
-
-    @staticmethod
-    def _run_row(session: Session, run_id: int) -> RunRow:
-        row = session.get(RunRow, run_id)
-        if row is None:
-            raise UnknownRunError(f"no run {run_id}")
-        return row
-
-    @staticmethod
-    def _require_run(sql: Sql, run_id: int) -> None:
-        if sql.first(_RUN_EXISTS, {"b_run": run_id}) is None:
-            raise UnknownRunError(f"no run {run_id}")
 
     def _apply(
         self, sql: Sql, run_id: int, change: LearningUpdate, names: _Names | None = None
@@ -316,7 +279,7 @@ class SqlAlchemyRunStore:
 
     def create_run(self, spec: RunSpec, network: tuple[NetworkPair, ...]) -> int:
         """Store a new run (status created) with its starting network; returns its id."""
-        params = _json(spec.params)
+        params = json_values(spec.params)
         with self._transaction("creating a run", write=True) as s:
             row = RunRow(
                 condition=spec.condition,
@@ -333,7 +296,7 @@ class SqlAlchemyRunStore:
             )
             s.add(row)
             s.flush()
-            names = _Names(self, _on(s), row.id)
+            names = _Names(self, session_sql(s), row.id)
             seen: dict[tuple[int, int], RunAssociationRow] = {}
             for pair in network:
                 key = names.pair((pair.stimulus, pair.behaviour))
@@ -348,11 +311,6 @@ class SqlAlchemyRunStore:
                 assoc.source = pair.source
                 assoc.locked = pair.locked
             return row.id
-
-    def load_run(self, run_id: int) -> StoredRun:
-        """A stored run; raises `UnknownRunError` when there is none."""
-        with self._transaction(f"loading run {run_id}", write=False) as s:
-            return self._stored(s, self._run_row(s, run_id))
 
     def set_status(self, run_id: int, status: RunStatus, error: str | None = None) -> None:
         """Change a run's status (and error message), stamping when it started and ended."""
@@ -371,7 +329,7 @@ class SqlAlchemyRunStore:
     def _insert_reward(
         sql: Sql, run_id: int, reward: RewardRecord, applied: bool, credited: int
     ) -> int:
-        row = sql.first(_INSERT_REWARD, _reward_row(run_id, reward, applied, credited))
+        row = sql.first(_INSERT_REWARD, reward_values(run_id, reward, applied, credited))
         assert row is not None
         return int(row[0])
 
@@ -427,7 +385,7 @@ class SqlAlchemyRunStore:
         sql: Sql, run_id: int, records: Sequence[RewardRecord], credited: Sequence[int]
     ) -> list[int]:
         """Insert applied rewards; their ids in the records' order."""
-        rows = [_reward_row(run_id, r, True, c) for r, c in zip(records, credited, strict=True)]
+        rows = [reward_values(run_id, r, True, c) for r, c in zip(records, credited, strict=True)]
         return [int(r[0]) for r in sql.returning(_INSERT_REWARDS_IN_ORDER, rows)]
 
     def _mark_all_applied(self, sql: Sql, run_id: int, logged: Sequence[tuple[int, int]]) -> None:
@@ -446,7 +404,7 @@ class SqlAlchemyRunStore:
 
     def log_command(self, run_id: int, command: CommandRecord, update: LearningUpdate) -> int:
         """In one transaction: append a command to the log and store what it changed."""
-        payload = _json(command.payload)
+        payload = json_values(command.payload)
         with self._writing(f"logging a command for run {run_id}") as sql:
             self._require_run(sql, run_id)
             self._apply(sql, run_id, update)
@@ -515,168 +473,6 @@ class SqlAlchemyRunStore:
                     ],
                 )
 
-    def _stored(self, s: Session, run: RunRow) -> StoredRun:
-        checkpoint = None
-        after = -1
-        if run.checkpoint_tick is not None:
-            assert run.checkpoint_episode is not None and run.checkpoint is not None
-            after = run.checkpoint_tick
-            checkpoint = Checkpoint(run.checkpoint_episode, after, bytes(run.checkpoint))
-        rewards = s.execute(_rewards(RewardRow.run_id == run.id, RewardRow.tick > after))
-        commands = s.execute(_commands(RunCommandRow.run_id == run.id, RunCommandRow.tick > after))
-        return replace(
-            _summary(run),
-            checkpoint=checkpoint,
-            rewards_after=tuple(_reward(r) for r in rewards),
-            commands_after=tuple(_command(c) for c in commands),
-        )
-
-    def _pairs(self, s: Session, table: type[_Row], run_id: int) -> dict[_Pair, float]:
-        self._require_run(_on(s), run_id)
-        query = (
-            select(StimulusRow.name, BehaviourRow.name, table.reliability)
-            .join(StimulusRow, StimulusRow.id == table.stimulus_id)
-            .join(BehaviourRow, BehaviourRow.id == table.behaviour_id)
-            .where(table.run_id == run_id)
-        )
-        return {(st, be): r for st, be, r in s.execute(query)}
-
-    def ltm(self, run_id: int) -> dict[_Pair, float]:
-        """The run's LTM reliabilities by (stimulus, behaviour)."""
-        with self._transaction(f"reading the LTM of run {run_id}", write=False) as s:
-            return self._pairs(s, LtmRow, run_id)
-
-    def rltm(self, run_id: int) -> dict[_Pair, float]:
-        """The run's RLTM reliabilities by (stimulus, behaviour)."""
-        with self._transaction(f"reading the RLTM of run {run_id}", write=False) as s:
-            return self._pairs(s, RltmRow, run_id)
-
-    def network(self, run_id: int) -> tuple[NetworkPair, ...]:
-        """The run's live behaviour network, in insertion order."""
-        with self._transaction(f"reading the network of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            a = aliased(RunAssociationRow)
-            query = (
-                select(StimulusRow.name, BehaviourRow.name, a.strength, a.source, a.locked)
-                .join(StimulusRow, StimulusRow.id == a.stimulus_id)
-                .join(BehaviourRow, BehaviourRow.id == a.behaviour_id)
-                .where(a.run_id == run_id)
-                .order_by(a.id)
-            )
-            return tuple(NetworkPair(*row) for row in s.execute(query).all())
-
-    def behaviours(self, run_id: int) -> tuple[BehaviourSpec, ...]:
-        """The behaviours the run synthesised, in the order they were added."""
-        with self._transaction(f"reading the behaviours of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            rows = s.scalars(
-                select(BehaviourRow).where(BehaviourRow.run_id == run_id).order_by(BehaviourRow.id)
-            )
-            return tuple(
-                BehaviourSpec(b.name, b.family, b.speed_mps, b.turn_dps, b.ticks, b.mode)
-                for b in rows
-            )
-
-    def rewards(self, run_id: int) -> list[StoredReward]:
-        """The run's whole reward log, in log order."""
-        with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            return [_reward(r) for r in s.execute(_rewards(RewardRow.run_id == run_id))]
-
-    def rewards_page(
-        self, run_id: int, offset: int = 0, limit: int = 100
-    ) -> tuple[list[StoredReward], int]:
-        """A page of the run's reward log in log order, and the log's length."""
-        with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            total = s.scalar(
-                select(func.count()).select_from(RewardRow).where(RewardRow.run_id == run_id)
-            )
-            rows = s.execute(_rewards(RewardRow.run_id == run_id).offset(offset).limit(limit))
-            return [_reward(r) for r in rows], int(total or 0)
-
-    def commands(self, run_id: int) -> list[StoredCommand]:
-        """The run's whole command log, in log order."""
-        with self._transaction(f"reading the commands of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            return [_command(c) for c in s.execute(_commands(RunCommandRow.run_id == run_id))]
-
-    def episodes(self, run_id: int) -> list[EpisodeRecord]:
-        """The run's episodes, by episode number."""
-        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            rows = s.scalars(
-                select(EpisodeRow).where(EpisodeRow.run_id == run_id).order_by(EpisodeRow.episode)
-            )
-            return [
-                EpisodeRecord(
-                    e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards, bytes(e.trace)
-                )
-                for e in rows
-            ]
-
-    def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:
-        """One episode of a run with its trace, None if it has no such episode."""
-        with self._transaction(f"reading episode {episode} of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            e = s.scalars(
-                select(EpisodeRow).where(EpisodeRow.run_id == run_id, EpisodeRow.episode == episode)
-            ).first()
-            if e is None:
-                return None
-            return EpisodeRecord(
-                e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards, bytes(e.trace)
-            )
-
-    def episode_summaries(self, run_id: int) -> list[EpisodeRecord]:
-        """The run's episodes by number, without their traces (`trace` is empty)."""
-        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            e = EpisodeRow
-            rows = s.execute(
-                select(e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards)
-                .where(e.run_id == run_id)
-                .order_by(e.episode)
-            )
-            return [EpisodeRecord(*row, trace=b"") for row in rows]
-
-    def list_runs(self) -> list[StoredRun]:
-        """Every run, by id."""
-        with self._transaction("listing runs", write=False) as s:
-            return [self._stored(s, r) for r in s.scalars(select(RunRow).order_by(RunRow.id))]
-
-    def episode_summaries_page(
-        self, run_id: int, offset: int = 0, limit: int = 100
-    ) -> tuple[list[EpisodeRecord], int]:
-        """A page of the run's episodes by number, without traces, and how many it has.
-
-        It reads the page's rows only (by the episodes' primary key): never a trace.
-        """
-        with self._transaction(f"reading the episodes of run {run_id}", write=False) as s:
-            self._require_run(_on(s), run_id)
-            e = EpisodeRow
-            total = s.scalar(select(func.count()).select_from(e).where(e.run_id == run_id))
-            rows = s.execute(
-                select(e.episode, e.outcome, e.cause, e.ticks, e.start_tick, e.rewards)
-                .where(e.run_id == run_id)
-                .order_by(e.episode)
-                .offset(offset)
-                .limit(limit)
-            )
-            return [EpisodeRecord(*row, trace=b"") for row in rows], int(total or 0)
-
-    def run_summary(self, run_id: int) -> StoredRun:
-        """A run's spec, status and totals, without its checkpoint or log (`UnknownRunError`)."""
-        with self._transaction(f"reading run {run_id}", write=False) as s:
-            return _summary(self._run_row(s, run_id))
-
-    def run_summaries(self, offset: int = 0, limit: int = 100) -> tuple[list[StoredRun], int]:
-        """A page of runs by id, as `run_summary`, and how many runs are stored."""
-        with self._transaction("listing runs", write=False) as s:
-            total = s.scalar(select(func.count()).select_from(RunRow))
-            rows = s.scalars(select(RunRow).order_by(RunRow.id).offset(offset).limit(limit))
-            return [_summary(r) for r in rows], int(total or 0)
-
     def interrupt_active(self) -> int:
         """Mark every run stored as running or paused interrupted (its process died)."""
         active = [s.value for s in ACTIVE]
@@ -687,75 +483,3 @@ class SqlAlchemyRunStore:
                 .values(status=RunStatus.INTERRUPTED.value)
             )
             return int(getattr(result, "rowcount", 0) or 0)
-
-
-def _reward_row(run_id: int, r: RewardRecord, applied: bool, credited: int) -> dict[str, Any]:
-    return {
-        "run_id": run_id,
-        "tick": r.tick,
-        "episode": r.episode,
-        "value": r.value,
-        "source": r.source,
-        "note": r.note,
-        "uid": r.uid,
-        "applied": applied,
-        "credited": credited,
-    }
-
-
-def _summary(run: RunRow) -> StoredRun:
-    return StoredRun(
-        id=run.id,
-        spec=_spec(run),
-        status=RunStatus(run.status),
-        totals=RunTotals(run.episodes_done, run.successes, run.ticks),
-        checkpoint=None,
-        rewards_after=(),
-        commands_after=(),
-        error=run.error,
-    )
-
-
-def _spec(run: RunRow) -> RunSpec:
-    return run_spec(
-        condition=run.condition,
-        seed=run.seed,
-        episodes=run.episodes,
-        mode=run.mode,
-        hz=run.hz,
-        network=run.network,
-        network_id=run.network_id,
-        params=run.params,
-        world=run.world,
-        sensors=run.sensors,
-    )
-
-
-def _rewards(
-    *where: ColumnElement[bool],
-) -> Select[int, int, int, float, str, str, str, bool, int]:
-    """Reward log rows in log order, as plain columns.
-
-    Not ORM objects: their identity map, change tracking and the unused `created_at`
-    (parsed from SQLite's text) cost more than the rows' values.
-    """
-    r = RewardRow
-    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.applied, r.credited)
-    return select(*columns).where(*where).order_by(r.id)
-
-
-def _reward(row: Row[int, int, int, float, str, str, str, bool, int]) -> StoredReward:
-    id_, tick, episode, value, source, note, uid, applied, credited = row
-    record = RewardRecord(tick, episode, value, source, note, uid)
-    return StoredReward(id_, record, applied, credited)
-
-
-def _commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:
-    """Command log rows in log order, as plain columns (as `_rewards`)."""
-    c = RunCommandRow
-    return select(c.id, c.tick, c.kind, c.payload).where(*where).order_by(c.id)
-
-
-def _command(row: Row[int, int, str, dict[str, Any]]) -> StoredCommand:
-    id_, tick, kind, payload = row
-    return StoredCommand(id_, CommandRecord(tick, kind, dict(payload)))

@@ -23,7 +23,7 @@ from server.reports.base import (
     write_summary,
 )
 from server.reports.declared import declared_section
-from server.reports.experiment import CONDITION_COLOURS
+from server.reports.experiment_plots import CONDITION_COLOURS
 from server.reports.plots import save, subplots, success_axes
 
 FIGURES = (("success_rate", "training, all episodes"), ("held_out", "held-out, frozen"))

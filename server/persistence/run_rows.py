@@ -1,0 +1,111 @@
+"""A run's rows as the ports' values: reward and command log rows, a run's summary."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from sqlalchemy import ColumnElement, Row, Select, select
+from sqlalchemy.orm import Session
+
+from core.ports import (
+    CommandRecord,
+    RewardRecord,
+    RunSpec,
+    RunStatus,
+    RunTotals,
+    StoredCommand,
+    StoredReward,
+    StoredRun,
+)
+from server.persistence.driver import ConnectionSql
+from server.persistence.orm import RewardRow, RunCommandRow, RunRow
+from server.runspec import run_spec
+
+
+def session_sql(session: Session) -> ConnectionSql:
+    """`Sql` on a session's connection (inside its transaction)."""
+    return ConnectionSql(session.connection())
+
+
+def json_values(value: Mapping[str, Any]) -> dict[str, Any]:
+    """`value` as JSON will give it back (tuples become lists); TypeError if it cannot."""
+    out: dict[str, Any] = json.loads(json.dumps(value, allow_nan=False))
+    return out
+
+
+def reward_values(run_id: int, r: RewardRecord, applied: bool, credited: int) -> dict[str, Any]:
+    """A reward log row's column values."""
+    return {
+        "run_id": run_id,
+        "tick": r.tick,
+        "episode": r.episode,
+        "value": r.value,
+        "source": r.source,
+        "note": r.note,
+        "uid": r.uid,
+        "applied": applied,
+        "credited": credited,
+    }
+
+
+def summary(run: RunRow) -> StoredRun:
+    """A run's spec, status and totals, without its checkpoint or log."""
+    return StoredRun(
+        id=run.id,
+        spec=_spec(run),
+        status=RunStatus(run.status),
+        totals=RunTotals(run.episodes_done, run.successes, run.ticks),
+        checkpoint=None,
+        rewards_after=(),
+        commands_after=(),
+        error=run.error,
+    )
+
+
+def _spec(run: RunRow) -> RunSpec:
+    return run_spec(
+        condition=run.condition,
+        seed=run.seed,
+        episodes=run.episodes,
+        mode=run.mode,
+        hz=run.hz,
+        network=run.network,
+        network_id=run.network_id,
+        params=run.params,
+        world=run.world,
+        sensors=run.sensors,
+    )
+
+
+def select_rewards(
+    *where: ColumnElement[bool],
+) -> Select[int, int, int, float, str, str, str, bool, int]:
+    """Reward log rows in log order, as plain columns.
+
+    Not ORM objects: their identity map, change tracking and the unused `created_at`
+    (parsed from SQLite's text) cost more than the rows' values.
+    """
+    r = RewardRow
+    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.applied, r.credited)
+    return select(*columns).where(*where).order_by(r.id)
+
+
+def stored_reward(row: Row[int, int, int, float, str, str, str, bool, int]) -> StoredReward:
+    """A reward log row of `select_rewards` as the ports' value."""
+    id_, tick, episode, value, source, note, uid, applied, credited = row
+    record = RewardRecord(tick, episode, value, source, note, uid)
+    return StoredReward(id_, record, applied, credited)
+
+
+def select_commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:
+    """Command log rows in log order, as plain columns (as `_rewards`)."""
+    c = RunCommandRow
+    return select(c.id, c.tick, c.kind, c.payload).where(*where).order_by(c.id)
+
+
+def stored_command(row: Row[int, int, str, dict[str, Any]]) -> StoredCommand:
+    """A command log row of `select_commands` as the ports' value."""
+    id_, tick, kind, payload = row
+    return StoredCommand(id_, CommandRecord(tick, kind, dict(payload)))
