@@ -7,6 +7,7 @@ from collections.abc import Callable
 from typing import TypeVar
 
 from playwright.sync_api import Page
+from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 
 from bench.liveserver import LiveServer
 
@@ -14,9 +15,21 @@ T = TypeVar("T")
 
 
 def open_view(page: Page, server: LiveServer, route: str) -> None:
-    """Open the page at `route` (e.g. "editor/mine") and wait until it has loaded."""
+    """Open the page at `route` (e.g. "editor/mine") and wait until it has loaded.
+
+    A page that never gets ready fails with what it showed (its toasts, the service's
+    health), so a rare stall says where it stood.
+    """
     page.goto(f"{server.url}/#/{route}")
-    page.wait_for_selector("body[data-ready=true]")
+    try:
+        page.wait_for_selector("body[data-ready=true]")
+    except PlaywrightTimeoutError:
+        toasts = page.locator(".toast").all_inner_texts()
+        health = server.client.get("/api/health")
+        raise AssertionError(
+            f"the page at #/{route} never got ready; its toasts: {toasts}; "
+            f"the service's health: {health.status_code} {health.text}"
+        ) from None
 
 
 def cell(page: Page, stimulus: str, behaviour: str, where: str = "#matrix") -> str:
