@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from core.commands import EditAssociation, InjectReward
 from core.errors import RunStateError, SimulationStateError
-from core.ports import RunStatus, RunTotals
+from core.ports import Mode, RunStatus, RunTotals
 from core.simulation import Snapshot
 
 if TYPE_CHECKING:
@@ -110,7 +110,7 @@ async def perform(
         case Stop():
             engine.stop()
         case SetRate(hz=hz):
-            if engine.spec.mode.value != "realtime":
+            if engine.spec.mode is not Mode.REALTIME:
                 raise RunStateError(f"run {engine.run_id} is fast: it has no rate")
             engine.set_rate(hz)
     return None
