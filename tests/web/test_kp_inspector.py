@@ -7,7 +7,7 @@ from typing import Any
 from browser import artifact
 from liveharness import wait_status
 from playwright.sync_api import Page, expect
-from webpage import eventually, open_view
+from webpage import eventually, open_view, set_open
 
 from bench.liveserver import LiveServer
 
@@ -42,7 +42,7 @@ def test_the_panel_shows_a_propagated_association_and_its_provenance(
     )
     expect(pair.locator("summary")).to_contain_text(f"{assoc['stimulus']} → {assoc['behaviour']}")
     expect(pair.locator("summary")).to_contain_text("in network")
-    pair.locator("summary").click()
+    set_open(pair)
     expect(pair.locator(".kp-made")).to_contain_text(f"snapped to the primitive {p['nearest']}")
     rows = pair.locator(".kp-prov tbody tr")
     expect(rows).to_have_count(len(p["sources"]))
@@ -57,7 +57,7 @@ def test_the_panel_shows_a_propagated_association_and_its_provenance(
     # Opened just before a refresh replaced it, a block never tells its "toggle" (the
     # event comes a task later, from the block no longer shown): it stays open anyway.
     # Shown here by keeping the page's toggle events from its handlers.
-    pair.locator("summary").click()
+    set_open(pair, False)
     expect(pair.locator(".kp-made")).to_be_hidden()
     page.evaluate(
         """pair => {
