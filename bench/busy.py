@@ -17,7 +17,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-SPIN = "from server.tuning import ask_short_slices\nask_short_slices(0)\nwhile True: pass"
+SPIN = "from server.runtime.tuning import ask_short_slices\nask_short_slices(0)\nwhile True: pass"
 """A spinner's code: the kernel's default slice (not an inherited one), then work."""
 
 
@@ -26,7 +26,7 @@ def busy(count: int) -> Iterator[None]:
     """`count` processes spinning while the block runs, as other people's processes would.
 
     They run at the default priority and the kernel's default slice, whatever the
-    benchmark asked for itself (children inherit a slice: `server.tuning`).
+    benchmark asked for itself (children inherit a slice: `server.runtime.tuning`).
     """
     path = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH")) if p)
     env = {**os.environ, "PYTHONPATH": path}  # `server` importable from any directory

@@ -2,7 +2,7 @@
 
 Run as ``.venv/bin/python -m bench.engine`` (``make bench``). Measured in one run:
 
-1. ticks/s of the plain headless loop (`core.runner.run`) against the engine in fast mode
+1. ticks/s of the plain headless loop (`core.run.runner.run`) against the engine in fast mode
    committing everything to SQLite, the store in the engine's process (worker threads)
    as `srlab serve` has it, seed by seed in alternating order: each seed's ratio,
    their mean with a 95% bootstrap interval (goal: at least 0.8);
@@ -30,13 +30,13 @@ from pathlib import Path
 from bench.busy import busy
 from bench.figures import percentile
 from core.brain.catalog import load_catalog
-from core.conditions import get_condition
 from core.engine import EngineStats, RunEngine
+from core.lab.stats import Estimate, bootstrap_mean
 from core.ports import Mode, RunSpec, RunStore
-from core.runner import run
-from core.stats import Estimate, bootstrap_mean
+from core.run.conditions import get_condition
+from core.run.runner import run
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
-from server.tuning import configure_process, freeze_heap
+from server.runtime.tuning import configure_process, freeze_heap
 
 STORES = ("threads", "sessions")
 """How the store writes: ``threads`` on SQLite's driver in the engine's worker threads, as it

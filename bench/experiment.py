@@ -35,8 +35,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from bench.ticks import bare_pymunk, measure
-from core import baselines
-from core.experiment import (
+from core.lab.experiment import (
     LocalBackend,
     Task,
     TaskResult,
@@ -44,8 +43,9 @@ from core.experiment import (
     run_experiment,
     run_tasks,
 )
-from core.probe import probe
-from core.setup import Setup, SignalMode
+from core.lab.probe import probe
+from core.learners import baselines
+from core.run.setup import Setup, SignalMode
 
 PAPER = ["innate", "delayed", "dp", "rp", "kp", "qlambda"]
 DEEP = ["dqn", "ppo"]

@@ -4,7 +4,7 @@ Run as ``.venv/bin/python -m bench.instructions`` (needs valgrind; about 5 minut
 shared machine the same run goes at rates up to a third apart from one second to the next,
 so `bench.engine`'s ratio of rates moves by a few hundredths between runs and cannot show a
 change of a per cent or two. This counts instructions instead (valgrind's callgrind): the
-plain headless loop (`core.runner.run`) and the engine in fast mode with its store on
+plain headless loop (`core.run.runner.run`) and the engine in fast mode with its store on
 SQLite in worker threads, with and without recording episodes' traces, each run for 1 and
 for 1 + ``--episodes`` episodes of one seed; the difference is what those episodes cost,
 start-up excluded. It prints the main thread's count (the ticks, and all the engine does
@@ -42,10 +42,10 @@ SUMMARY = re.compile(r"^summary: (\d+)$", re.MULTILINE)
 def child(variant: str, condition: str, seed: int, episodes: int, folder: Path) -> int:
     """Run `variant` for `episodes` episodes in this process; its ticks."""
     from core.brain.catalog import load_catalog
-    from core.conditions import get_condition
     from core.engine import RunEngine
     from core.ports import Mode, RunSpec
-    from core.runner import run
+    from core.run.conditions import get_condition
+    from core.run.runner import run
     from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker, upgrade
 
     catalog = load_catalog()

@@ -6,7 +6,7 @@ write, the event loop when the write is done) after a little work each. This mea
 exactly that, side by side in one run: a thread that works ``--work-ms`` (1 ms, about a
 tick's work), then sleeps ``--sleep-ms`` (10 ms), and how late each wake-up is, in
 processes alternating between Linux's default slice and the short one srlab's processes
-ask for (`server.tuning.ask_short_slices`), beside ``--busy`` spinning processes.
+ask for (`server.runtime.tuning.ask_short_slices`), beside ``--busy`` spinning processes.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import time
 
 from bench.busy import busy
 from bench.figures import percentile
-from server.tuning import SHORT_SLICE_NS, ask_short_slices, slice_ns
+from server.runtime.tuning import SHORT_SLICE_NS, ask_short_slices, slice_ns
 
 LATE_S = 0.001
 """A wake-up this late counts as late."""

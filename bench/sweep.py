@@ -30,8 +30,8 @@ import time
 
 from ray.cluster_utils import Cluster
 
-from core.experiment import LocalBackend, TaskResult
-from core.sweep import Sweep, parse_grid, run_sweep
+from core.lab.experiment import LocalBackend, TaskResult
+from core.lab.sweep import Sweep, parse_grid, run_sweep
 from server.backends.ray import OBJECT_STORE_BYTES, RayBackend
 
 

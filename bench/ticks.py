@@ -24,14 +24,14 @@ from functools import partial
 
 import pymunk
 
-from core.conditions import get_condition
-from core.setup import Setup
+from core.run.conditions import get_condition
+from core.run.setup import Setup
+from core.run.simulation import Simulation
 from core.sim.channels import Channel
 from core.sim.robot import RobotConfig
 from core.sim.track import TrackGeometry
 from core.sim.world import MotorCommand, PymunkWorld, WorldConfig
-from core.simulation import Simulation
-from core.worlds import load_world, world_names
+from core.sim.worlds import load_world, world_names
 
 Stepper = Callable[[int], None]
 """Runs n ticks."""

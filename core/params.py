@@ -3,7 +3,7 @@
 The brain's conditions take the runs API's learning parameters (eta, epsilon, synthesize)
 and a few more of the memory, selection and KP modules; the Q(lambda) baseline takes its
 own; a condition with a reinforcement program takes its teacher's imperfections
-(``teacher_mistake``..., `core.trainer.Imperfections`). Each parameter says which conditions
+(``teacher_mistake``..., `core.run.trainer.Imperfections`). Each parameter says which conditions
 it applies to, so a sweep over `eta` runs the Q(lambda) condition once instead of once per
 value.
 """
@@ -19,9 +19,9 @@ from typing import Any, Literal
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import data_dir
-from core.conditions import Condition, get_condition
 from core.errors import CatalogError, CoreError, UnknownNameError
-from core.trainer import MAX_DELAY_CV, MAX_DELAY_S, Imperfections
+from core.run.conditions import Condition, get_condition
+from core.run.trainer import MAX_DELAY_CV, MAX_DELAY_S, Imperfections
 
 
 @dataclass(frozen=True, slots=True)
@@ -413,7 +413,7 @@ def qlambda_config(
 def baseline_params(
     condition: Condition, params: Mapping[str, ParamValue] | Params = ()
 ) -> dict[str, float]:
-    """A deep baseline's `core.baselines.BaselineConfig` fields with `params` set.
+    """A deep baseline's `core.learners.baselines.BaselineConfig` fields with `params` set.
 
     The condition's exploration rate is DQN's epsilon unless `params` sets it.
     """
@@ -428,7 +428,7 @@ def baseline_params(
 
 @cache
 def tuned() -> dict[str, Params]:
-    """The tuned parameters per condition, from `core/data/tuned.toml` (see `core.tune`).
+    """The tuned parameters per condition, from `core/data/tuned.toml` (see `core.lab.tune`).
 
     Empty when nothing was tuned.
     """

@@ -55,7 +55,7 @@ class RunSpec:
     """What a run is: everything needed to reproduce it with its command log.
 
     Attributes:
-        condition: the condition's name (core.conditions).
+        condition: the condition's name (core.run.conditions).
         seed: the run's seed.
         episodes: how many episodes to run, or None to run until stopped.
         mode: fast or realtime.
@@ -63,9 +63,9 @@ class RunSpec:
         network: the knowledge set or stored network the run starts from (None: the
             condition's own).
         params: learning parameters that override the condition's (eta, epsilon, ...).
-        world: the world preset it runs in (`core.worlds`; "" for the default).
+        world: the world preset it runs in (`core.sim.worlds`; "" for the default).
         sensors: the sensor definition its logical sensors use (`core.brain.catalog`;
-            "" for the default). A stored run keeps both resolved (see `core.setup.Setup`),
+            "" for the default). A stored run keeps both resolved (see `core.run.setup.Setup`),
             so a later change of the defaults never changes what an old run meant.
         network_id: the stored network's identity when `network` names one (None: a
             knowledge set, or the network was deleted since): live edits of that network

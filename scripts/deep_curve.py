@@ -2,7 +2,7 @@
 
 Each learner trains on the same seeds (so on the same obstacles and lamp cycles) for the
 same number of episodes, counted the same way; the curve is the rolling success over the
-last `--window` episodes, the mean over seeds with its 95% band (`core.stats.mean_interval`,
+last `--window` episodes, the mean over seeds with its 95% band (`core.lab.stats.mean_interval`,
 Student's t, clipped to the seeds' range: with 3 seeds that is often the range itself).
 Needs the srlab[baselines] extra (``make install-baselines``):
 
@@ -34,10 +34,10 @@ import numpy as np
 
 from core.errors import ExtraMissingError
 from core.events import Outcome
-from core.experiment import Task, parse_conditions, run_task
+from core.lab.experiment import Task, parse_conditions, run_task
+from core.lab.stats import mean_interval
 from core.params import tuned_params
-from core.setup import SIGNAL_MODES, Setup
-from core.stats import mean_interval
+from core.run.setup import SIGNAL_MODES, Setup
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # after choosing the headless backend

@@ -22,10 +22,10 @@ from functools import partial
 
 from core.brain.catalog import AssociationSpec
 from core.brain.network import BehaviourNetwork
-from core.conditions import get_condition
-from core.runner import run
-from core.setup import Setup, network_specs
-from core.simulation import Simulation
+from core.run.conditions import get_condition
+from core.run.runner import run
+from core.run.setup import Setup, network_specs
+from core.run.simulation import Simulation
 
 CANDIDATES = (
     "goforward3",

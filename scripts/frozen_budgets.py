@@ -4,7 +4,7 @@ While training, the baselines keep exploring (qlambda and qlambda-hybrid at thei
 20%) and KP's robot stops exploring a stimulus once its response is confident, so success
 while training mixes what was learned with how much is still explored. Here each learner
 trains on the same seeds, and what it learned is frozen (no exploration, no learning) and
-run on held-out seeds after 50, 200 and 1,000 episodes (`core.experiment.Task.eval_after`:
+run on held-out seeds after 50, 200 and 1,000 episodes (`core.lab.experiment.Task.eval_after`:
 one run per learner and seed, evaluated at each budget, the same numbers as one run per
 budget). `qlambda-decay` and `qlambda-hybrid-decay` are the Q(lambda) baselines with an
 exploration rate that decays (tuned with the same budget as every learner)::
@@ -34,9 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from core.conditions import get_condition
 from core.events import Outcome
-from core.experiment import (
+from core.lab.experiment import (
     Checkpoint,
     LocalBackend,
     Task,
@@ -44,10 +43,11 @@ from core.experiment import (
     parse_conditions,
     run_tasks,
 )
+from core.lab.stats import Estimate, mean_interval, paired_difference, pct
 from core.params import tuned_params
-from core.runner import EpisodeSummary
-from core.setup import Setup
-from core.stats import Estimate, mean_interval, paired_difference, pct
+from core.run.conditions import get_condition
+from core.run.runner import EpisodeSummary
+from core.run.setup import Setup
 from server.reports.base import clean_json, cpu_seconds, head, interval_line, row
 from server.reports.declared import Comparison, Tested, compare_declared, paired_points, points
 from server.reports.plots import colours, save, subplots, success_axes

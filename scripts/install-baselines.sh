@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The optional srlab[baselines] extra (stable-baselines3's DQN and PPO, core/baselines.py)
+# The optional srlab[baselines] extra (stable-baselines3's DQN and PPO, core/learners/baselines.py)
 # in the project's .venv, on a CPU-only torch:
 #
 #   scripts/install-baselines.sh UV PYTHON     # what `make install-baselines` runs

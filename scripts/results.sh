@@ -21,7 +21,7 @@ SRLAB=${SRLAB:-.venv/bin/srlab}
 OUT=${RESULTS_OUT:-docs/results}
 JOBS=${JOBS:-2}
 ALL="innate,delayed,dp,rp,kp,sonar,reflexes,expert,qlambda,qlambda-hybrid"
-if .venv/bin/python -c 'from core.baselines import available; raise SystemExit(not available())'; then
+if .venv/bin/python -c 'from core.learners.baselines import available; raise SystemExit(not available())'; then
     ALL="$ALL,dqn,ppo"
 else
     echo "results: the srlab[baselines] extra is not installed: dqn and ppo left out" >&2

@@ -6,7 +6,7 @@ Both, and their ablation `sonar` (no propagation), learn on the same seeds in tw
 `crossed-sonar`, where the front sonars' cables are crossed so the reflex answers an
 obstacle in the path on the wrong side, and `soft-obstacle`, where the reflex is right.
 Before any learner, the script measures what the reflexes alone would teach the camera
-there (`core.copies`); then it trains every condition, signal given, and reports success,
+there (`core.lab.copies`); then it trains every condition, signal given, and reports success,
 the frozen held-out evaluation and what each variant answers each camera stimulus
 (judged by the placement probe) as the episodes go by::
 
@@ -32,14 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from core.copies import Copy, CopyReport, copy_report, reflex_copies
 from core.events import Outcome
-from core.experiment import CAMERA_SENSOR, LocalBackend, Task, TaskResult, run_tasks
+from core.lab.copies import Copy, CopyReport, copy_report, reflex_copies
+from core.lab.experiment import CAMERA_SENSOR, LocalBackend, Task, TaskResult, run_tasks
+from core.lab.stats import Estimate, mean_interval, mean_intervals, paired_difference, pct
 from core.params import Params, normalise, tuned_params
-from core.setup import Setup
-from core.stats import Estimate, mean_interval, mean_intervals, paired_difference, pct
-from core.worlds import load_world
-from server.probe_cache import cached_probe
+from core.run.setup import Setup
+from core.sim.worlds import load_world
 from server.reports.base import clean_json, cpu_seconds, head, interval_line, row
 from server.reports.declared import (
     Comparison,
@@ -49,6 +48,7 @@ from server.reports.declared import (
     points,
 )
 from server.reports.plots import colours, save, subplots, success_axes
+from server.services.probe_cache import cached_probe
 
 WORLDS = ("crossed-sonar", "soft-obstacle")
 CONDITIONS = ("kp", "kp-punished", "sonar")
@@ -397,7 +397,7 @@ def markdown(study: Study) -> str:
         lines += [f"- `{w}`: {load_world(w).description}"]
     lines += [
         "",
-        f"What the sonar reflexes alone would teach the camera (`core/copies.py`: `reflexes` "
+        f"What the sonar reflexes alone would teach the camera (`core/lab/copies.py`: `reflexes` "
         f"with a KP module that records and never learns, {args.copy_episodes} episodes x "
         f"{n} seeds; each episode's RSTM reasoned over as KP does, the copy judged by the "
         "placement probe). KP propagates only after a successful lap, so the copies of "

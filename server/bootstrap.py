@@ -18,14 +18,14 @@ from contextlib import asynccontextmanager
 
 import anyio.to_thread
 
-from core.setup import Setup
+from core.run.setup import Setup
 from server.api.deps import AppState
+from server.api.guard import SitePolicy
+from server.api.ratelimit import RateLimiter
 from server.config import Settings
-from server.guard import SitePolicy
 from server.persistence.storage import StorageFactory, open_storage
-from server.ratelimit import RateLimiter
 from server.runtime import open_runs
-from server.tuning import step_back, warm_up
+from server.runtime.tuning import step_back, warm_up
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
 """Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""

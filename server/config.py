@@ -57,7 +57,7 @@ class Settings(BaseSettings):
         service_nice: with the engines in a process, how far the service's own processes (HTTP,
             the 3D view and their store process) step back for the engines' process when
             the machine is busy: a nice increment, 0-19, applied once the engines' process
-            runs (`server.tuning.step_back`). `srlab serve` makes it 10 unless the
+            runs (`server.runtime.tuning.step_back`). `srlab serve` makes it 10 unless the
             environment says; `create_app` alone leaves it 0 (it would renice the caller).
     """
 

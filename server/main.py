@@ -25,18 +25,18 @@ from core.errors import (
     UnknownRunError,
 )
 from server.api import ROUTERS, contract, docs, etags
+from server.api.asgi import cut_off, send_error
 from server.api.contract import operation_id
+from server.api.guard import CrossSiteGuard, SitePolicy
 from server.api.methods import ApiMethods
 from server.api.routing import add_routes
 from server.api.strictjson import StrictJson
-from server.asgi import cut_off, send_error
+from server.api.timeouts import BodyTimeout
 from server.bootstrap import service
 from server.config import Settings
-from server.guard import CrossSiteGuard, SitePolicy
 from server.persistence.networks import StaleVersionError
 from server.persistence.storage import StorageFactory, open_storage
 from server.runtime import TooManyRunsError
-from server.timeouts import BodyTimeout
 
 log = logging.getLogger("srlab.server")
 WEB = Path(__file__).resolve().parents[1] / "web"

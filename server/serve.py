@@ -13,11 +13,11 @@ import uvicorn
 from fastapi import FastAPI
 from uvicorn.config import STARTUP_FAILURE
 
+from server.api.timeouts import timed_protocol
 from server.config import Settings
 from server.main import create_app
 from server.persistence import upgrade
-from server.timeouts import timed_protocol
-from server.tuning import configure_process
+from server.runtime.tuning import configure_process
 
 log = logging.getLogger("srlab.serve")
 
@@ -99,7 +99,7 @@ def serve(host: str | None = None, port: int | None = None) -> int:
         forwarded_allow_ips=settings.forwarded_allow_ips or None,
         timeout_graceful_shutdown=5,
         # Slow clients: an idle kept-alive connection, a request head and a request body
-        # each get a deadline (server.timeouts), and a head is at most 16 KiB.
+        # each get a deadline (server.api.timeouts), and a head is at most 16 KiB.
         http=timed_protocol(settings.request_timeout_s),
         timeout_keep_alive=5,
         h11_max_incomplete_event_size=16 * 1024,

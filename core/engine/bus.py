@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from core.brain.selection import Selector
 from core.ports import RunStatus, RunTotals
-from core.simulation import Snapshot
+from core.run.simulation import Snapshot
 
 COMPETITORS = 8
 """How many of a tick's competing behaviours its event carries, strongest first."""

@@ -29,9 +29,7 @@ from dataclasses import replace
 from core.brain.brain import BrainConfig, RewardOutcome
 from core.brain.catalog import Catalog
 from core.brain.network import Association, BehaviourNetwork
-from core.checkpoint import decode, encode, export_state, restore_simulation
 from core.commands import EditAssociation, InjectReward, RewardSource
-from core.conditions import Condition, get_condition
 from core.engine.boundary import Boundary
 from core.engine.bus import Competition, EventBus, StatusChanged, Subscription, TickPublished
 from core.engine.jobs import (
@@ -72,11 +70,13 @@ from core.ports import (
     RunTotals,
     StoredRun,
 )
-from core.setup import Setup, condition_network
+from core.run.checkpoint import decode, encode, export_state, restore_simulation
+from core.run.conditions import Condition, get_condition
+from core.run.setup import Setup, condition_network
+from core.run.simulation import Simulation, Snapshot
+from core.run.trace import TraceRecorder
 from core.sim.world import WorldConfig
-from core.simulation import Simulation, Snapshot
 from core.text import check_storable
-from core.trace import TraceRecorder
 
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
@@ -205,7 +205,7 @@ class RunEngine:
 
         Its network is `network`, else the spec's knowledge set, else the condition's own;
         a knowledge set is taken in its variant for the catalogue's sensor definition
-        (`core.setup.condition_network`).
+        (`core.run.setup.condition_network`).
         """
         condition, config = cls._condition(spec)
         if network is not None:

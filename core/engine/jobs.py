@@ -15,7 +15,7 @@ from typing import Any, Final, Generic, TypeVar
 
 from core.commands import EditAssociation, InjectReward
 from core.ports import EpisodeRecord, LearningUpdate, RewardCommit, RunTotals
-from core.trace import TraceArray, compress
+from core.run.trace import TraceArray, compress
 
 
 @dataclass(frozen=True, slots=True)

@@ -14,7 +14,7 @@ from core.brain.network import Association
 from core.commands import EditAssociation
 from core.events import AssociationDemoted, AssociationPromoted
 from core.ports import BehaviourSpec, LearningUpdate, NetworkPair
-from core.simulation import Simulation
+from core.run.simulation import Simulation
 
 
 def pair(sim: Simulation, a: Association) -> NetworkPair:

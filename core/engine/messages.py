@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 from core.commands import EditAssociation, InjectReward
 from core.errors import RunStateError, SimulationStateError
 from core.ports import Mode, RunStatus, RunTotals
-from core.simulation import Snapshot
+from core.run.simulation import Snapshot
 
 if TYPE_CHECKING:
     from core.engine.engine import RunEngine

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.latency import LatencyHistogram
+from core.engine.latency import LatencyHistogram
 
 
 @dataclass
 class EngineStats:
     """Pacing and storage figures, for benchmarks and the live view.
 
-    The latencies are histograms (`core.latency`): reading them costs the same whatever
+    The latencies are histograms (`core.engine.latency`): reading them costs the same whatever
     the run's age.
     """
 

@@ -19,8 +19,8 @@ from core.brain.selection import Selector
 from core.engine.bus import EventBus
 from core.engine.stats import EngineStats
 from core.ports import RunSpec, RunStatus, RunTotals
+from core.run.simulation import Simulation, Snapshot
 from core.sim.world import WorldConfig
-from core.simulation import Simulation, Snapshot
 
 
 class Viewed(Protocol):

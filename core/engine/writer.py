@@ -18,7 +18,6 @@ import time
 from collections import deque
 from dataclasses import replace
 
-from core.checkpoint import encode
 from core.engine.jobs import (
     CLOSE,
     AckFeed,
@@ -34,6 +33,7 @@ from core.engine.jobs import (
 from core.engine.stats import EngineStats
 from core.errors import StorageError
 from core.ports import Checkpoint, CommandRecord, RewardRecord, RunStatus, RunStore
+from core.run.checkpoint import encode
 
 EPISODE_BATCH_S = 0.05
 """How long the episode writer gathers episodes before it commits them together."""

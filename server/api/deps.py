@@ -16,8 +16,8 @@ from fastapi import Depends, HTTPException, Request, status
 
 from core.brain.catalog import Catalog
 from core.ports import NetworkRepository, RunQueries
+from server.api.ratelimit import RateLimiter
 from server.config import Settings
-from server.ratelimit import RateLimiter
 from server.runtime import Runs
 
 if TYPE_CHECKING:

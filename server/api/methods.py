@@ -19,7 +19,7 @@ from fastapi import routing
 from starlette.routing import BaseRoute
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from server.asgi import send_error
+from server.api.asgi import send_error
 
 API_PREFIX = "/api/"
 _HTTP_METHODS = {"get", "put", "post", "delete", "patch", "options", "head", "trace"}

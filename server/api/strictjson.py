@@ -16,7 +16,7 @@ from typing import Any
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from server.asgi import send_error
+from server.api.asgi import send_error
 
 
 class _Bad:

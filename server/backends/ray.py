@@ -19,7 +19,7 @@ from typing import Any
 from urllib.parse import urlsplit
 
 import core
-from core.experiment import Task, TaskFunction, TaskResult, run_task
+from core.lab.experiment import Task, TaskFunction, TaskResult, run_task
 from server.backends.errors import BackendError
 
 RAY_EXTRA = "pip install 'srlab[ray]'"

@@ -24,16 +24,16 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from core.conditions import CONDITIONS
 from core.params import point_label
-from core.setup import Setup
-from core.worlds import WorldSettings
+from core.run.conditions import CONDITIONS
+from core.run.setup import Setup
+from core.sim.worlds import WorldSettings
 from server.reports.base import first_line
 
 if TYPE_CHECKING:
-    from core.cells import Cell
-    from core.experiment import Backend, TaskResult
-    from core.probe import ProbeResult
+    from core.lab.cells import Cell
+    from core.lab.experiment import Backend, TaskResult
+    from core.lab.probe import ProbeResult
 
 Handler = Callable[[argparse.Namespace, IO[str], IO[str]], int]
 """What a command runs: its arguments, stdout and stderr in; the exit code out."""
@@ -91,9 +91,9 @@ def engine_condition(text: str) -> str:
 
 
 def perception_type(text: str) -> WorldSettings:
-    """An argparse type: `--perception`'s world settings (`core.worlds.parse_perception`)."""
+    """An argparse type: `--perception`'s world settings (`core.sim.worlds.parse_perception`)."""
     from core.errors import CoreError
-    from core.worlds import parse_perception
+    from core.sim.worlds import parse_perception
 
     try:
         return parse_perception(text)
@@ -106,8 +106,8 @@ def add_setup_arguments(
 ) -> None:
     """--world, --sensors, --signal (unless `signal` is False) and, with `start`, --start."""
     from core.brain.catalog import sensor_definitions
-    from core.setup import SIGNAL_MODES
-    from core.worlds import default_world, perception_parameters, world_names
+    from core.run.setup import SIGNAL_MODES
+    from core.sim.worlds import default_world, perception_parameters, world_names
 
     parser.add_argument(
         "--world",
@@ -143,7 +143,7 @@ def add_setup_arguments(
             "responses added, so success measures the obstacle alone",
         )
     if start:
-        from core.conditions import STARTS
+        from core.run.conditions import STARTS
 
         parser.add_argument(
             "--start",
@@ -236,7 +236,7 @@ def open_backend(args: argparse.Namespace, err: Console) -> Iterator[tuple[Backe
     """The backend the arguments choose, connected, and where it runs, for people."""
     check_backend_arguments(args)
     if args.backend == "local":
-        from core.experiment import LocalBackend
+        from core.lab.experiment import LocalBackend
 
         yield LocalBackend(args.jobs), f"{args.jobs} local process{'es' * (args.jobs > 1)}"
         return
@@ -370,7 +370,7 @@ def run_cells(
     Returns the results and the parameters every study's report starts with: the command,
     the seeds and episodes, the tasks, where they ran and how long they took.
     """
-    from core.cells import run_study, study_tasks
+    from core.lab.cells import run_study, study_tasks
 
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     tasks = study_tasks(cells, seeds, args.episodes, args.eval_episodes)
@@ -430,7 +430,7 @@ def judge_learned(args: argparse.Namespace, err: Console, setup: Setup) -> Probe
     """The placement probe of `setup` (`srlab probe`, cached), or None with --no-probe."""
     if args.no_probe:
         return None
-    from server.probe_cache import cached_probe
+    from server.services.probe_cache import cached_probe
 
     status = err.status("judging what was learned (srlab probe)")
     with status if not args.quiet else nullcontext():

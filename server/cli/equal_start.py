@@ -43,9 +43,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def equal_start_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab equal-start`."""
-    from core.conditions import STARTS
-    from core.equal_start import START_NAMES, EqualStartStudy, summarise_equal_start
-    from core.experiment import CAMERA_SENSOR, parse_conditions
+    from core.lab.equal_start import START_NAMES, EqualStartStudy, summarise_equal_start
+    from core.lab.experiment import CAMERA_SENSOR, parse_conditions
+    from core.run.conditions import STARTS
     from server.reports.equal_start import write_equal_start_report
 
     setup = setup_of(args)

@@ -11,7 +11,7 @@ from typing import IO
 from rich.console import Console
 from rich.table import Table
 
-from core.conditions import CONDITIONS
+from core.run.conditions import CONDITIONS
 from server.cli.common import (
     UsageError,
     add_task_arguments,
@@ -82,11 +82,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab experiment`."""
-    from core.analysis import DECLARED, parse_pairs
-    from core.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
+    from core.lab.analysis import DECLARED, parse_pairs
+    from core.lab.experiment import CAMERA_SENSOR, parse_conditions, run_experiment, summarise
+    from core.lab.stats import Estimate, pct
     from core.params import teacher_params, tuned_params
-    from core.stats import Estimate, pct
-    from core.trainer import parse_teacher
+    from core.run.trainer import parse_teacher
     from server.reports.experiment import write_report
 
     conditions = parse_conditions(args.conditions)
@@ -127,7 +127,7 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
         elapsed = time.perf_counter() - started
     probed = None
     if not args.no_probe:
-        from server.probe_cache import cached_probe
+        from server.services.probe_cache import cached_probe
 
         with (
             err.status("judging what was learned (srlab probe)")

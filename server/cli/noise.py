@@ -24,7 +24,7 @@ CONDITIONS = "kp,sonar,rp,qlambda-hybrid,dp"
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The `noise` command and its arguments."""
-    from core.worlds import parse_perception
+    from core.sim.worlds import parse_perception
 
     p = sub.add_parser(
         "noise",
@@ -44,8 +44,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def noise_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab noise`."""
-    from core.experiment import CAMERA_SENSOR, parse_conditions
-    from core.noise import PERCEPTIONS, NoiseStudy, summarise_noise
+    from core.lab.experiment import CAMERA_SENSOR, parse_conditions
+    from core.lab.noise import PERCEPTIONS, NoiseStudy, summarise_noise
     from server.reports.noise import write_noise_report
 
     noise = args.perception

@@ -9,7 +9,7 @@ from typing import IO
 from rich.console import Console
 from rich.table import Table
 
-from core.conditions import CONDITIONS
+from core.run.conditions import CONDITIONS
 from server.cli.common import (
     add_task_arguments,
     command_line,
@@ -25,7 +25,7 @@ DEFAULT_CONDITIONS = "kp,sonar,rp,qlambda-hybrid,dp"
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The `phase` command and its arguments."""
-    from core.worlds import WORLD_PARAMETERS
+    from core.sim.worlds import WORLD_PARAMETERS
 
     names = "; ".join(
         f"{p.name} ({p.unit}, {p.parameter.bounds}): {p.parameter.description}"
@@ -71,10 +71,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def phase_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab phase`."""
-    from core.experiment import parse_conditions
+    from core.lab.experiment import parse_conditions
+    from core.lab.phase import Phase, load_grid, merge_axes, parse_axes, run_phase, summarise_phase
+    from core.lab.stats import Estimate, pct
     from core.params import ParameterError, tuned_params
-    from core.phase import Phase, load_grid, merge_axes, parse_axes, run_phase, summarise_phase
-    from core.stats import Estimate, pct
     from server.reports.base import diff
     from server.reports.phase import write_phase_report
 

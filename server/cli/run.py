@@ -20,8 +20,8 @@ from core.brain.catalog import sensor_definitions
 from core.errors import StorageError
 from core.events import EpisodeEnded, Outcome
 from core.ports import NOT_ENDED, Mode, RunQueries, RunStatus, RunTotals, StoredRun
-from core.setup import default_sensors
-from core.worlds import default_world, world_names
+from core.run.setup import default_sensors
+from core.sim.worlds import default_world, world_names
 from server.cli.common import (
     CONDITION_METAVAR,
     OTHER_CONDITIONS,
@@ -34,8 +34,8 @@ from server.cli.common import (
     unit,
 )
 from server.cli.db import open_store, safe_url
-from server.runspec import run_spec
-from server.tuning import configure_process, freeze_heap
+from server.runtime.tuning import configure_process, freeze_heap
+from server.services.runspec import run_spec
 
 if TYPE_CHECKING:
     from core.engine import RunEngine

@@ -13,10 +13,10 @@ from rich.table import Table
 
 from core.brain.catalog import Catalog
 from core.brain.selection import Strategy
-from core.conditions import get_condition
 from core.events import Outcome
-from core.runner import EpisodeSummary, RunSummary, run
-from core.simulation import Snapshot
+from core.run.conditions import get_condition
+from core.run.runner import EpisodeSummary, RunSummary, run
+from core.run.simulation import Snapshot
 from server.cli.common import (
     CONDITION_METAVAR,
     OTHER_CONDITIONS,

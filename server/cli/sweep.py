@@ -9,8 +9,8 @@ from typing import IO
 from rich.console import Console
 from rich.table import Table
 
-from core.conditions import CONDITIONS
 from core.params import PARAMETERS
+from core.run.conditions import CONDITIONS
 from server.cli.common import (
     add_task_arguments,
     command_line,
@@ -51,9 +51,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab sweep`."""
-    from core.experiment import parse_conditions
+    from core.lab.experiment import parse_conditions
+    from core.lab.sweep import Sweep, parse_grid, run_sweep, summarise_sweep
     from core.params import format_value
-    from core.sweep import Sweep, parse_grid, run_sweep, summarise_sweep
     from server.reports.sweep import write_sweep_report
 
     plan = Sweep(

@@ -21,8 +21,8 @@ from server.reports.base import diff, fmt, setup_params
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """The `teachers` command and its arguments."""
-    from core.teachers import LEVELS, PRESETS, REFERENCES
-    from core.trainer import TEACHERS_FILE
+    from core.lab.teachers import LEVELS, PRESETS, REFERENCES
+    from core.run.trainer import TEACHERS_FILE
 
     levels = "; ".join(f"{n}={','.join(f'{v:g}' for v in vs)}" for n, vs in LEVELS)
     p = sub.add_parser(
@@ -59,10 +59,10 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def teachers_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab teachers`."""
-    from core.experiment import parse_conditions
+    from core.lab.experiment import parse_conditions
+    from core.lab.sweep import parse_grid
+    from core.lab.teachers import LEVELS, TeacherStudy, summarise_teachers
     from core.params import TEACHER_PREFIX, format_value
-    from core.sweep import parse_grid
-    from core.teachers import LEVELS, TeacherStudy, summarise_teachers
     from server.reports.teachers import write_teachers_report
 
     study = TeacherStudy(

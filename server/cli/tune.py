@@ -31,7 +31,7 @@ def add_tune_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     tn = sub.add_parser(
         "tune",
         help="tune every learner with the same budget on seeds the experiments never use",
-        description="Run each learning condition's 27-point grid (core/tune.py) on the "
+        description="Run each learning condition's 27-point grid (core/lab/tune.py) on the "
         "tuning seeds, print every point best first, and with --write keep each learner's "
         "best in core/data/tuned.toml, which srlab experiment then runs with.",
     )
@@ -50,9 +50,9 @@ def add_tune_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def tune(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab tune`."""
-    from core import tune as tuning
     from core.brain.catalog import data_dir
-    from core.experiment import parse_conditions
+    from core.lab import tune as tuning
+    from core.lab.experiment import parse_conditions
 
     conditions = parse_conditions(args.conditions)
     if args.seed_base < tuning.TUNING_SEED_BASE:
@@ -131,7 +131,7 @@ def _floats(text: str, name: str) -> list[float]:
 
 def qlambda_sweep(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab qlambda-sweep`."""
-    from core.qlambda import QLambdaConfig, sweep
+    from core.learners.qlambda import QLambdaConfig, sweep
 
     grid = [
         QLambdaConfig(alpha=a, lam=lam, epsilon=e)

@@ -46,7 +46,7 @@ def add_probe_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
 
 def probe(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab probe`."""
-    from server.probe_cache import cached_probe
+    from server.services.probe_cache import cached_probe
 
     setup = setup_of(args)
     err = Console(file=stderr, stderr=True)
@@ -103,10 +103,10 @@ def add_world_check_parser(sub: argparse._SubParsersAction[argparse.ArgumentPars
 def world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab world-check`."""
     from core.brain.catalog import sensor_definitions
-    from core.stats import pct
-    from core.worldcheck import PROPERTIES
-    from core.worldcheck import world_check as check_world
-    from core.worlds import load_world, world_names
+    from core.lab.stats import pct
+    from core.lab.worldcheck import PROPERTIES
+    from core.lab.worldcheck import world_check as check_world
+    from core.sim.worlds import load_world, world_names
 
     worlds = list(dict.fromkeys(args.world or world_names()))
     for w in worlds:

@@ -21,7 +21,7 @@ from core.ports import (
 )
 from server.persistence.driver import ConnectionSql
 from server.persistence.orm import RewardRow, RunCommandRow, RunRow
-from server.runspec import run_spec
+from server.services.runspec import run_spec
 
 
 def session_sql(session: Session) -> ConnectionSql:

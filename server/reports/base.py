@@ -13,19 +13,19 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from core.lab.stats import Estimate, interval_name
+from core.lab.stats import pct as stats_pct
 from core.params import point_label
-from core.stats import Estimate, interval_name
-from core.stats import pct as stats_pct
 
 if TYPE_CHECKING:
-    from core.experiment import TaskResult
-    from core.setup import Setup
+    from core.lab.experiment import TaskResult
+    from core.run.setup import Setup
 
 
 def fmt(stat: dict[str, float], pct: bool = False, digits: int = 2) -> str:
     """A figure over seeds with its interval: a rate as ``5% [0, 15]``, else ``0.12 ± 0.03``.
 
-    A rate's interval is the summary's (`core.stats.mean_interval`, within the values'
+    A rate's interval is the summary's (`core.lab.stats.mean_interval`, within the values'
     range, so within [0, 1]; clipped there all the same) when it has one: a mean ± Student's
     t half-width alone ran past 0% and 100% with few seeds ("5% ± 64%").
     """

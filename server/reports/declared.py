@@ -1,8 +1,8 @@
 """Pre-declared comparisons: the few paired differences a summary's conclusions rest on.
 
 Each is a difference between two conditions' per-seed figures, paired by seed, with its
-interval and sign-flip p (`core.stats.paired_difference`); the family of them is corrected
-for multiplicity with Holm's step-down method (`core.stats.holm`), so a conclusion drawn
+interval and sign-flip p (`core.lab.stats.paired_difference`); the family of them is corrected
+for multiplicity with Holm's step-down method (`core.lab.stats.holm`), so a conclusion drawn
 from any of them keeps the family's error rate at 5%. Every other figure in a summary is
 exploratory.
 """
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from core.stats import Paired, holm, p_text, paired_difference
+from core.lab.stats import Paired, holm, p_text, paired_difference
 from server.reports.base import diff
 
 
@@ -67,7 +67,7 @@ def points(tested: Tested) -> str:
 
 
 def declared_section(family: Sequence[dict[str, Any]], declared_as: str) -> list[str]:
-    """A summary's section of the comparisons `family` (`core.cells.declared_family`).
+    """A summary's section of the comparisons `family` (`core.lab.cells.declared_family`).
 
     `declared_as` says, in a sentence's words, what was declared (e.g. "kp minus each other
     method with the starting knowledge equal, in training and held out").

@@ -7,9 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from core.brain.catalog import Catalog
-from core.conditions import STARTS
-from core.equal_start import START_NAMES, EqualStartStudy, label, own_start
-from core.experiment import TaskResult
+from core.lab.equal_start import START_NAMES, EqualStartStudy, label, own_start
+from core.lab.experiment import TaskResult
+from core.run.conditions import STARTS
 from server.reports.base import diff, failed_lines, fmt, head, row
 from server.reports.declared import declared_section
 from server.reports.plots import grouped_bars, save, subplots, success_axes

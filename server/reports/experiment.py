@@ -6,9 +6,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from core.analysis import DECLARED, declared_comparisons, paired_table
 from core.brain.catalog import Catalog
-from core.experiment import TaskResult
+from core.lab.analysis import DECLARED, declared_comparisons, paired_table
+from core.lab.experiment import TaskResult
 from server.reports.base import write_summary
 from server.reports.experiment_markdown import summary_markdown
 from server.reports.experiment_plots import plot_knowledge, plot_learning_curves, plot_reliability

@@ -8,10 +8,10 @@ from typing import Any
 
 import numpy as np
 
-from core.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
 from core.brain.catalog import Catalog
-from core.experiment import CAMERA_SENSOR, TaskResult
-from core.stats import p_text, wilson
+from core.lab.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
+from core.lab.experiment import CAMERA_SENSOR, TaskResult
+from core.lab.stats import p_text, wilson
 from server.reports.base import diff, failed_lines, head, interval_line, row
 from server.reports.paper import PAPER_TABLE_II, PAPER_TABLE_III
 
@@ -457,7 +457,7 @@ def summary_markdown(
 ) -> str:
     """The experiment's summary as readable tables, under `title`.
 
-    `declared` holds the pre-declared comparisons (`core.analysis.declared_comparisons`).
+    `declared` holds the pre-declared comparisons (`core.lab.analysis.declared_comparisons`).
     """
     lines = [
         f"# {title}",

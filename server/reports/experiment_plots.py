@@ -10,7 +10,7 @@ import matplotlib.patches
 import numpy as np
 
 from core.brain.catalog import Catalog
-from core.stats import interval_name, mean_interval
+from core.lab.stats import interval_name, mean_interval
 from server.reports.experiment_markdown import camera_names
 from server.reports.paper import PAPER_TABLE_III
 from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes

@@ -7,9 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from core.brain.catalog import Catalog
-from core.experiment import TaskResult
-from core.noise import PERCEPTIONS, NoiseStudy, label
-from core.worlds import PERCEPTION_PREFIX
+from core.lab.experiment import TaskResult
+from core.lab.noise import PERCEPTIONS, NoiseStudy, label
+from core.sim.worlds import PERCEPTION_PREFIX
 from server.reports.base import (
     diff,
     failed_lines,

@@ -10,11 +10,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from core.experiment import TaskResult
+from core.lab.experiment import TaskResult
+from core.lab.phase import REFLEXES, Phase, sign_of
+from core.lab.stats import Estimate, pct
 from core.params import format_value
-from core.phase import REFLEXES, Phase, sign_of
-from core.stats import Estimate, pct
-from core.worlds import get_world_parameter
+from core.sim.worlds import get_world_parameter
 from server.reports.base import (
     diff,
     failed_lines,

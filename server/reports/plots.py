@@ -20,7 +20,7 @@ import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from core.analysis import CRITERION_RATE
+from core.lab.analysis import CRITERION_RATE
 
 ROLLING = 5
 """Episodes in the rolling mean of a learning curve."""

@@ -1,6 +1,6 @@
 """What a study of cells writes: its summary and plot, and an experiment report per part.
 
-A study runs cells (`core.cells`); its summary compares them, and each part of it (the
+A study runs cells (`core.lab.cells`); its summary compares them, and each part of it (the
 cells from one start, or sensing one way) is also an experiment of its own, reported as
 `srlab experiment` reports one in a folder beneath the study's.
 """
@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from core.brain.catalog import Catalog
-from core.experiment import TaskResult
+from core.lab.experiment import TaskResult
 from server.reports.base import study_document, write_summary
 from server.reports.experiment import write_report
 
@@ -25,7 +25,7 @@ class Part:
     Attributes:
         name: its folder.
         results: its tasks' results.
-        summary: its conditions' summaries, by condition (as `core.analysis.summarise`).
+        summary: its conditions' summaries, by condition (as `core.lab.analysis.summarise`).
         params: its report's parameters.
         title: its summary's title.
     """

@@ -8,9 +8,9 @@ from typing import Any
 
 import numpy as np
 
-from core.experiment import TaskResult
+from core.lab.experiment import TaskResult
+from core.lab.sweep import Sweep
 from core.params import Params, ParamValue, format_value, point_label
-from core.sweep import Sweep
 from server.reports.base import diff, failed_lines, fmt, head, interval_line, row, write_summary
 from server.reports.plots import ROLLING, rolling_success, save, subplots, success_axes
 

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 from matplotlib.axes import Axes
 
-from core.experiment import TaskResult
+from core.lab.experiment import TaskResult
+from core.lab.teachers import MEASURES, TAUGHT, TeacherStudy
 from core.params import TEACHER_PREFIX, format_value
-from core.teachers import MEASURES, TAUGHT, TeacherStudy
 from server.reports.base import (
     diff,
     failed_lines,
@@ -137,7 +137,7 @@ def summary_markdown(
         "",
         "`rp` is the reinforcement program given by a simulated teacher: each imperfection "
         "below is raised alone, the others at the perfect teacher's 0 "
-        "(`core.trainer.Imperfections`, `core/data/trainers/teachers.toml`). A late reward "
+        "(`core.run.trainer.Imperfections`, `core/data/trainers/teachers.toml`). A late reward "
         "credits what STM holds when it arrives. Beside it, learners that need no teacher:",
         "",
         *ref_lines,

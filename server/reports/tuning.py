@@ -6,8 +6,8 @@ import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from core.setup import Setup
-from core.tune import GRIDS, TunedPoint
+from core.lab.tune import GRIDS, TunedPoint
+from core.run.setup import Setup
 from server.reports.base import head, row, setup_params
 
 

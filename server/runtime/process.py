@@ -27,7 +27,7 @@ call gets `EngineProcessError` (503) meanwhile, and the service stays up to say 
 starts a new child (after `RESPAWN_FIRST_S`, then twice as long, at least a second, after
 each start that fails, up to `RESPAWN_MAX_S`): new runs tick there, and the failed ones
 can be started again from their checkpoints. The new child is started by the service's
-process, so it shares the service's lowered priority (`server.tuning.step_back`).
+process, so it shares the service's lowered priority (`server.runtime.tuning.step_back`).
 """
 
 from __future__ import annotations
@@ -427,7 +427,7 @@ async def _child(read_fd: int, write_fd: int) -> None:
     from server.config import Settings
     from server.persistence.storage import open_storage
     from server.runtime.reads import QUERIES
-    from server.tuning import configure_process, warm_up
+    from server.runtime.tuning import configure_process, warm_up
 
     configure_process()
     loop = asyncio.get_running_loop()

@@ -13,10 +13,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
-from core.conditions import CONDITIONS
 from core.engine import RunView
 from core.engine.messages import Query, RunState
 from core.ports import NOT_ENDED, RunSpec, RunTotals
+from core.run.conditions import CONDITIONS
 from server.runtime.host import QueryHandler
 from server.schemas import (
     KpAssociationPublic,

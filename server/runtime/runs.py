@@ -24,7 +24,7 @@ from core.engine import RewardAck, RunEngine, Subscription
 from core.engine.messages import Command, EditBatch, Query, RunState, Step
 from core.errors import RunStateError, StorageError
 from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore
-from core.setup import Setup
+from core.run.setup import Setup
 from server.runtime.host import RunLetGo
 
 log = logging.getLogger("srlab.engines")

@@ -7,7 +7,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, JsonValue
 
 from core.brain.catalog import sensor_definitions
-from core.worlds import world_names
+from core.sim.worlds import world_names
 
 
 class StimulusPublic(BaseModel):

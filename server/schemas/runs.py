@@ -6,8 +6,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from core.conditions import CONDITIONS
 from core.engine import HZ_MAX, HZ_MIN
+from core.run.conditions import CONDITIONS
 from server.schemas.catalog import SENSOR_DEFINITIONS, WORLD_NAMES
 from server.schemas.common import Strict, one_of
 from server.schemas.networks import AssociationPublic

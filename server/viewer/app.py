@@ -18,9 +18,9 @@ from websockets.frames import CloseCode
 from core.brain.catalog import Catalog
 from core.ports import RunQueries
 from core.sim.world import WorldConfig
-from core.worlds import load_world
-from server.guard import SitePolicy
-from server.ratelimit import RateLimiter
+from core.sim.worlds import load_world
+from server.api.guard import SitePolicy
+from server.api.ratelimit import RateLimiter
 from server.runtime import Runs as Engines
 from server.viewer.control import Controller
 from server.viewer.gate import MAX_VIEWERS, Gate, Peer

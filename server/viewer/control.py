@@ -23,9 +23,9 @@ from core.engine.messages import Latest, LatestTick, SetRate
 from core.errors import CoreError
 from core.events import EpisodeEnded
 from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
+from core.run.simulation import Snapshot
 from core.sim.world import WorldConfig
-from core.simulation import Snapshot
-from server.ratelimit import RateLimiter
+from server.api.ratelimit import RateLimiter
 from server.runtime import LiveRun as Live
 from server.runtime import RunLetGo
 from server.runtime import Runs as Engines

@@ -60,7 +60,7 @@ from websockets.http11 import Request
 from websockets.streams import StreamReader
 from websockets.utils import accept_key
 
-from server.guard import SitePolicy
+from server.api.guard import SitePolicy
 
 log = logging.getLogger("srlab.viewer")
 

@@ -9,10 +9,10 @@ from dataclasses import dataclass, field, replace
 from core.brain.catalog import Catalog
 from core.errors import UnknownNameError
 from core.ports import NetworkPair, RunQueries
+from core.run.trace import TraceRow, unpack
 from core.sim.track import TrackGeometry
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig, episode_layout
-from core.trace import TraceRow, unpack
-from core.worlds import load_world
+from core.sim.worlds import load_world
 from server.viewer.scene import TickView
 
 log = logging.getLogger("srlab.viewer")

@@ -35,7 +35,7 @@ from websockets.asyncio.server import Server, ServerConnection
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from server.guard import SitePolicy
+from server.api.guard import SitePolicy
 from server.viewer.gate import Peer, Relay, refusal
 
 log = logging.getLogger("srlab.viewer")

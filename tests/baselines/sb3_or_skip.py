@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from core.baselines import INSTALL_HINT
+from core.learners.baselines import INSTALL_HINT
 
 try:
     import stable_baselines3  # noqa: F401

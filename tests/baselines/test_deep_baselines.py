@@ -10,7 +10,8 @@ import sb3_or_skip  # noqa: F401  # before SB3 and torch: skips the module witho
 import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from core.baselines import (
+from core.events import Outcome
+from core.learners.baselines import (
     ALGOS,
     Algo,
     BaselineConfig,
@@ -20,9 +21,8 @@ from core.baselines import (
     learn,
     run_baseline,
 )
-from core.events import Outcome
-from core.runner import EpisodeSummary
-from core.setup import Setup
+from core.run.runner import EpisodeSummary
+from core.run.setup import Setup
 
 # Small enough for a test: DQN learns from its 10th decision, PPO updates every 32.
 QUICK = {"learning_starts": 10.0, "batch_size": 16.0}

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 import sb3_or_skip  # noqa: F401  # before SB3 and torch: skips the module without them
 
-from core.conditions import get_condition
 from core.events import Outcome
-from core.experiment import LocalBackend, Task, run_experiment, run_task
+from core.lab.experiment import LocalBackend, Task, run_experiment, run_task
 from core.params import ParameterError, baseline_params
-from core.setup import Setup
+from core.run.conditions import get_condition
+from core.run.setup import Setup
 from server.cli import main
 
 EPISODES = 4

@@ -12,8 +12,8 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from core.baselines import ALGOS, Algo, BaselineConfig, make_model
-from core.envs import ENV_ID, AmigoTrackEnv
+from core.learners.baselines import ALGOS, Algo, BaselineConfig, make_model
+from core.learners.envs import ENV_ID, AmigoTrackEnv
 
 
 @pytest.mark.parametrize("render_mode", [None, "rgb_array"])

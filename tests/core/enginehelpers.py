@@ -8,7 +8,6 @@ from typing import Any
 
 from core.brain.catalog import Catalog, load_catalog
 from core.commands import InjectReward, RewardSource
-from core.conditions import get_condition
 from core.engine import (
     RunEngine,
 )
@@ -18,7 +17,8 @@ from core.ports import (
     RunStatus,
     StoredReward,
 )
-from core.simulation import Simulation, TickInputs
+from core.run.conditions import get_condition
+from core.run.simulation import Simulation, TickInputs
 
 LtmByName = dict[tuple[str, str], float]
 

@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from core.analysis import (
+from core.errors import UnknownNameError
+from core.lab.analysis import (
     correctness,
     criterion_null,
     declared_comparisons,
@@ -16,8 +17,7 @@ from core.analysis import (
     parse_pairs,
     trend_per_10,
 )
-from core.errors import UnknownNameError
-from core.stats import holm
+from core.lab.stats import holm
 
 
 def test_trend_per_10_is_the_least_squares_slope() -> None:

@@ -1,4 +1,4 @@
-"""core.baselines without its extra: it imports, says how to install it, checks parameters."""
+"""core.learners.baselines without its extra: it imports, says how to install it."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from core.baselines import (
+from core.learners.baselines import (
     INSTALL_HINT,
     USED_BY,
     BaselineConfig,
@@ -15,14 +15,14 @@ from core.baselines import (
     run_baseline,
 )
 from core.params import ParameterError
-from core.setup import Setup
+from core.run.setup import Setup
 
 
 def test_core_baselines_imports_without_torch_or_stable_baselines3() -> None:
     code = (
         "import sys\n"
         "sys.modules.update(torch=None, stable_baselines3=None)\n"
-        "import core.baselines\n"
+        "import core.learners.baselines\n"
         "assert 'torch' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
@@ -77,7 +77,7 @@ def test_a_deep_condition_without_the_extra_is_refused_before_anything_runs(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from core.errors import ExtraMissingError
-    from core.experiment import parse_conditions
+    from core.lab.experiment import parse_conditions
     from server.cli import main
 
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)

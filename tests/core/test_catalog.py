@@ -23,8 +23,8 @@ from core.brain.catalog import (
     sensor_definitions,
 )
 from core.brain.sensors import compile_detector
-from core.conditions import get_condition
 from core.errors import CatalogError, UnknownNameError
+from core.run.conditions import get_condition
 
 
 def sensor(*conditions: Any, **extra: Any) -> dict[str, Any]:

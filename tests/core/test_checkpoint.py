@@ -8,10 +8,10 @@ import pytest
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import load_catalog
-from core.checkpoint import decode, encode, export_state, restore_simulation
-from core.conditions import get_condition
-from core.runner import run
-from core.simulation import Simulation
+from core.run.checkpoint import decode, encode, export_state, restore_simulation
+from core.run.conditions import get_condition
+from core.run.runner import run
+from core.run.simulation import Simulation
 
 CATALOG = load_catalog()
 

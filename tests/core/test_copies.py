@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from core.copies import Copy, copy_report, reflex_copies
-from core.setup import Setup
+from core.lab.copies import Copy, copy_report, reflex_copies
+from core.run.setup import Setup
 
 
 def test_copies_are_camera_stimuli_reasoned_from_sonar_responses_and_reproducible() -> None:

@@ -12,7 +12,6 @@ from enginehelpers import CATALOG, drive, fast, headless_ltm, realtime, wait_tic
 from fakes import InMemoryRunStore, ManualPacer
 
 from core.commands import EditAssociation
-from core.conditions import get_condition
 from core.engine import (
     RewardAck,
     RunEngine,
@@ -28,9 +27,10 @@ from core.ports import (
     Mode,
     RunStatus,
 )
-from core.runner import run as headless_run
-from core.simulation import Snapshot
-from core.trace import unpack
+from core.run.conditions import get_condition
+from core.run.runner import run as headless_run
+from core.run.simulation import Snapshot
+from core.run.trace import unpack
 
 
 @pytest.mark.parametrize("condition", ["kp", "rp", "delayed", "dp"])

@@ -8,12 +8,12 @@ import pytest
 from fakes import InMemoryRunStore
 
 from core.brain.catalog import load_catalog, sensor_definitions
-from core.conditions import get_condition
 from core.engine import RunEngine
 from core.errors import CatalogError, UnknownNameError
 from core.ports import Mode, RunSpec, RunStatus
-from core.setup import Setup, default_sensors, network_specs
-from core.worlds import default_world, load_world, world_names
+from core.run.conditions import get_condition
+from core.run.setup import Setup, default_sensors, network_specs
+from core.sim.worlds import default_world, load_world, world_names
 
 OTHER_WORLD = next(n for n in world_names() if n != default_world())
 """A world preset that is not the default."""

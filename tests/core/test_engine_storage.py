@@ -11,7 +11,6 @@ from enginehelpers import CATALOG, drive, fast, realtime, wait_ticks
 from fakes import InMemoryRunStore
 
 from core.commands import EditAssociation
-from core.conditions import get_condition
 from core.engine import (
     RewardAck,
     RunEngine,
@@ -25,7 +24,8 @@ from core.ports import (
     RewardRecord,
     RunStatus,
 )
-from core.runner import run as headless_run
+from core.run.conditions import get_condition
+from core.run.runner import run as headless_run
 
 
 class FailingStore(InMemoryRunStore):

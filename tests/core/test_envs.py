@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from core.envs import ENV_ID, AmigoTrackEnv, register
 from core.events import Outcome
-from core.runner import EpisodeSummary
+from core.learners.envs import ENV_ID, AmigoTrackEnv, register
+from core.run.runner import EpisodeSummary
 
 
 @pytest.mark.parametrize("prior", ["innate", "kp"])
@@ -182,8 +182,8 @@ def test_step_refuses_what_is_not_one_integer(action: object) -> None:
 def test_deferring_every_decision_is_the_built_in_behaviour_alone() -> None:
     """The defer action lets the prior answer: always deferring lives exactly the episodes
     of the condition without a learner."""
-    from core.conditions import Condition
-    from core.runner import run
+    from core.run.conditions import Condition
+    from core.run.runner import run
 
     env = AmigoTrackEnv(prior="kp", defer=True)
     assert env.action_space == gym.spaces.Discrete(len(env.catalog.behaviours) + 1)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import pytest
 
 from core.brain.catalog import load_catalog
-from core.cells import run_study
-from core.conditions import Start, get_condition, with_start
-from core.equal_start import EqualStartStudy, label, own_start, summarise_equal_start
 from core.errors import UnknownNameError
-from core.experiment import LocalBackend, Task, run_task
-from core.setup import Setup, network_specs
+from core.lab.cells import run_study
+from core.lab.equal_start import EqualStartStudy, label, own_start, summarise_equal_start
+from core.lab.experiment import LocalBackend, Task, run_task
+from core.run.conditions import Start, get_condition, with_start
+from core.run.setup import Setup, network_specs
 
 CATALOG = load_catalog()
 CAMERA = {s.name for s in CATALOG.stimuli if s.sensor == "camera_obstacle"}

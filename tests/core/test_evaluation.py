@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from core.brain.selection import How
-from core.conditions import get_condition
-from core.envs import AmigoTrackEnv
-from core.evaluation import EVAL_SEED_OFFSET, eval_seed, evaluate, frozen, without_sonar
-from core.experiment import Task, run_task
-from core.qlambda import QLambdaConfig, evaluate_qlambda, run_qlambda
-from core.runner import run
-from core.setup import Setup
-from core.simulation import Simulation
+from core.lab.evaluation import EVAL_SEED_OFFSET, eval_seed, evaluate, frozen, without_sonar
+from core.lab.experiment import Task, run_task
+from core.learners.envs import AmigoTrackEnv
+from core.learners.qlambda import QLambdaConfig, evaluate_qlambda, run_qlambda
+from core.run.conditions import get_condition
+from core.run.runner import run
+from core.run.setup import Setup
+from core.run.simulation import Simulation
 
 SETUP = Setup(signal="given").resolved()
 

@@ -11,11 +11,10 @@ from typing import Any
 
 import pytest
 
-import core.experiment
-from core.conditions import Condition
+import core.lab.experiment
 from core.errors import UnknownNameError
 from core.events import Outcome
-from core.experiment import (
+from core.lab.experiment import (
     WORKER_DIED,
     LocalBackend,
     Task,
@@ -31,9 +30,10 @@ from core.experiment import (
     summarise,
     t_quantile_975,
 )
-from core.runner import RunSummary
-from core.runner import run as real_run
-from core.setup import Setup
+from core.run.conditions import Condition
+from core.run.runner import RunSummary
+from core.run.runner import run as real_run
+from core.run.setup import Setup
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_a_failing_task_is_returned_with_its_error_and_the_others_survive(
             raise RuntimeError("the robot fell off the table")
         return real_run(condition, seed, episodes, **kw)
 
-    monkeypatch.setattr(core.experiment, "run", run)
+    monkeypatch.setattr(core.lab.experiment, "run", run)
     results = run_experiment(["kp", "rp"], [0, 1], 2, jobs=1)
     failed = [r for r in results if not r.ok]
     assert [(r.task.condition, r.task.seed) for r in failed] == [("rp", 1)]
@@ -292,13 +292,13 @@ def test_paired_against_pairs_seeds_and_a_condition_against_itself_is_zero() -> 
             "seeds": 3, "seed_ids": [0, 1, 2], "success_by_seed": [[1, 1], [1, 1], [1, 0]],
         },
     }  # fmt: skip
-    out = core.experiment.paired_against(summary, "kp")
+    out = core.lab.experiment.paired_against(summary, "kp")
     assert out["same"]["mean"] == 0.0 and out["same"]["p"] == 1.0  # the same seeds, reordered
     # better - kp per seed: +0.5, 0, +0.5.
     assert out["better"]["mean"] == pytest.approx(1 / 3)
-    first = core.experiment.paired_against(summary, "kp", horizon=1)
+    first = core.lab.experiment.paired_against(summary, "kp", horizon=1)
     assert first["better"]["mean"] == pytest.approx(1 / 3)  # 0, 0, +1 over episode 1
-    assert core.experiment.paired_against(summary, "nobody") == {}
+    assert core.lab.experiment.paired_against(summary, "nobody") == {}
 
 
 def test_the_new_conditions_with_evaluation_are_the_same_whatever_the_jobs() -> None:

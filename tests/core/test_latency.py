@@ -7,7 +7,7 @@ import math
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.latency import BUCKETS_PER_DOUBLING, LatencyHistogram
+from core.engine.latency import BUCKETS_PER_DOUBLING, LatencyHistogram
 
 RESOLUTION = 2.0 ** (1 / BUCKETS_PER_DOUBLING)
 """A percentile is at most this factor over the exact one."""

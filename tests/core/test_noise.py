@@ -1,15 +1,15 @@
-"""Noisy perception beside exact (`core.noise`): the cells, and the study's arithmetic."""
+"""Noisy perception beside exact (`core.lab.noise`): the cells, and the study's arithmetic."""
 
 from __future__ import annotations
 
 import pytest
 
-from core.cells import run_study
 from core.errors import UnknownNameError
-from core.experiment import LocalBackend, experiment_tasks, run_task
-from core.noise import NoiseStudy, label, summarise_noise
-from core.setup import Setup
-from core.worlds import PERCEPTION_PRESETS, parse_perception
+from core.lab.cells import run_study
+from core.lab.experiment import LocalBackend, experiment_tasks, run_task
+from core.lab.noise import NoiseStudy, label, summarise_noise
+from core.run.setup import Setup
+from core.sim.worlds import PERCEPTION_PRESETS, parse_perception
 
 GIVEN = Setup(signal="given")
 NOISY = PERCEPTION_PRESETS["noisy"]

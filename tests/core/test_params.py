@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from core.conditions import CONDITIONS, get_condition
 from core.errors import UnknownNameError
-from core.experiment import Task, run_task
+from core.lab.experiment import Task, run_task
+from core.learners.qlambda import QLambdaConfig
 from core.params import (
     PARAMETERS,
     ParameterError,
@@ -18,8 +18,8 @@ from core.params import (
     normalise,
     qlambda_config,
 )
-from core.qlambda import QLambdaConfig
-from core.trainer import IMPERFECTIONS
+from core.run.conditions import CONDITIONS, get_condition
+from core.run.trainer import IMPERFECTIONS
 
 
 @pytest.mark.parametrize("name", sorted(CONDITIONS))

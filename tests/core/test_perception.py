@@ -20,7 +20,7 @@ from core.sim.perception import PerceptionConfig
 from core.sim.sensing import UNSEEN
 from core.sim.types import MotorCommand, SensorFrame
 from core.sim.world import PymunkWorld, WorldConfig
-from core.worlds import PERCEPTION_PRESETS, load_world, parse_perception, with_settings
+from core.sim.worlds import PERCEPTION_PRESETS, load_world, parse_perception, with_settings
 
 BASE = load_world("soft-obstacle").config
 FOV_HALF_DEG = BASE.robot.camera_fov_deg / 2

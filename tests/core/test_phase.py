@@ -7,12 +7,12 @@ from pathlib import Path
 import pytest
 
 from core.events import Cause, Outcome
-from core.experiment import TaskResult, experiment_tasks
+from core.lab.experiment import TaskResult, experiment_tasks
+from core.lab.phase import Phase, PhasePoint, load_grid, sign_of, summarise_phase
 from core.params import ParameterError
-from core.phase import Phase, PhasePoint, load_grid, sign_of, summarise_phase
-from core.runner import EpisodeSummary
-from core.setup import Setup
-from core.worlds import PERCEPTION_PRESETS
+from core.run.runner import EpisodeSummary
+from core.run.setup import Setup
+from core.sim.worlds import PERCEPTION_PRESETS
 
 GIVEN = Setup("soft-obstacle", signal="given").resolved()
 

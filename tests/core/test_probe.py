@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.probe import CORRECT_SHARE, Placement, ProbeResult, _Prober, fingerprint, probe
-from core.setup import Setup
+from core.lab.probe import CORRECT_SHARE, Placement, ProbeResult, _Prober, fingerprint, probe
+from core.run.setup import Setup
 
 SETUP = Setup(sensors="path").resolved()
 

@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from core.qlambda import QLambdaConfig, WatkinsQLambda, epsilon_at, run_qlambda, sweep
+from core.learners.qlambda import QLambdaConfig, WatkinsQLambda, epsilon_at, run_qlambda, sweep
 
 LEFT, RIGHT = 0, 1
 GOAL = 3

@@ -8,10 +8,10 @@ import pytest
 
 from core.brain.selection import How
 from core.commands import InjectReward
-from core.conditions import CONDITIONS, get_condition
 from core.events import Event, Outcome, RewardApplied
-from core.runner import EpisodeSummary, run
-from core.simulation import Simulation, Snapshot, TickInputs
+from core.run.conditions import CONDITIONS, get_condition
+from core.run.runner import EpisodeSummary, run
+from core.run.simulation import Simulation, Snapshot, TickInputs
 
 TICKS = 2000
 

@@ -7,12 +7,12 @@ from fakes import ScriptedStep, ScriptedWorld, lap_steps
 
 from core.brain.selection import How
 from core.commands import InjectReward
-from core.conditions import get_condition
 from core.errors import SimulationStateError
 from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied
+from core.run.conditions import get_condition
+from core.run.simulation import Simulation, TickInputs, TickResult
 from core.sim.channels import Channel
 from core.sim.world import WorldConfig
-from core.simulation import Simulation, TickInputs, TickResult
 
 STEP_M = 0.5
 

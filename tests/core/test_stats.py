@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.polynomial.hermite_e import hermegauss
 
-from core.stats import (
+from core.lab.stats import (
     INTERVAL,
     IntervalMethod,
     bootstrap_mean,

@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 
 from core.errors import UnknownNameError
-from core.experiment import LocalBackend, Task, TaskResult, run_task, run_tasks
+from core.lab.experiment import LocalBackend, Task, TaskResult, run_task, run_tasks
+from core.lab.sweep import Sweep, parse_grid, parse_param, run_sweep, summarise_sweep
 from core.params import ParameterError
-from core.runner import EpisodeSummary
-from core.sweep import Sweep, parse_grid, parse_param, run_sweep, summarise_sweep
+from core.run.runner import EpisodeSummary
 
 
 def test_parse_param_reads_name_and_values_in_order() -> None:

@@ -11,16 +11,16 @@ from fakes import InMemoryRunStore
 
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.selection import Decision, How
-from core.checkpoint import decode, encode, export_state, restore_simulation
-from core.conditions import Condition, get_condition
 from core.engine import RunEngine
 from core.errors import CatalogError, UnknownNameError
 from core.events import RewardApplied, RewardDue
 from core.params import configure, teacher_params
 from core.ports import Mode, RunSpec, RunStatus
-from core.runner import run
-from core.simulation import Simulation
-from core.trainer import (
+from core.run.checkpoint import decode, encode, export_state, restore_simulation
+from core.run.conditions import Condition, get_condition
+from core.run.runner import run
+from core.run.simulation import Simulation
+from core.run.trainer import (
     IMPERFECTIONS,
     PERFECT,
     Imperfections,

@@ -20,9 +20,9 @@ import pytest
 
 from core.brain.selection import How
 from core.events import Cause, Outcome
+from core.run.simulation import Snapshot
+from core.run.trace import MAGIC, TraceRecorder, TraceRow, compress, unpack
 from core.sim.types import LampColor
-from core.simulation import Snapshot
-from core.trace import MAGIC, TraceRecorder, TraceRow, compress, unpack
 
 DATA = Path(__file__).parent / "data"
 FIXTURE = json.loads((DATA / "trace.json").read_text())

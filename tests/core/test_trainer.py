@@ -8,11 +8,11 @@ import pytest
 
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.selection import Decision, How
-from core.conditions import get_condition
 from core.errors import CatalogError, UnknownNameError
 from core.events import RewardApplied
-from core.simulation import Simulation
-from core.trainer import ReinforcementProgram, load_trainer
+from core.run.conditions import get_condition
+from core.run.simulation import Simulation
+from core.run.trainer import ReinforcementProgram, load_trainer
 
 
 @pytest.fixture(scope="module")

@@ -6,11 +6,11 @@ import tomllib
 
 import pytest
 
-from core.conditions import CONDITIONS
 from core.errors import CatalogError
+from core.lab.tune import GRIDS, TUNING_SEED_BASE, TunedPoint, plan, toml_key, tune, tuned_toml
 from core.params import get_parameter, normalise, tuned, tuned_params
-from core.setup import Setup
-from core.tune import GRIDS, TUNING_SEED_BASE, TunedPoint, plan, toml_key, tune, tuned_toml
+from core.run.conditions import CONDITIONS
+from core.run.setup import Setup
 
 
 def test_every_learner_has_a_grid_of_the_same_size() -> None:

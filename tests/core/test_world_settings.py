@@ -10,15 +10,15 @@ import pytest
 
 from core.brain.catalog import Catalog
 from core.brain.motor import Motor, cruise_scale
-from core.conditions import get_condition
 from core.errors import CatalogError
-from core.runner import run
-from core.setup import Setup
+from core.run.conditions import get_condition
+from core.run.runner import run
+from core.run.setup import Setup
+from core.run.simulation import Simulation
 from core.sim.channels import Channel
 from core.sim.robot import RobotConfig
 from core.sim.track import ObstacleConfig, TrackConfig
 from core.sim.world import PymunkWorld, WorldConfig
-from core.simulation import Simulation
 
 
 def facing_obstacle(sight_range_m: float, ahead_m: float) -> list[float]:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 
 from core.errors import CatalogError, UnknownNameError
-from core.experiment import LocalBackend
+from core.lab.experiment import LocalBackend
+from core.lab.worldcheck import world_check
 from core.sim.world import WorldConfig
-from core.worldcheck import world_check
-from core.worlds import _apply, default_world, load_world, world_names
+from core.sim.worlds import _apply, default_world, load_world, world_names
 
 
 def test_every_preset_loads_and_the_default_is_first() -> None:
@@ -78,10 +78,10 @@ def _reflex_at(world: str, along: float, lateral: float) -> tuple[list[str], str
     ahead of the robot's centre, `lateral` m to its left (negative: right).
     """
     from core.brain.sensors import compile_detector
-    from core.conditions import get_condition
-    from core.setup import Setup
+    from core.run.conditions import get_condition
+    from core.run.setup import Setup
+    from core.run.simulation import Simulation
     from core.sim.world import PymunkWorld
-    from core.simulation import Simulation
 
     setup = Setup(world, signal="given").resolved()
     catalog = setup.catalog()

@@ -13,10 +13,10 @@ import httpx
 
 from core.brain.catalog import load_catalog
 from core.commands import InjectReward, RewardSource
-from core.conditions import get_condition
 from core.events import RewardDue
 from core.ports import StoredReward
-from core.simulation import Simulation
+from core.run.conditions import get_condition
+from core.run.simulation import Simulation
 
 INTERNAL = ("task", "program")
 """Reward sources the run itself produces (the rest are trainers')."""

@@ -7,7 +7,7 @@ from apphelpers import client_for, create, until
 from fakes import InMemoryNetworkRepository, InMemoryRunStore
 
 from core.ports import RunStatus
-from core.setup import Setup
+from core.run.setup import Setup
 from server.config import Settings
 from server.persistence.storage import Storage
 

@@ -270,8 +270,8 @@ def test_the_command_line_loads_no_command_s_machinery_before_it_runs() -> None:
     """`srlab` (and so every `srlab serve`) starts without the experiment code, gymnasium,
     Ray or the report plots: each command imports what it needs when it runs."""
     heavy = (
-        "core.experiment",
-        "core.qlambda",
+        "core.lab.experiment",
+        "core.learners.qlambda",
         "gymnasium",
         "ray",
         "server.backends.ray",

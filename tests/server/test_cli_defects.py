@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from core.analysis import mean_ci
-from core.conditions import CONDITIONS
+from core.lab.analysis import mean_ci
 from core.ports import Mode, RunSpec, RunStatus, RunTotals, StoredRun
+from core.run.conditions import CONDITIONS
 from server.cli import build_parser, main
 from server.cli import run as run_cli
 from server.cli.common import ENGINE_CONDITIONS

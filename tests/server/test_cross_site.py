@@ -17,8 +17,8 @@ from apphelpers import client_for, create, settings_for, until
 from reliability_report import record
 
 from bench.liveserver import free_port
-from server.guard import SitePolicy, host_name
-from server.ratelimit import RateLimiter, client_key
+from server.api.guard import SitePolicy, host_name
+from server.api.ratelimit import RateLimiter, client_key
 
 pytestmark = pytest.mark.anyio
 FOREIGN = "http://127.0.0.1:9999"

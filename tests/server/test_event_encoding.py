@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from core.brain.catalog import Catalog
-from core.conditions import get_condition
 from core.engine import COMPETITORS, Competition, TickPublished
-from core.simulation import Simulation
+from core.run.conditions import get_condition
+from core.run.simulation import Simulation
 from server.api.routes.events import competition, encode
 
 

@@ -10,7 +10,7 @@ import matplotlib.image
 import pytest
 from clihelpers import PNG_SIGNATURE, exits_2
 
-from core.stats import holm
+from core.lab.stats import holm
 from server.cli import main
 
 
@@ -271,17 +271,17 @@ def test_qlambda_sweep_bad_grid_exits_2(
 def test_experiment_with_a_failed_task_reports_it_and_exits_1(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import core.experiment
-    from core.conditions import Condition
-    from core.runner import RunSummary
-    from core.runner import run as real_run
+    import core.lab.experiment
+    from core.run.conditions import Condition
+    from core.run.runner import RunSummary
+    from core.run.runner import run as real_run
 
     def run(condition: Condition, seed: int, episodes: int, **kw: Any) -> RunSummary:
         if condition.name == "kp":
             raise RuntimeError("sonar unplugged")
         return real_run(condition, seed, episodes, **kw)
 
-    monkeypatch.setattr(core.experiment, "run", run)
+    monkeypatch.setattr(core.lab.experiment, "run", run)
     argv = ["experiment", "--conditions", "innate,kp", "--seeds", "1", "--episodes", "2"]
     assert main([*argv, "--jobs", "1", "--out", str(tmp_path), "--quiet"]) == 1
     err = capsys.readouterr().err

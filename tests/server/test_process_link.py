@@ -32,7 +32,7 @@ from server.persistence.storage import Storage, open_storage
 from server.runtime import LiveRun, RunLetGo, Runs
 from server.runtime import process as engine_process
 from server.runtime.process import EngineProcessError, ProcessLink
-from server.tuning import SHORT_SLICE_NS, slice_ns, threads
+from server.runtime.tuning import SHORT_SLICE_NS, slice_ns, threads
 
 pytestmark = pytest.mark.anyio
 
@@ -353,7 +353,7 @@ def test_every_process_of_srlab_serve_runs_its_threads_in_short_slices(tmp_path:
     """Each thread of the service and of the engines' process.
 
     So that beside busy processes a tick's or a storage thread's wake-up is let in at once
-    rather than at the end of another process's slice (`server.tuning.ask_short_slices`).
+    rather than at the end of another process's slice (`server.runtime.tuning.ask_short_slices`).
     """
     env = {"SRLAB_ENGINES": "process", "SRLAB_VISER": "false"}
     with live_server(tmp_path / "slices.db", env=env) as server:

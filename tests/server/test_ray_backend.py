@@ -21,7 +21,7 @@ except ImportError:
         allow_module_level=True,
     )
 
-from core.experiment import Task, TaskResult, run_task, run_tasks
+from core.lab.experiment import Task, TaskResult, run_task, run_tasks
 from server.backends.ray import RayBackend
 from server.cli import main
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from core.brain.catalog import sensor_definitions
-from core.setup import default_sensors
-from core.worlds import default_world, world_names
+from core.run.setup import default_sensors
+from core.sim.worlds import default_world, world_names
 from server.cli import build_parser, main
 from server.cli import run as run_cli
 from server.cli.db import open_store

@@ -12,8 +12,8 @@ from apphelpers import client_for, create, settings_for, until
 
 from core.brain.catalog import load_catalog, sensor_definitions
 from core.brain.selection import ORIGINS
-from core.setup import default_sensors
-from core.worlds import default_world, load_world, world_names
+from core.run.setup import default_sensors
+from core.sim.worlds import default_world, load_world, world_names
 
 pytestmark = pytest.mark.anyio
 

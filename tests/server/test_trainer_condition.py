@@ -9,7 +9,7 @@ import httpx
 import pytest
 from apphelpers import client_for, create, settings_for, until
 
-from core.conditions import CONDITIONS, get_condition
+from core.run.conditions import CONDITIONS, get_condition
 
 pytestmark = pytest.mark.anyio
 

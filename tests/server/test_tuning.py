@@ -1,4 +1,4 @@
-"""Process tuning (`server.tuning`): short scheduler slices asked for, and nothing else moved.
+"""Process tuning (`server.runtime.tuning`): short scheduler slices, and nothing else moved.
 
 Each case runs in a fresh interpreter, so the test process keeps its own slices (and a
 slice it may have asked for, which children inherit, is first set back to the default). The cases
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from server.tuning import SHORT_SLICE_NS, slice_ns
+from server.runtime.tuning import SHORT_SLICE_NS, slice_ns
 
 reported = slice_ns()
 pytestmark = pytest.mark.skipif(
@@ -42,7 +42,7 @@ def test_every_thread_and_every_later_one_asks_for_short_slices_at_its_own_nice(
     result = _in_fresh_interpreter(
         """
 import json, os, threading
-from server.tuning import ask_short_slices, slice_ns
+from server.runtime.tuning import ask_short_slices, slice_ns
 ask_short_slices(0)  # the kernel's default slice again
 os.nice(5)
 before = slice_ns()
@@ -79,7 +79,7 @@ def test_a_policy_someone_chose_is_kept() -> None:
     result = _in_fresh_interpreter(
         """
 import json, os
-from server.tuning import ask_short_slices, slice_ns
+from server.runtime.tuning import ask_short_slices, slice_ns
 os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
 before = slice_ns()
 asked = ask_short_slices()

@@ -27,7 +27,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.typing import Subprotocol
 
-from server.guard import SitePolicy
+from server.api.guard import SitePolicy
 from server.viewer import gate as gate_module
 from server.viewer.gate import MAX_VIEWERS, Gate, Peer, Relay, handshake_answer, run_path
 

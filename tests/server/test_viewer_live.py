@@ -20,7 +20,7 @@ from gatehelpers import start_run, viewer_of
 from bench.liveserver import free_port
 from core.brain.selection import ORIGINS
 from core.ports import RunStatus
-from core.worlds import default_world, load_world, world_names
+from core.sim.worlds import default_world, load_world, world_names
 from server.main import create_app
 from server.viewer.render import REWARD_NOTE
 from server.viewer.scene import static_scene, why

@@ -9,14 +9,14 @@ import pytest
 from sqlalchemy import Engine as DbEngine
 
 from core.brain.catalog import Catalog
-from core.conditions import get_condition
 from core.engine import RunEngine
 from core.errors import UnknownRunError
 from core.ports import Mode, RunSpec, RunStatus
-from core.runner import run as headless_run
+from core.run.conditions import get_condition
+from core.run.runner import run as headless_run
+from core.run.simulation import Simulation, Snapshot
+from core.run.trace import TraceRow
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig
-from core.simulation import Simulation, Snapshot
-from core.trace import TraceRow
 from server.persistence import SqlAlchemyRunStore, make_sessionmaker
 from server.viewer.replay import ReplayClock, load_replay, replay_views
 from server.viewer.scene import scene_frame, static_scene

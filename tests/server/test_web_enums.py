@@ -1,4 +1,4 @@
-"""The web client's enums module (`server/web_enums.py` -> `web/js/generated/enums.js`)."""
+"""The web client's enums module (`server/schemas/web_enums.py` -> `web/js/generated/enums.js`)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import re
 
 import pytest
 
-from server import web_enums
 from server.main import WEB, create_app
+from server.schemas import web_enums
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +19,7 @@ def test_the_checked_in_module_is_what_the_script_writes_now(openapi: dict[str, 
     written = web_enums.TARGET.read_text()
     assert written == web_enums.render(openapi), (
         f"{web_enums.TARGET.relative_to(WEB.parent)} is out of date with the API's schemas: "
-        "run `.venv/bin/python -m server.web_enums` and commit the file"
+        "run `.venv/bin/python -m server.schemas.web_enums` and commit the file"
     )
 
 

@@ -7,8 +7,8 @@ from typing import Any
 from pydantic import JsonValue
 
 from core.brain.catalog import Stimulus, sensor_definitions
-from core.conditions import CONDITIONS
-from core.worlds import default_world, load_world, world_names
+from core.run.conditions import CONDITIONS
+from core.sim.worlds import default_world, load_world, world_names
 from server.api.deps import StateDep
 from server.api.routing import resource_router
 from server.schemas import (

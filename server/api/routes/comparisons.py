@@ -2,7 +2,7 @@
 
 The editor's "run this network" starts ordinary runs (one per seed) through the runs API
 and asks here what they show: nothing is stored for a comparison. A seed is the unit of
-replication (`core.stats`): each run's value is its success rate over the first episodes
+replication (`core.lab.stats`): each run's value is its success rate over the first episodes
 every run has done, so runs still going are compared on equal terms.
 """
 
@@ -16,8 +16,8 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import Field
 from starlette.concurrency import run_in_threadpool as io
 
+from core.lab.stats import Estimate, mean_interval, paired_difference
 from core.ports import RunStatus, StoredRun
-from core.stats import Estimate, mean_interval, paired_difference
 from server.api.deps import EnginesDep, StoreDep
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router

@@ -17,9 +17,9 @@ from core.events import AssociationDemoted, AssociationPromoted, EpisodeEnded, R
 from core.ports import RunStatus
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.errors import ErrorPublic
+from server.api.guard import SitePolicy
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
-from server.guard import SitePolicy
 from server.runtime import TooManyStreamsError
 
 router = resource_router("/runs/{run_id}/events", tag="events")
@@ -109,7 +109,7 @@ def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None
 
 
 def _foreign(request: Request, state: StateDep) -> bool:
-    """Whether a browser says the request comes from another site (`server.guard`'s rule)."""
+    """Whether a browser says the request comes from another site (`server.api.guard`'s rule)."""
     settings = state.settings
     policy = SitePolicy.of(settings.host_names(), settings.cors_origins)
     return policy.origin_problem(request.headers, request.url.scheme) is not None

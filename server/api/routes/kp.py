@@ -5,10 +5,10 @@ from __future__ import annotations
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
-from core.conditions import CONDITIONS
 from core.params import applicable, configure
 from core.ports import RunQueries
-from core.trace import unpack
+from core.run.conditions import CONDITIONS
+from core.run.trace import unpack
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router

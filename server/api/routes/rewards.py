@@ -10,9 +10,9 @@ from starlette.concurrency import run_in_threadpool
 
 from core.commands import RewardSource
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
+from server.api.ratelimit import client_key
 from server.api.routes.runs import RunId
 from server.api.routing import resource_router
-from server.ratelimit import client_key
 from server.schemas import RewardAccepted, RewardCreate, RewardPublic, RewardsPublic
 
 router = resource_router("/runs/{run_id}/rewards", tag="rewards")

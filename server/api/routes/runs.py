@@ -12,13 +12,12 @@ from starlette.concurrency import run_in_threadpool as io
 from core.engine.messages import Command, Pause, Resume, SetRate, Stop
 from core.errors import UnknownNameError
 from core.ports import StoredRun
+from core.run.trace import unpack
 from core.sim.track import TrackGeometry
-from core.trace import unpack
-from core.worlds import load_world
+from core.sim.worlds import load_world
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
-from server.runspec import run_spec
 from server.runtime import LiveRun
 from server.runtime.reads import run_of_state, run_public
 from server.schemas import (
@@ -37,6 +36,7 @@ from server.schemas import (
     SonarPublic,
     ViewChosen,
 )
+from server.services.runspec import run_spec
 
 router = resource_router("/runs", tag="runs")
 RunId = Annotated[int, Path(ge=1, le=2**62, description="a run's id")]

@@ -2,7 +2,7 @@
 // runs API (so they are ordinary runs, in the console too), with their success rate,
 // failure causes and learning curve beside the matrix; "compare with" runs another version
 // or network on the same seeds and shows the paired difference with its CI, computed by
-// the server (GET /api/comparisons, core.stats).
+// the server (GET /api/comparisons, core.lab.stats).
 
 import { get, post, ApiError } from "../api.js";
 import { $, el, svg, toast } from "../ui.js";

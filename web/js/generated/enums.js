@@ -1,5 +1,5 @@
 // The service's closed sets, from its OpenAPI document (/openapi.json). Written by
-// `python -m server.web_enums`; do not edit: a test fails while this differs from what
+// `python -m server.schemas.web_enums`; do not edit: a test fails while this differs from what
 // that command writes, or while a page names a value (RunStatus.running) that is not here.
 
 /** RunPublic.status */

@@ -4,7 +4,7 @@ A preset is a set of overrides of `WorldConfig`'s defaults, nested as the datacl
 (``[world.robot]``, ``[world.track.obstacle]`` ...), with the physical reasons for them
 written beside them. `srlab world-check --world NAME` measures whether a preset poses the
 paper's problem, on properties of the world alone (no learning). `WORLD_PARAMETERS` names
-the settings a phase diagram varies around a preset (`srlab phase`, `core.phase`).
+the settings a phase diagram varies around a preset (`srlab phase`, `core.lab.phase`).
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from functools import cache
 from typing import Any
 
 from core.brain.catalog import data_dir
-from core.conditions import Condition
 from core.errors import CatalogError, UnknownNameError
 from core.params import Parameter
+from core.run.conditions import Condition
 from core.sim.world import WorldConfig
 
 
@@ -169,7 +169,7 @@ def _every(_: Condition) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class WorldParameter:
-    """A named world setting a phase diagram may vary (`core.phase`).
+    """A named world setting a phase diagram may vary (`core.lab.phase`).
 
     Attributes:
         parameter: its name, physical meaning, kind and allowed values.

@@ -22,12 +22,12 @@ import numpy.typing as npt
 
 from core.brain.catalog import Catalog, load_catalog
 from core.brain.network import BehaviourNetwork
-from core.conditions import Condition
 from core.events import Cause, EpisodeEnded, Outcome
-from core.render import TopDown
-from core.runner import EpisodeSummary
+from core.run.conditions import Condition
+from core.run.runner import EpisodeSummary
+from core.run.simulation import NO_INPUTS, Simulation, TickInputs
+from core.sim.render import TopDown
 from core.sim.world import WorldConfig
-from core.simulation import NO_INPUTS, Simulation, TickInputs
 
 ENV_ID = "srlab/AmigoTrack-v0"
 MAX_SKIPPED = 100
@@ -219,7 +219,7 @@ def _summary(e: EpisodeEnded) -> EpisodeSummary:
 def register() -> None:
     """Register `srlab/AmigoTrack-v0` with Gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="core.envs:AmigoTrackEnv")
+        gym.register(id=ENV_ID, entry_point="core.learners.envs:AmigoTrackEnv")
 
 
 register()

@@ -1,7 +1,7 @@
 """The placement probe's results, cached on disk per world, sensor definition and settings.
 
 A probe takes seconds and depends only on the world, the stimuli's rules and the
-behaviours (`core.probe.fingerprint`), so its result is kept in ``SRLAB_CACHE_DIR``
+behaviours (`core.lab.probe.fingerprint`), so its result is kept in ``SRLAB_CACHE_DIR``
 (default ``~/.cache/srlab``) under ``probe/<world>-<sensors>-<fingerprint>.json`` and
 reused until any of them changes. A cache that cannot be read or written is ignored.
 """
@@ -12,8 +12,8 @@ import json
 import os
 from pathlib import Path
 
-from core.probe import ProbeResult, fingerprint, probe
-from core.setup import Setup
+from core.lab.probe import ProbeResult, fingerprint, probe
+from core.run.setup import Setup
 
 
 def cache_dir() -> Path:

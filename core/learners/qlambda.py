@@ -1,6 +1,6 @@
 """The baseline a user would pick instead: tabular Watkins Q(lambda) with replacing traces.
 
-It learns on the Gymnasium environment (`core.envs`), so it sees the same stimuli, chooses
+It learns on the Gymnasium environment (`core.learners.envs`), so it sees the same stimuli, chooses
 among the same behaviours, meets the same episodes (obstacles and lamp cycles per seed) and
 gets the same delayed reward as the architecture's conditions.
 """
@@ -12,9 +12,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from core.envs import AmigoTrackEnv, Observation
+from core.learners.envs import AmigoTrackEnv, Observation
 from core.params import QLambdaConfig as QLambdaConfig  # its home is core.params
-from core.runner import EpisodeSummary
+from core.run.runner import EpisodeSummary
 
 
 def epsilon_at(config: QLambdaConfig, episode: int) -> float:

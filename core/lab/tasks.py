@@ -1,7 +1,7 @@
 """What an experiment runs and what it gets back: `Task`, `TaskResult`, `Checkpoint`.
 
-Plain values, apart from the running (`core.experiment`) and the summaries
-(`core.analysis`), which both read them.
+Plain values, apart from the running (`core.lab.experiment`) and the summaries
+(`core.lab.analysis`), which both read them.
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from core.params import Params
-from core.runner import EpisodeSummary
-from core.setup import Setup
+from core.run.runner import EpisodeSummary
+from core.run.setup import Setup
 
 DEFAULT_SETUP = Setup()
 
@@ -70,7 +70,7 @@ class TaskResult:
     programmed: dict[str, float] = field(default_factory=dict)
     error: str | None = None
     ticks_by_origin: dict[str, int] = field(default_factory=dict)
-    """Ticks by what made their behaviour run (see `core.runner.RunSummary`)."""
+    """Ticks by what made their behaviour run (see `core.run.runner.RunSummary`)."""
     camera_met: dict[str, tuple[int, int, int, int]] = field(default_factory=dict)
     """Per camera obstacle stimulus met: (ticks it was active, encounters, episodes it was
     met in, successes among those episodes)."""
@@ -78,7 +78,7 @@ class TaskResult:
     """After each training episode, the behaviour the learner gives each camera obstacle
     stimulus seen alone (catalogue order; None: no answer of its own)."""
     evaluation: tuple[EpisodeSummary, ...] = ()
-    """The frozen evaluation's episodes on the held-out seed (see `core.evaluation`)."""
+    """The frozen evaluation's episodes on the held-out seed (see `core.lab.evaluation`)."""
     transfer: tuple[EpisodeSummary, ...] = ()
     """The camera-only transfer test's episodes: frozen, the sonar's obstacle responses
     removed."""

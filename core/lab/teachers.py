@@ -2,7 +2,7 @@
 
 The reinforcement program (`rp`) rewards every response at once and never errs: an oracle.
 A study here runs it with one imperfection at a time raised through its levels (the others
-at 0, `core.trainer.Imperfections`), beside the learners that need no teacher at all (`kp`
+at 0, `core.run.trainer.Imperfections`), beside the learners that need no teacher at all (`kp`
 and `qlambda-hybrid` by default), all on the same seeds, and says at which level the
 taught robot falls below each of them: in training, and frozen on held-out seeds.
 """
@@ -13,17 +13,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from core.conditions import get_condition
 from core.params import TEACHER_PREFIX, ParameterError, ParamValue, format_value, get_parameter
-from core.setup import Setup
-from core.trainer import PERFECT, teacher_presets
+from core.run.conditions import get_condition
+from core.run.setup import Setup
+from core.run.trainer import PERFECT, teacher_presets
 
 if TYPE_CHECKING:  # the study's machinery is imported when it runs: `srlab` starts without it
-    from core.cells import Cell
-    from core.experiment import TaskResult
+    from core.lab.cells import Cell
+    from core.lab.experiment import TaskResult
 
 Axes = tuple[tuple[str, tuple[ParamValue, ...]], ...]
-"""Imperfections (``teacher_*`` parameters), each with its levels (`core.sweep.Axes`)."""
+"""Imperfections (``teacher_*`` parameters), each with its levels (`core.lab.sweep.Axes`)."""
 
 TAUGHT = "rp"
 """The condition whose teacher is varied."""
@@ -84,7 +84,7 @@ class TeacherStudy:
 
     def cells(self) -> list[Cell]:
         """The references, the perfect teacher, every level of every axis, the presets."""
-        from core.cells import cell
+        from core.lab.cells import cell
 
         setup, tuned = self.setup, self.tuned
         out = [cell(c, c, setup, tuned=tuned) for c in self.references]
@@ -125,7 +125,7 @@ def summarise_teachers(study: TeacherStudy, results: Sequence[TaskResult]) -> di
     the perfect teacher and by each preset, minus the first reference (kp), per measure,
     each p Holm-adjusted over that family.
     """
-    from core.cells import compare, declared_family, summarise_cells
+    from core.lab.cells import compare, declared_family, summarise_cells
 
     cells = study.cells()
     summary = summarise_cells(cells, results)

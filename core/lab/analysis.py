@@ -1,13 +1,13 @@
 """The analysis of an experiment: what each condition achieved, and how they compare.
 
 A seed is the unit of replication: each figure is computed per seed, then summarised over
-seeds with a 95% Student's t interval (`core.stats`, which says why); comparisons pair
+seeds with a 95% Student's t interval (`core.lab.stats`, which says why); comparisons pair
 seeds, since every condition meets the same obstacles and lamp cycles on a seed. Reported
 per condition:
 
 - success over fixed horizons (episodes 1-10, 1-50, all) and the per-seed trend;
 - failures by cause; the frozen, held-out evaluation and the camera-only transfer test;
-- what was learned, judged by the placement probe's correct responses (`core.probe`): at
+- what was learned, judged by the placement probe's correct responses (`core.lab.probe`): at
   checkpoints, the share of seeds whose answer to each camera stimulus is correct, wrong or
   missing, and the knowledge criterion (the first episode after which the answer is
   correct and stays correct);
@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from core.conditions import CONDITIONS, get_condition
 from core.errors import UnknownNameError
 from core.events import Cause, Outcome
-from core.stats import holm, mean_interval, paired_difference, t_quantile
-from core.tasks import TaskResult
+from core.lab.stats import holm, mean_interval, paired_difference, t_quantile
+from core.lab.tasks import TaskResult
+from core.run.conditions import CONDITIONS, get_condition
 
 CRITERION_WINDOW = 10
 CRITERION_RATE = 0.8
@@ -49,7 +49,7 @@ def t_quantile_975(df: int) -> float:
 def mean_ci(values: Sequence[float]) -> dict[str, float]:
     """The mean over seeds, its 95% interval (`low`, `high`), and `ci95`.
 
-    The interval is `core.stats.mean_interval`'s (Student's t, clipped to the values'
+    The interval is `core.lab.stats.mean_interval`'s (Student's t, clipped to the values'
     range); `ci95` is the t interval's half-width before clipping.
     """
     n = len(values)

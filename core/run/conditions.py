@@ -9,7 +9,7 @@ from core.brain.brain import BrainConfig, LearningConfig
 from core.brain.propagation import KpConfig
 from core.brain.selection import SelectionConfig
 from core.errors import UnknownNameError
-from core.trainer import PERFECT, Imperfections
+from core.run.trainer import PERFECT, Imperfections
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,14 +25,14 @@ class Condition:
         success_reward: the delayed reward a successful lap gives (None: none).
         learnable_sensors: the logical sensors whose stimuli are explored and learned.
         trainer: the reinforcement program that rewards responses at once (None: none).
-        teacher: how the program's judgements are given (`core.trainer.Imperfections`): the
+        teacher: how the program's judgements are given (`core.run.trainer.Imperfections`): the
             perfect teacher, at once and always right, unless set (the teacher_*
             parameters, `srlab experiment --teacher`).
         kp: whether knowledge propagation runs.
         agent: ``brain`` (the paper's architecture), ``qlambda`` (the tabular baseline), or
             ``dqn`` / ``ppo`` (stable-baselines3's, the ``srlab[baselines]`` extra).
         extra_networks: knowledge sets added on top of `network` (the signal's responses
-            when they are given, see `core.setup.Setup`).
+            when they are given, see `core.run.setup.Setup`).
         hybrid: for an outside learner (``agent`` other than ``brain``): it may defer to the
             built-in behaviour, starts by deferring, and explores per encounter, so the
             designed reflexes it starts from are kept until it has learned better.
@@ -41,7 +41,7 @@ class Condition:
         kp_failure_penalty: with `kp`, the punishment a failed episode gives KP's RLTM
             (`core.brain.propagation.KpConfig.failure_penalty`; 0: none).
         epsilon_half_life: for Q(lambda), episodes over which `epsilon` halves
-            (`core.qlambda.epsilon_at`; 0: it stays constant).
+            (`core.learners.qlambda.epsilon_at`; 0: it stays constant).
     """
 
     name: str
@@ -283,7 +283,7 @@ def with_start(condition: Condition, start: Start) -> Condition:
 
 
 DEEP_AGENTS = ("dqn", "ppo")
-"""The agents of the deep baselines (`core.baselines`), which need the optional extra."""
+"""The agents of the deep baselines (`core.learners.baselines`), which need the optional extra."""
 
 
 def get_condition(name: str) -> Condition:

@@ -14,9 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from core.conditions import get_condition
 from core.events import Cause, Outcome
-from core.experiment import (
+from core.lab.experiment import (
     DEFAULT_SETUP,
     Backend,
     Task,
@@ -25,9 +24,10 @@ from core.experiment import (
     run_tasks,
     summarise,
 )
+from core.lab.stats import paired_difference
 from core.params import Parameter, ParameterError, ParamValue, applicable, get_parameter
-from core.setup import Setup
-from core.stats import paired_difference
+from core.run.conditions import get_condition
+from core.run.setup import Setup
 
 Point = dict[str, ParamValue]
 Axes = tuple[tuple[str, tuple[ParamValue, ...]], ...]

@@ -3,7 +3,7 @@
 An experiment compares conditions; a study compares cells, so the same condition can stand
 in several (rp with a perfect teacher and with a mistaken one; kp from Table I and from
 its own design). Each cell is summarised as an experiment's condition is
-(`core.analysis.summarise`), and cells are compared seed by seed as conditions are: every
+(`core.lab.analysis.summarise`), and cells are compared seed by seed as conditions are: every
 cell meets the same obstacles and lamp cycles on a seed. Cells that run the same task
 share its result.
 """
@@ -14,11 +14,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from core.analysis import paired, per_seed, summarise
-from core.conditions import get_condition
-from core.experiment import Backend, Task, TaskResult, run_tasks
+from core.lab.analysis import paired, per_seed, summarise
+from core.lab.experiment import Backend, Task, TaskResult, run_tasks
 from core.params import Params, ParamValue, normalise, tuned_params
-from core.setup import Setup
+from core.run.conditions import get_condition
+from core.run.setup import Setup
 
 HORIZONS = (("1-10", 10), ("all", None))
 """The training horizons a study compares cells over."""
@@ -120,7 +120,7 @@ def _measures() -> list[tuple[str, int | None, str | None]]:
 def compare(summary: Mapping[str, Any], a: str, b: str) -> dict[str, dict[str, float]]:
     """Cell `a`'s success minus cell `b`'s, seed by seed, per horizon and held out.
 
-    Each entry: the mean difference, its 95% interval (`core.stats`), the sign-flip p and the
+    Each entry: the mean difference, its 95% interval (`core.lab.stats`), the sign-flip p and the
     seeds paired; a horizon the cells cannot be paired on is left out.
     """
     out: dict[str, dict[str, float]] = {}
@@ -141,7 +141,7 @@ def compare_change(
     lead in one compared with its own in the other. Per horizon and held out, as `compare`;
     a measure on which fewer than two seeds have all four cells is left out.
     """
-    from core.stats import paired_difference
+    from core.lab.stats import paired_difference
 
     names = (*first, *second)
     if not all(summary.get(n, {}).get("seeds") for n in names):
@@ -165,7 +165,7 @@ def declared_family(
     `entries` are (what is compared, in words; a paired difference as `compare` gives it).
     A difference that could not be paired is left out of the family.
     """
-    from core.stats import holm
+    from core.lab.stats import holm
 
     family: list[dict[str, Any]] = [{"label": name, **d} for name, d in entries if d is not None]
     for d, adjusted in zip(family, holm([float(d["p"]) for d in family]), strict=True):

@@ -20,10 +20,10 @@ from dataclasses import replace
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Catalog
 from core.brain.network import BehaviourNetwork
-from core.conditions import Condition
-from core.runner import EpisodeSummary, run
+from core.run.conditions import Condition
+from core.run.runner import EpisodeSummary, run
+from core.run.simulation import Simulation
 from core.sim.world import WorldConfig
-from core.simulation import Simulation
 
 EVAL_SEED_OFFSET = 1_000_000
 """Held-out seeds: experiments use seeds below 1,000 and tuning seeds 1,000-1,999."""

@@ -25,7 +25,7 @@ import numpy as np
 from core.brain.catalog import Catalog
 from core.brain.motor import Motor, cruise_scale
 from core.brain.sensors import compile_detector
-from core.setup import Setup
+from core.run.setup import Setup
 from core.sim.world import PymunkWorld, WorldConfig
 
 CAMERA_SENSOR = "camera_obstacle"

@@ -4,7 +4,7 @@ In the paper's comparison the methods do not start alike: `rp` and `dp` start fr
 I, `kp` (and the baselines built on it) from kp's design, which adds lane keeping and the
 sonar's obstacle responses; and `dp` can leave different stimuli to learn (`dp-rare`, the
 paper's split, or srlab's `dp`). A study here runs every method from both starts
-(`core.conditions.with_start`), so that a difference between two methods is measured
+(`core.run.conditions.with_start`), so that a difference between two methods is measured
 with the knowledge equal, and the headline's difference between a method at its own
 start and kp at its own splits exactly into the method's part and the start's:
 
@@ -19,13 +19,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
-from core.conditions import PROGRAMMED_ON_TABLE_I, START_SETS, STARTS, Start, get_condition
 from core.errors import UnknownNameError
-from core.setup import Setup
+from core.run.conditions import PROGRAMMED_ON_TABLE_I, START_SETS, STARTS, Start, get_condition
+from core.run.setup import Setup
 
 if TYPE_CHECKING:  # the study's machinery is imported when it runs: `srlab` starts without it
-    from core.cells import Cell
-    from core.experiment import TaskResult
+    from core.lab.cells import Cell
+    from core.lab.experiment import TaskResult
 
 METHODS = ("dp-rare", "dp", "rp", "kp", "qlambda-hybrid")
 """The methods of the grid: DP with the paper's split and srlab's, RP, KP, the baseline."""
@@ -80,7 +80,7 @@ class EqualStartStudy:
 
     def cells(self) -> list[Cell]:
         """Every method from every start, start by start."""
-        from core.cells import cell
+        from core.lab.cells import cell
 
         return [
             cell(label(m, s), m, self.start_setup(s), tuned=self.tuned)
@@ -108,7 +108,7 @@ def summarise_equal_start(
     reference's start) and ``start`` (the method at the reference's start minus at its
     own); each a paired difference per horizon and held out.
     """
-    from core.cells import (
+    from core.lab.cells import (
         DECLARED_MEASURES,
         cell_figures,
         compare,

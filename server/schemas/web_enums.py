@@ -1,6 +1,6 @@
 """The service's closed sets as one JavaScript module for the web client.
 
-`python -m server.web_enums` writes `web/js/generated/enums.js` from the app's OpenAPI
+`python -m server.schemas.web_enums` writes `web/js/generated/enums.js` from the app's OpenAPI
 document, so the pages name a run status or a reward source through the schema instead of
 typing its string again; `tests/server/test_web_enums.py` fails while the checked-in file
 differs from what this writes now.
@@ -35,7 +35,7 @@ ENUMS: dict[str, tuple[str, str]] = {
 
 HEADER = """\
 // The service's closed sets, from its OpenAPI document (/openapi.json). Written by
-// `python -m server.web_enums`; do not edit: a test fails while this differs from what
+// `python -m server.schemas.web_enums`; do not edit: a test fails while this differs from what
 // that command writes, or while a page names a value (RunStatus.running) that is not here.
 """
 
@@ -77,7 +77,7 @@ def generate() -> str:
 
 
 def main() -> None:
-    """Write the module (`python -m server.web_enums`)."""
+    """Write the module (`python -m server.schemas.web_enums`)."""
     text = generate()
     TARGET.parent.mkdir(parents=True, exist_ok=True)
     TARGET.write_text(text)

@@ -20,15 +20,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from core.analysis import paired, summarise
-from core.conditions import get_condition
 from core.errors import CatalogError
-from core.experiment import DEFAULT_SETUP, Backend, Task, TaskResult, run_tasks
+from core.lab.analysis import paired, summarise
+from core.lab.experiment import DEFAULT_SETUP, Backend, Task, TaskResult, run_tasks
+from core.lab.stats import holm
+from core.lab.sweep import Axes, checked_values, parse_grid
 from core.params import Parameter, ParameterError, ParamValue, tuned_params
-from core.setup import Setup
-from core.stats import holm
-from core.sweep import Axes, checked_values, parse_grid
-from core.worlds import WorldSettings, get_world_parameter, merge_settings
+from core.run.conditions import get_condition
+from core.run.setup import Setup
+from core.sim.worlds import WorldSettings, get_world_parameter, merge_settings
 
 REFLEXES = "reflexes"
 """The condition every point runs besides the others: its success is the diagram's x."""

@@ -16,7 +16,7 @@ from typing import Any
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from server.asgi import cut_off, send_error
+from server.api.asgi import cut_off, send_error
 
 DEFAULT_LIMIT_S = 10.0
 

@@ -16,10 +16,10 @@ import numpy as np
 
 from core.errors import CatalogError
 from core.events import Outcome
-from core.experiment import Backend, LocalBackend, TaskResult, run_tasks
+from core.lab.experiment import Backend, LocalBackend, TaskResult, run_tasks
+from core.lab.sweep import Axes, Sweep
 from core.params import ParamValue, point_label
-from core.setup import Setup
-from core.sweep import Axes, Sweep
+from core.run.setup import Setup
 
 TUNING_SEED_BASE = 1000
 """Tuning seeds start here: experiments use seeds below 1,000, held-out evaluation
@@ -125,7 +125,7 @@ def tune(
 
 
 TUNED_HEADER = (
-    "# Each learner's parameters as tuned by `srlab tune` (see core/tune.py): the best of\n"
+    "# Each learner's parameters as tuned by `srlab tune` (see core/lab/tune.py): the best of\n"
     "# a 27-point grid on the tuning seeds, the same budget for every learner.\n"
     "# `srlab experiment` runs with these unless given --untuned.\n"
 )

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from core.brain.selection import ORIGINS
 
 if TYPE_CHECKING:
-    from core.simulation import Snapshot
+    from core.run.simulation import Snapshot
 
 MAGIC = b"SRT2"
 _MAGIC_V1 = b"SRT1"

@@ -14,10 +14,10 @@ from typing import Literal
 
 from core.brain.catalog import AssociationSpec, Catalog, load_catalog, sensor_definitions
 from core.brain.network import BehaviourNetwork
-from core.conditions import START_SETS, Condition, Start, with_start
 from core.errors import UnknownNameError
+from core.run.conditions import START_SETS, Condition, Start, with_start
 from core.sim.world import WorldConfig
-from core.worlds import WorldSettings, default_world, load_world, with_settings
+from core.sim.worlds import WorldSettings, default_world, load_world, with_settings
 
 SignalMode = Literal["learned", "given"]
 SIGNAL_MODES: tuple[SignalMode, ...] = ("learned", "given")
@@ -51,9 +51,9 @@ class Setup:
             responses added (locked) and the signal taken out of what is learned, so that
             success measures the obstacle alone.
         world_settings: settings changed over the world preset, by dotted path (a phase
-            diagram's point, `core.phase`); none by default.
+            diagram's point, `core.lab.phase`); none by default.
         start: what every condition's robot starts from: its own knowledge ("", the
-            default), ``table1`` or ``design`` (kp's; `core.conditions.with_start`), so
+            default), ``table1`` or ``design`` (kp's; `core.run.conditions.with_start`), so
             that methods are compared from equal starting knowledge.
     """
 

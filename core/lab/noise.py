@@ -15,14 +15,14 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
-from core.conditions import get_condition
 from core.errors import UnknownNameError
-from core.setup import Setup
-from core.worlds import PERCEPTION_PREFIX, PERCEPTION_PRESETS, WorldSettings, merge_settings
+from core.run.conditions import get_condition
+from core.run.setup import Setup
+from core.sim.worlds import PERCEPTION_PREFIX, PERCEPTION_PRESETS, WorldSettings, merge_settings
 
 if TYPE_CHECKING:  # the study's machinery is imported when it runs: `srlab` starts without it
-    from core.cells import Cell
-    from core.experiment import TaskResult
+    from core.lab.cells import Cell
+    from core.lab.experiment import TaskResult
 
 Perception = Literal["exact", "noisy"]
 PERCEPTIONS: tuple[Perception, ...] = ("exact", "noisy")
@@ -44,7 +44,7 @@ class NoiseStudy:
     Attributes:
         conditions: the conditions compared.
         noise: the noisy side's perception settings (``perception.*`` world settings;
-            `core.worlds.parse_perception`).
+            `core.sim.worlds.parse_perception`).
         setup: where every cell runs; its world settings set no perception (the study
             does).
         reference: the condition the others are compared with.
@@ -77,7 +77,7 @@ class NoiseStudy:
 
     def cells(self) -> list[Cell]:
         """Every condition sensing each way, exact first."""
-        from core.cells import cell
+        from core.lab.cells import cell
 
         return [
             cell(label(c, p), c, self.perception_setup(p), tuned=self.tuned)
@@ -101,9 +101,9 @@ def summarise_noise(
     ``declared``: the comparisons the study's conclusion rests on, named before it runs:
     the reference minus each other condition with noise, in training (all episodes) and
     held out, each p Holm-adjusted over that family. Each difference is paired by seed,
-    per horizon and held out (`core.cells.compare`).
+    per horizon and held out (`core.lab.cells.compare`).
     """
-    from core.cells import (
+    from core.lab.cells import (
         DECLARED_MEASURES,
         cell_figures,
         compare,

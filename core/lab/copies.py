@@ -1,11 +1,11 @@
 """What the low-level reflexes would teach the camera: KP's copies, measured with no learning.
 
-A property of a world and of the designed reflexes alone, like `core.worldcheck`'s: the
+A property of a world and of the designed reflexes alone, like `core.lab.worldcheck`'s: the
 `reflexes` condition (kp's design, no learning) runs with a KP module that records its
 RSTM but never learns, and at each episode's end every camera stimulus's RSTM records are
 reasoned over as KP's reasoning does (the vector sum of the sonar's responses, snapped to
 a primitive). That is the response KP would copy to the stimulus had the lap been
-rewarded. The placement probe (`core.probe`) says whether each copy is correct.
+rewarded. The placement probe (`core.lab.probe`) says whether each copy is correct.
 
 KP itself propagates only from a successful lap, so each copy says whether its episode
 succeeded: the copies of the successful episodes are what a rewarded teacher would pass on.
@@ -20,12 +20,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from core.brain.propagation import KpConfig
-from core.conditions import get_condition
 from core.events import Outcome
-from core.runner import EpisodeSummary, run
-from core.setup import Setup
-from core.simulation import Simulation
-from core.stats import Estimate, mean_interval
+from core.lab.stats import Estimate, mean_interval
+from core.run.conditions import get_condition
+from core.run.runner import EpisodeSummary, run
+from core.run.setup import Setup
+from core.run.simulation import Simulation
 
 CONDITION = "reflexes"
 """The sonar reflexes alone: the teacher, never taught."""

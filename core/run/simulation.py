@@ -14,14 +14,14 @@ from core.brain.catalog import Catalog, load_catalog
 from core.brain.network import BehaviourNetwork
 from core.brain.selection import How
 from core.commands import InjectReward, RewardSource
-from core.conditions import Condition
 from core.errors import SimulationStateError
 from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied, RewardDue
-from core.setup import condition_network
+from core.run.conditions import Condition
+from core.run.setup import condition_network
+from core.run.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.sim.channels import Channel
 from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
-from core.trainer import ReinforcementProgram, Teacher, load_trainer
-from core.worlds import load_world
+from core.sim.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)
 

@@ -12,7 +12,11 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from core.analysis import (
+from core.brain.catalog import Behaviour, Catalog, Stimulus
+from core.brain.network import BehaviourNetwork
+from core.errors import ExtraMissingError, UnknownNameError
+from core.events import Outcome
+from core.lab.analysis import (
     CRITERION_RATE,
     CRITERION_WINDOW,
     episodes_to_criterion,
@@ -21,11 +25,11 @@ from core.analysis import (
     summarise,
     t_quantile_975,
 )
-from core.brain.catalog import Behaviour, Catalog, Stimulus
-from core.brain.network import BehaviourNetwork
-from core.conditions import DEEP_AGENTS, Condition, get_condition
-from core.errors import ExtraMissingError, UnknownNameError
-from core.events import Outcome
+from core.lab.tasks import DEFAULT_SETUP as DEFAULT_SETUP
+from core.lab.tasks import Checkpoint as Checkpoint
+from core.lab.tasks import Task as Task
+from core.lab.tasks import TaskResult as TaskResult
+from core.learners.qlambda import WatkinsQLambda, run_qlambda
 from core.params import (
     Params,
     ParamValue,
@@ -36,13 +40,9 @@ from core.params import (
     qlambda_config,
     tuned_params,
 )
-from core.qlambda import WatkinsQLambda, run_qlambda
-from core.runner import EpisodeSummary, run
-from core.setup import Setup
-from core.tasks import DEFAULT_SETUP as DEFAULT_SETUP
-from core.tasks import Checkpoint as Checkpoint
-from core.tasks import Task as Task
-from core.tasks import TaskResult as TaskResult
+from core.run.conditions import DEEP_AGENTS, Condition, get_condition
+from core.run.runner import EpisodeSummary, run
+from core.run.setup import Setup
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -61,7 +61,7 @@ def parse_conditions(text: str) -> list[str]:
         raise UnknownNameError("no condition given")
     deep = [n for n in names if get_condition(n).agent in DEEP_AGENTS]
     if deep:
-        from core import baselines
+        from core.learners import baselines
 
         if not baselines.available():
             raise ExtraMissingError(
@@ -102,8 +102,8 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
 
 
 def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
-    from core.evaluation import evaluate, without_sonar
-    from core.simulation import Simulation
+    from core.lab.evaluation import evaluate, without_sonar
+    from core.run.simulation import Simulation
 
     setup = task.setup
     condition, brain_config = configure(condition, task.params)
@@ -179,9 +179,9 @@ def _run_brain_task(task: Task, catalog: Catalog, condition: Condition) -> TaskR
 
 
 def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
-    from core.envs import AmigoTrackEnv
-    from core.evaluation import eval_seed
-    from core.qlambda import answer, evaluate_qlambda
+    from core.lab.evaluation import eval_seed
+    from core.learners.envs import AmigoTrackEnv
+    from core.learners.qlambda import answer, evaluate_qlambda
 
     setup = task.setup
     config = qlambda_config(condition, task.params)
@@ -240,10 +240,10 @@ def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> Tas
 
 
 def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskResult:
-    """A deep baseline (DQN or PPO, `core.baselines`) trained and evaluated like the others."""
-    from core import baselines
-    from core.envs import AmigoTrackEnv
-    from core.evaluation import eval_seed
+    """A deep baseline (DQN or PPO, `core.learners.baselines`), trained and evaluated as any."""
+    from core.lab.evaluation import eval_seed
+    from core.learners import baselines
+    from core.learners.envs import AmigoTrackEnv
 
     algo: baselines.Algo = "dqn" if condition.agent == "dqn" else "ppo"
     config = baselines.BaselineConfig.with_params(algo, baseline_params(condition, task.params))
@@ -450,7 +450,7 @@ def run_experiment(
     """Run every (condition, seed) task on `backend` (default: `jobs` local processes).
 
     With `eval_episodes`, each task ends with a frozen, held-out evaluation of that many
-    episodes and the camera-only transfer test (`core.evaluation`). With `tuned`, each
+    episodes and the camera-only transfer test (`core.lab.evaluation`). With `tuned`, each
     condition runs with its tuned parameters (`core/data/tuned.toml`, `srlab tune`);
     `params` are set, over those, on every condition that uses them (a teacher's
     imperfections on rp's, say).

@@ -15,10 +15,10 @@ from typing import Any
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Behaviour, Catalog
 from core.brain.network import Association, BehaviourNetwork
-from core.conditions import Condition
 from core.errors import CoreError
+from core.run.conditions import Condition
+from core.run.simulation import Simulation
 from core.sim.world import WorldConfig
-from core.simulation import Simulation
 
 VERSION = 1
 

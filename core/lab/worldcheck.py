@@ -10,7 +10,7 @@ and no learning anywhere:
 
 and, as the paper's Table II, (d) Table I's innate knowledge alone, the signal not given
 (`innate`), succeeds in <= 10%. Each figure is a mean over seeds with its 95% interval
-(`core.stats.mean_interval`); a property holds when its mean is within its bounds.
+(`core.lab.stats.mean_interval`); a property holds when its mean is within its bounds.
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.events import Outcome
-from core.experiment import Backend, LocalBackend, Task, TaskResult, run_tasks
-from core.setup import Setup
-from core.stats import Estimate, mean_interval
+from core.lab.experiment import Backend, LocalBackend, Task, TaskResult, run_tasks
+from core.lab.stats import Estimate, mean_interval
+from core.run.setup import Setup
 
 
 @dataclass(frozen=True, slots=True)

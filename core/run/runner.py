@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Catalog
-from core.conditions import Condition
 from core.events import Cause, EpisodeEnded, Outcome, RewardApplied
+from core.run.conditions import Condition
+from core.run.simulation import Simulation, Snapshot
 from core.sim.world import WorldConfig
-from core.simulation import Simulation, Snapshot
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,6 +1,6 @@
 """Deep RL baselines: stable-baselines3's DQN and PPO on `srlab/AmigoTrack-v0`.
 
-Like the tabular Q(lambda) baseline (`core.qlambda`), they learn on the Gymnasium
+Like the tabular Q(lambda) baseline (`core.learners.qlambda`), they learn on the Gymnasium
 environment, so they see the same stimuli, choose among the same behaviours (and, with
 ``defer``, may let the built-in behaviour answer), meet the same episodes (obstacles and
 lamp cycles per seed) and get the same delayed reward as the architecture's conditions.
@@ -31,11 +31,11 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from core.conditions import Condition
-from core.envs import AmigoTrackEnv, Observation
+from core.learners.envs import AmigoTrackEnv, Observation
 from core.params import ParameterError
-from core.runner import EpisodeSummary
-from core.setup import Setup
+from core.run.conditions import Condition
+from core.run.runner import EpisodeSummary
+from core.run.setup import Setup
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -152,7 +152,7 @@ class BaselineResult:
         algo: ``dqn`` or ``ppo``.
         seed: the training seed.
         episodes: the training episodes in order, with those the learner had no decision
-            in (run inside the environment's `reset`), as `core.qlambda.run_qlambda`
+            in (run inside the environment's `reset`), as `core.learners.qlambda.run_qlambda`
             counts them.
         ticks: the ticks of the training episodes.
         eval_seeds: the seeds of the frozen evaluation.
