@@ -267,7 +267,7 @@ SLOW_FIXTURES = frozenset({"server", "browser", "image"})
 """A live `srlab serve` (conftest's and two modules' own), Chromium, the rebuilt image."""
 SLOW_MODULES = frozenset(
     {
-        "core/test_deep_curve.py",  # a script in a subprocess
+        "core/lab/test_deep_curve.py",  # a script in a subprocess
         "reliability/test_crash.py",
         "reliability/test_load.py",
         "reliability/test_long_day.py",
@@ -275,16 +275,16 @@ SLOW_MODULES = frozenset(
         "reliability/test_sigterm.py",
         "reliability/test_storage_errors.py",
         "reliability/test_store_restart.py",
-        "server/test_benches.py",  # each bench in a subprocess
+        "benches/test_benches.py",  # each bench in a subprocess
         "server/test_e2e_serve.py",
         "server/test_listening_sockets.py",
-        "server/test_process_link.py",  # each test starts an engines' process
+        "server/runtime/test_process_link.py",  # each test starts an engines' process
         "server/test_proxy.py",
-        "server/test_ray_backend.py",
-        "server/test_schemathesis.py",
-        "server/test_slow_clients.py",
-        "server/test_viewer_malformed.py",
-        "server/test_viewer_serve.py",
+        "server/backends/test_ray_backend.py",
+        "server/api/test_schemathesis.py",
+        "server/api/test_slow_clients.py",
+        "server/viewer/test_viewer_malformed.py",
+        "server/viewer/test_viewer_serve.py",
     }
 )
 """Modules whose every test starts a server, a subprocess or Ray, or fuzzes the API."""
@@ -318,8 +318,8 @@ ALONE = frozenset(
         "tests/reliability/test_serve_kill.py",
         "tests/reliability/test_storage_errors.py",
         "tests/server/test_proxy.py",
-        "tests/server/test_viewer_serve.py",
-        "tests/server/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
+        "tests/server/viewer/test_viewer_serve.py",
+        "tests/server/cli/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
         "tests/web/test_viewer.py",  # 1-2 minutes a test: a server each pays
         # Browser tests with a server of their own, in modules that share one.
         "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
@@ -331,7 +331,7 @@ ALONE = frozenset(
 """Modules whose tests are units one by one, and single tests (all their parameters)."""
 LONGEST_FIRST = (
     "tests/reliability/test_crash.py",
-    "tests/server/test_schemathesis.py",
+    "tests/server/api/test_schemathesis.py",
     "tests/deploy/test_podman.py",  # builds the image, then the compose stack: 1-2 min
     "tests/web/test_viewer.py",
     "tests/web/test_console.py::test_the_page_recovers_when_the_server_restarts",
@@ -344,8 +344,8 @@ LONGEST_FIRST = (
     "tests/web/test_editor_day.py",
     "tests/reliability/test_storage_errors.py",
     "tests/deploy/test_docker.py",
-    "tests/server/test_viewer_serve.py",
-    "tests/server/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
+    "tests/server/viewer/test_viewer_serve.py",
+    "tests/server/cli/test_run_cli.py::test_a_signal_stops_a_realtime_run_cleanly_and_it_resumes",
     "tests/web/test_console_trainer.py",
     "tests/reliability/test_load.py",
     "tests/server/test_proxy.py",

@@ -9,7 +9,7 @@ Every summary reports Student's t interval (`INTERVAL`), chosen by its coverage 
 synthetic samples shaped like srlab's (per-seed success rates of Bernoulli episodes, with
 and without seed-to-seed differences, and paired differences of them): at 20 and 40 seeds
 it covers the true mean 94.5-95.2% of the time, where the percentile bootstrap and BCa
-cover 92.4-92.9% at 20 seeds and 93.6-93.8% at 40 (`tests/core/test_stats.py` measures
+cover 92.4-92.9% at 20 seeds and 93.6-93.8% at 40 (`tests/core/lab/test_stats.py` measures
 all three). Both bootstraps are too narrow by about the same factor: they use the plug-in
 spread (`sqrt((n - 1) / n)` of the sample's) and in effect the normal quantile where the
 mean of `n` values has Student's; BCa corrects a skew these samples hardly have.

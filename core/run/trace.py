@@ -72,7 +72,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("released_by", "<i1", "released_by"),
 )
 """A stored trace's layout (SRT2), in its stored order: the one list packing and reading
-follow. Reordering or retyping a column changes what is stored (tests/core/test_trace.py
+follow. Reordering or retyping a column changes what is stored (tests/core/run/test_trace.py
 holds traces packed before)."""
 _V1_COLUMNS = 8
 """SRT1 traces, stored before, have the first columns only."""

@@ -4,7 +4,7 @@ Starlette's router takes the first route that matches fully, and the editor's st
 at "/" matches every path: without this, `DELETE /api/runs` reached the mount and got its
 405 with `Allow: GET, HEAD`, and `GET /api/nothing` its plain-text 404. The paths and
 methods are the routes the OpenAPI document is made of (its API routes in the schema), so
-`Allow` says what the document says (tests/server/test_api_methods.py compares them),
+`Allow` says what the document says (tests/server/api/test_api_methods.py compares them),
 read from the routes themselves: building the document costs about 1.5 s of CPU, which
 every service paid on its first API request when this read it.
 """

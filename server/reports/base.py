@@ -46,7 +46,7 @@ def interval_line() -> str:
         f"Intervals: the {interval_name()}, clipped to the values' range: it covers the "
         "true mean 93-97% of the time on synthetic samples shaped like srlab's at 20 and "
         "40 seeds, where the percentile bootstrap covers 92-93% at 20 "
-        "(`tests/core/test_stats.py`)."
+        "(`tests/core/lab/test_stats.py`)."
     )
 
 

@@ -2,7 +2,7 @@
 
 `python -m server.schemas.web_enums` writes `web/js/generated/enums.js` from the app's OpenAPI
 document, so the pages name a run status or a reward source through the schema instead of
-typing its string again; `tests/server/test_web_enums.py` fails while the checked-in file
+typing its string again; `tests/server/api/test_web_enums.py` fails while the checked-in file
 differs from what this writes now.
 """
 

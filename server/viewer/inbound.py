@@ -79,7 +79,7 @@ def guard_panel(gui: viser.GuiApi, refuse: Callable[[str], None]) -> bool:
     Install it before adding the inputs: it reads them at each message. viser (1.1) has no
     hook on a client's messages, so this swaps its GUI API's own handler for one that checks
     first; should another viser lack that handler it returns False and the panel takes what
-    viser takes (tests/server/test_viewer_malformed.py says so).
+    viser takes (tests/server/viewer/test_viewer_malformed.py says so).
     """
     interface = getattr(gui, "_websock_interface", None)
     apply = getattr(gui, "_handle_gui_updates", None)

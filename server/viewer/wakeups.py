@@ -66,7 +66,7 @@ def install() -> None:
     if current is LoopSafeBuffer:
         return
     if current is not AsyncMessageBuffer:
-        # Another viser builds its buffers elsewhere: tests/server/test_viewer_wakeups.py
+        # Another viser builds its buffers elsewhere: tests/server/viewer/test_viewer_wakeups.py
         # fails, and the view runs with viser's own events meanwhile.
         log.warning("viser's message buffers are not where srlab expects them")
         return

@@ -44,13 +44,13 @@ FULL = {
 """The full sizes; the tests' own defaults are CI's."""
 TESTS = [
     "tests/reliability",
-    "tests/server/test_schemathesis.py",
-    "tests/server/test_cross_site.py",
-    "tests/server/test_viewer_malformed.py",
+    "tests/server/api/test_schemathesis.py",
+    "tests/server/api/test_cross_site.py",
+    "tests/server/viewer/test_viewer_malformed.py",
     "tests/web/test_attack_page.py",
-    "tests/server/test_slow_clients.py",
-    "tests/server/test_network_versions.py",
-    "tests/server/test_strict_bodies.py",
+    "tests/server/api/test_slow_clients.py",
+    "tests/server/api/test_network_versions.py",
+    "tests/server/api/test_strict_bodies.py",
 ]
 TABLE_START = "<!-- reliability-table:start -->"
 TABLE_END = "<!-- reliability-table:end -->"

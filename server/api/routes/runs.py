@@ -322,7 +322,7 @@ def get_episode(
     # encoder; the stdlib's takes 3 ms on floats): a pydantic row each, validated again as
     # the response model, cost two thirds of a long episode's read (4.5 of 7.4 ms for 361
     # ticks). EpisodeDetail stays the documented schema, and
-    # tests/server/test_runs_api.py validates answers against it.
+    # tests/server/api/test_runs_api.py validates answers against it.
     trace = [
         {
             "tick": r.tick, "x": r.x, "y": r.y, "heading_rad": r.heading_rad,

@@ -25,7 +25,7 @@ import httpx
 import pytest
 from reliability_report import count, record
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 EXAMPLES = int(os.environ.get("SRLAB_FUZZ_EXAMPLES", "50"))
 STATEFUL = int(os.environ.get("SRLAB_STATEFUL_EXAMPLES", "50"))
 """Scenarios the stateful phase tries (it follows the document's links)."""

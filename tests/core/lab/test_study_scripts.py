@@ -12,7 +12,7 @@ import pytest
 
 from server.reports.declared import Comparison, compare_declared, points
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_declared_comparisons_are_paired_by_seed_and_corrected_together() -> None:

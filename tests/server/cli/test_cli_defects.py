@@ -20,7 +20,7 @@ from server.cli.common import ENGINE_CONDITIONS
 from server.reports.base import fmt as _fmt
 from server.schemas import EngineCondition
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture

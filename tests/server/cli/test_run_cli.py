@@ -22,7 +22,7 @@ from server.cli import build_parser, main
 from server.cli import run as run_cli
 from server.cli.db import open_store
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ import pytest
 from bench.liveserver import free_port
 from server.cli import main
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def fail(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import matplotlib.image
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_the_curve_script_writes_its_plot_and_every_episode(tmp_path: Path) -> None:

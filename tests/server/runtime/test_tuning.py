@@ -31,7 +31,7 @@ def _in_fresh_interpreter(code: str) -> dict[str, object]:
         text=True,
         timeout=60,
         check=True,
-        cwd=Path(__file__).resolve().parents[2],  # the repository, where `server` is
+        cwd=Path(__file__).resolve().parents[3],  # the repository, where `server` is
     )
     result = json.loads(done.stdout)
     assert isinstance(result, dict)

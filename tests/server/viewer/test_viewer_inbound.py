@@ -1,6 +1,6 @@
 """What the 3D view takes from a socket (server/viewer/inbound.py), on a bare viser server.
 
-The same over a live service's real websocket is tests/server/test_viewer_malformed.py.
+The same over a live service's real websocket is tests/server/viewer/test_viewer_malformed.py.
 These reach into the viser internals the guard relies on (its GUI handler, its message
 handling task, its socket reader), so a viser that changes them fails here first.
 """
