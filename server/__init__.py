@@ -7,12 +7,12 @@ host, where they tick, and the service's side of them), `viewer/` (the viser
 JSON and plots the experiment commands write) and `backends/` (where experiment tasks
 run besides local processes: Ray).
 
-At the top, the service's own wiring: `main.py` (`create_app`), `bootstrap.py` (what the
-service is made of), `config.py` (settings), `schemas/` (the HTTP models, by area), `asgi.py`,
-`serve.py` (uvicorn), the protections of both
-ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and `healthcheck.py` (the container's);
-and small helpers of the service and the commands: `runspec.py` (a run's spec from a
-request, a command line or a row), `probe_cache.py` (the placement probe's results on
-disk), `tuning.py` (the interpreter set up for engines) and `web_enums.py` (writes the
-web client's enums module from the OpenAPI document).
+At the top, only the service's entry points and wiring: `main.py` (`create_app`),
+`bootstrap.py` (what the service is made of), `config.py` (settings), `serve.py` (uvicorn)
+and `healthcheck.py` (the container's, kept light). The HTTP models are in `schemas/` (with
+`web_enums.py`, which writes the web client's enums module from the OpenAPI document); the
+protections of both ports (`guard.py`, `ratelimit.py`, `timeouts.py`) and the ASGI helpers
+in `api/`; a run's spec from a request, a command line or a row (`runspec.py`) and the
+placement probe's cache on disk in `services/`; the interpreter's set-up for engines
+(`tuning.py`) in `runtime/`.
 """
