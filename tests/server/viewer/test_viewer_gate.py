@@ -20,10 +20,11 @@ import os
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import pytest
 from gatehelpers import WAIT_S, until
-from websockets.asyncio.client import connect
+from websockets.asyncio.client import connect as ws_connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.typing import Subprotocol
 
@@ -114,6 +115,12 @@ def handshake(target: str, origin: str | None = None) -> bytes:
 
 
 Upstream = Callable[[asyncio.StreamReader, asyncio.StreamWriter], Awaitable[None]]
+
+
+def connect(url: str, **kwargs: Any) -> ws_connect:
+    """A websocket client of the gate; the fake viser behind it answers no closing
+    handshake, so a close waits 1 s for it, not websockets' 10."""
+    return ws_connect(url, close_timeout=1, **kwargs)
 
 
 @asynccontextmanager
