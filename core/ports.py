@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import datetime
 from enum import StrEnum
 from typing import Any, Protocol
 
@@ -176,6 +177,9 @@ class StoredReward:
     record: RewardRecord
     applied: bool
     credited: int = 0
+    at: datetime | None = None
+    """When the log took it (UTC; the database's clock): the reward log's reads
+    (`RunQueries.rewards_page`) give it, a run's reload (`StoredRun.rewards_after`) need not."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -347,7 +351,7 @@ class RunQueries(RunStore, Protocol):
     def rewards_page(
         self, run_id: int, offset: int = 0, limit: int = 100
     ) -> tuple[list[StoredReward], int]:
-        """A page of the run's reward log in log order, and the log's length."""
+        """A page of the run's reward log in log order, with times, and the log's length."""
         ...
 
     def episode(self, run_id: int, episode: int) -> EpisodeRecord | None:

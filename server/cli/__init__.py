@@ -1,12 +1,12 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
-`simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start` and `noise` have a
-module each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and
-`world-check`, `run` holds `run` and `runs`, `db` and `serve` the database and the
-service. `common` has what they share: argument types and groups, the backend choice,
-progress bars and tables. Each module adds its parsers with a `handler`, and imports what
-only its handler needs (storage, the service, the report writers) when it runs, so that a
-command starts without the others' dependencies.
+`simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise` and
+`export` have a module each; `tune` holds `tune` and `qlambda-sweep`, `world` holds
+`probe` and `world-check`, `run` holds `run` and `runs`, `db` and `serve` the database
+and the service. `common` has what they share: argument types and groups, the backend
+choice, progress bars and tables. Each module adds its parsers with a `handler`, and
+imports what only its handler needs (storage, the service, the report writers) when it
+runs, so that a command starts without the others' dependencies.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from server.cli import (
     db,
     equal_start,
     experiment,
+    export,
     noise,
     phase,
     run,
@@ -59,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_run_parser(sub)
     serve.add_parser(sub)
     run.add_runs_parser(sub)
+    export.add_parser(sub)
     return parser
 
 

@@ -34,7 +34,9 @@ from server.persistence.orm import (
     StimulusRow,
 )
 from server.persistence.run_rows import (
+    logged_reward,
     select_commands,
+    select_reward_log,
     select_rewards,
     session_sql,
     stored_command,
@@ -150,14 +152,14 @@ class SqlAlchemyRunReads:
     def rewards_page(
         self, run_id: int, offset: int = 0, limit: int = 100
     ) -> tuple[list[StoredReward], int]:
-        """A page of the run's reward log in log order, and the log's length."""
+        """A page of the run's reward log in log order, with times, and the log's length."""
         with self._transaction(f"reading the rewards of run {run_id}", write=False) as s:
             self._require_run(session_sql(s), run_id)
             total = s.scalar(
                 select(func.count()).select_from(RewardRow).where(RewardRow.run_id == run_id)
             )
-            rows = s.execute(select_rewards(RewardRow.run_id == run_id).offset(offset).limit(limit))
-            return [stored_reward(r) for r in rows], int(total or 0)
+            log = select_reward_log(RewardRow.run_id == run_id).offset(offset).limit(limit)
+            return [logged_reward(r) for r in s.execute(log)], int(total or 0)
 
     def commands(self, run_id: int) -> list[StoredCommand]:
         """The run's whole command log, in log order."""

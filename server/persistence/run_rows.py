@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
+from datetime import datetime
 from typing import Any
 
 from sqlalchemy import ColumnElement, Row, Select, select
@@ -20,6 +21,7 @@ from core.ports import (
     StoredRun,
 )
 from server.persistence.driver import ConnectionSql
+from server.persistence.network_rows import utc
 from server.persistence.orm import RewardRow, RunCommandRow, RunRow
 from server.services.runspec import run_spec
 
@@ -97,6 +99,22 @@ def stored_reward(row: Row[int, int, int, float, str, str, str, bool, int]) -> S
     id_, tick, episode, value, source, note, uid, applied, credited = row
     record = RewardRecord(tick, episode, value, source, note, uid)
     return StoredReward(id_, record, applied, credited)
+
+
+def select_reward_log(
+    *where: ColumnElement[bool],
+) -> Select[int, int, int, float, str, str, str, bool, int, datetime]:
+    """`select_rewards` with each reward's time (`created_at`): the reward log's reads."""
+    return select_rewards(*where).add_columns(RewardRow.created_at)
+
+
+def logged_reward(
+    row: Row[int, int, int, float, str, str, str, bool, int, datetime],
+) -> StoredReward:
+    """A reward log row of `select_reward_log` as the ports' value, with its time."""
+    id_, tick, episode, value, source, note, uid, applied, credited, at = row
+    record = RewardRecord(tick, episode, value, source, note, uid)
+    return StoredReward(id_, record, applied, credited, utc(at))
 
 
 def select_commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, Field
+from pydantic import AwareDatetime, BaseModel, Field
 
 from core.commands import RewardSource
 from server.schemas.common import Strict
@@ -42,6 +42,10 @@ class RewardPublic(BaseModel):
     )
     applied: bool
     credited: int
+    at: AwareDatetime | None = Field(
+        description="when the reward log took it (UTC, the database's clock; to the second "
+        "on SQLite)"
+    )
 
 
 class RewardsPublic(BaseModel):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from datetime import UTC, datetime
 from typing import Any, Protocol
 
 import numpy as np
@@ -163,7 +164,8 @@ class InMemoryRunStore:
         check_storable(reward.note, "a reward's note")
         reward_id = self._next_reward
         self._next_reward += 1
-        run.rewards[reward_id] = StoredReward(reward_id, reward, applied=False)
+        at = datetime.now(UTC)  # as the database's clock stamps a logged row
+        run.rewards[reward_id] = StoredReward(reward_id, reward, applied=False, at=at)
         return reward_id
 
     def apply_reward(

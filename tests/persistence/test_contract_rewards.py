@@ -5,6 +5,8 @@ Every implementation passes it (`store` in tests/conftest.py): memory, SQLite, P
 
 from __future__ import annotations
 
+from datetime import UTC, datetime, timedelta
+
 import pytest
 from contracthelpers import NETWORK, SLOWER, edit, new_run, reward
 from fakes import InspectableRunStore
@@ -324,3 +326,17 @@ def test_commit_rewards_is_all_or_nothing(store: InspectableRunStore) -> None:
     assert store.ltm(run_id) == {}
     with pytest.raises(UnknownRunError):
         store.commit_rewards(run_id + 1000, (RewardCommit(reward(1), LearningUpdate(), 0),))
+
+
+def test_the_reward_log_pages_say_when_each_reward_was_logged(store: InspectableRunStore) -> None:
+    run_id = new_run(store)
+    before = datetime.now(UTC).replace(microsecond=0)  # SQLite keeps whole seconds
+    ids = [store.log_reward(run_id, reward(t)) for t in (3, 4)]
+    after = datetime.now(UTC)
+
+    page, count = store.rewards_page(run_id)
+
+    assert count == 2 and [r.id for r in page] == ids
+    for r in page:
+        assert r.at is not None and r.at.tzinfo is not None
+        assert before <= r.at <= after + timedelta(seconds=1)

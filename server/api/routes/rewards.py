@@ -83,7 +83,7 @@ def list_rewards(
         RewardPublic(
             id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
             source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
-            uid=r.record.uid,
+            uid=r.record.uid, at=r.at,
         )
         for r in page
     ]  # fmt: skip

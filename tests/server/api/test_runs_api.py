@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -317,6 +318,10 @@ async def test_the_reward_log_is_paged(tmp_path: Path) -> None:
         page = (await client.get(f"/api/runs/{run['id']}/rewards?offset=2&limit=3")).json()
         assert page["count"] == 7
         assert [x["note"] for x in page["data"]] == ["2", "3", "4"]
+        # each with the time the log took it, in UTC
+        assert all(
+            datetime.fromisoformat(x["at"]).utcoffset() == timedelta(0) for x in page["data"]
+        )
         bad = await client.get(f"/api/runs/{run['id']}/rewards?limit=0")
         assert bad.status_code == 422
         await client.post(f"/api/runs/{run['id']}/stop")
