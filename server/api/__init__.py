@@ -10,19 +10,24 @@ from server.api.routes import (
     networks,
     rewards,
     runs,
+    studies,
 )
 
-ROUTERS = tuple(
-    module.router
-    for module in (
-        health,
-        catalog,
-        networks,
-        network_history,
-        runs,
-        kp,
-        comparisons,
-        rewards,
-        events,
-    )
+ROUTERS = (
+    *(
+        module.router
+        for module in (
+            health,
+            catalog,
+            networks,
+            network_history,
+            runs,
+            kp,
+            comparisons,
+            rewards,
+            events,
+            studies,
+        )
+    ),
+    studies.participant_router,
 )
