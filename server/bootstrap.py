@@ -92,4 +92,5 @@ async def service(
             engines=manager,
             rewards_limiter=limiter,
             viewer=viewer,
+            studies=opened.studies,
         )

@@ -11,20 +11,25 @@ from server.api.routes import (
     networks,
     rewards,
     runs,
+    studies,
 )
 
-ROUTERS = tuple(
-    module.router
-    for module in (
-        health,
-        catalog,
-        networks,
-        network_history,
-        runs,
-        exports,
-        kp,
-        comparisons,
-        rewards,
-        events,
-    )
+ROUTERS = (
+    *(
+        module.router
+        for module in (
+            health,
+            catalog,
+            networks,
+            network_history,
+            runs,
+            exports,
+            kp,
+            comparisons,
+            rewards,
+            events,
+            studies,
+        )
+    ),
+    studies.participant_router,
 )

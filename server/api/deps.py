@@ -21,6 +21,7 @@ from server.config import Settings
 from server.runtime import Runs
 
 if TYPE_CHECKING:
+    from core.studies import StudyRepository
     from server.persistence.storage import DatabaseProbe
     from server.viewer import Viewer
 
@@ -37,6 +38,8 @@ class AppState:
     engines: Runs
     rewards_limiter: RateLimiter
     viewer: Viewer | None = None
+    studies: StudyRepository | None = None
+    """Trainer studies (None: this storage keeps none, e.g. the in-memory fakes)."""
     run_networks: dict[int, int | None] = field(default_factory=dict)
     """Runs whose stored network was deleted while they ran here (None), overriding
     `RunSpec.network_id` of the engine's spec."""
@@ -78,6 +81,9 @@ async def require_write(request: Request, state: StateDep) -> None:
     settings = state.settings
     if not settings.writes_need_token:
         return
+    who = request.scope.get("srlab.principal")  # `server.api.access.SCOPE_KEY`
+    if who is not None and who.participant is not None:
+        return  # a participant's token, already held to their own run (`server.api.access`)
     given = bearer(request) or ""
     token = settings.token or ""
     if not given or not hmac.compare_digest(given.encode(), token.encode()):

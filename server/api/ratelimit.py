@@ -7,18 +7,25 @@ import ipaddress
 import time
 from collections.abc import Callable
 
+from core.studies import Participant
+
 IDLE_S = 60.0
 """A bucket untouched this long is full again, so it may be forgotten."""
 
 
-def client_key(address: str | None, token: str | None = None) -> str:
+def client_key(
+    address: str | None, token: str | None = None, *, participant: Participant | None = None
+) -> str:
     """Who a reward comes from, for its rate limit.
 
+    A study's participant is their pseudonym, each with a limit of their own.
     A bearer token is the trainer's identity; without one, the address is, with an IPv6
     /64 (what one host or one home gets) as one client and every loopback address as one:
     otherwise a client spreads its rewards over 127.0.0.0/8 or its /64 and escapes the
     limit.
     """
+    if participant is not None:
+        return "participant:" + participant.pseudonym[:16]
     if token:
         return "token:" + hashlib.sha256(token.encode()).hexdigest()[:16]
     if not address:

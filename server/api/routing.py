@@ -13,6 +13,7 @@ from collections.abc import Iterable
 
 from fastapi import APIRouter, FastAPI
 
+from server.api.access import Authorise
 from server.api.contract import operation_id
 from server.api.errors import ERRORS
 
@@ -26,6 +27,8 @@ def resource_router(prefix: str = "", *, tag: str) -> APIRouter:
         tags=[tag],
         responses=ERRORS,
         generate_unique_id_function=operation_id,
+        # Who may call it: a participant's token only their run (`server.api.access`).
+        dependencies=[Authorise],
     )
 
 

@@ -325,3 +325,69 @@ class RunCommandRow(Base):
     created_at: Mapped[datetime] = _created()
 
     __table_args__ = ({"sqlite_autoincrement": True},)
+
+
+STUDY_ASSIGNMENTS = ("balanced", "fixed")
+PARTICIPANT_STATUSES = ("invited", "consented", "training", "done")
+
+
+class StudyRow(Base):
+    """A trainer study: its conditions, budget, consent text and HMAC secret."""
+
+    __tablename__ = "studies"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    name: Mapped[str] = mapped_column(NAME, unique=True)
+    conditions: Mapped[list[str]] = mapped_column(JSON)
+    assignment: Mapped[str] = mapped_column(String(20))
+    budget_episodes: Mapped[int | None]
+    budget_s: Mapped[float | None]
+    consent_text: Mapped[str] = mapped_column(Text)
+    consent_version: Mapped[str] = mapped_column(NAME)
+    questionnaire: Mapped[list[str]] = mapped_column(JSON)
+    completion_code: Mapped[str | None] = mapped_column(NAME)
+    redirect_url: Mapped[str | None] = mapped_column(Text)
+    secret: Mapped[str] = mapped_column(String(64))
+    """The HMAC key of the pseudonyms: made at creation, never served."""
+    created_at: Mapped[datetime] = _created()
+
+    __table_args__ = (
+        CheckConstraint(_one_of("assignment", STUDY_ASSIGNMENTS), name="assignment"),
+        CheckConstraint("(budget_episodes IS NULL) <> (budget_s IS NULL)", name="one_budget"),
+    )
+
+
+class ParticipantRow(Base):
+    """A study's participant, by pseudonym; the token only as its SHA-256."""
+
+    __tablename__ = "participants"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    pseudonym: Mapped[str] = mapped_column(String(64))
+    token_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    run_id: Mapped[int | None] = mapped_column(
+        ForeignKey("runs.id", ondelete="SET NULL"), index=True
+    )
+    condition: Mapped[str | None] = mapped_column(NAME)
+    consent_version: Mapped[str | None] = mapped_column(NAME)
+    consented_at: Mapped[datetime | None]
+    status: Mapped[str] = mapped_column(String(20), server_default=text("'invited'"))
+    created_at: Mapped[datetime] = _created()
+
+    __table_args__ = (
+        UniqueConstraint("study_id", "pseudonym"),
+        CheckConstraint(_one_of("status", PARTICIPANT_STATUSES), name="status"),
+    )
+
+
+class ParticipantIdentityRow(Base):
+    """The mapping from a recruiter's id to a pseudonym, apart so it can be deleted."""
+
+    __tablename__ = "participant_identities"
+
+    participant_id: Mapped[int] = mapped_column(
+        ForeignKey("participants.id", ondelete="CASCADE"), primary_key=True
+    )
+    study_id: Mapped[int] = mapped_column(ForeignKey("studies.id", ondelete="CASCADE"), index=True)
+    external_id: Mapped[str] = mapped_column(Text)

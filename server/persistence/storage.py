@@ -12,10 +12,12 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from core.ports import NetworkRepository, RunQueries
+from core.studies import StudyRepository
 from server.config import Settings
 from server.persistence.db import DatabaseCheck, make_engine, make_sessionmaker
 from server.persistence.networks import SqlAlchemyNetworkRepository
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
+from server.persistence.studies import SqlAlchemyStudyRepository
 
 
 class DatabaseProbe(Protocol):
@@ -35,6 +37,8 @@ class Storage:
     database: DatabaseProbe
     close: Callable[[], None]
     """Blocking: called once, after the last write."""
+    studies: StudyRepository | None = None
+    """Trainer studies and their participants (None: this storage keeps none)."""
 
 
 StorageFactory = Callable[[Settings], Storage]
@@ -50,4 +54,5 @@ def open_storage(settings: Settings) -> Storage:
         SqlAlchemyNetworkRepository(sessions),
         DatabaseCheck(engine),
         engine.dispose,
+        SqlAlchemyStudyRepository(sessions),
     )

@@ -40,6 +40,9 @@ TABLES = {
     "episodes",
     "rewards",
     "run_commands",
+    "studies",
+    "participants",
+    "participant_identities",
 }
 
 

@@ -9,9 +9,12 @@ from fastapi import HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from core.commands import RewardSource
+from core.studies import ParticipantStatus
+from server.api.access import PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
 from server.api.ratelimit import client_key
 from server.api.routes.runs import RunId
+from server.api.routes.studies import current
 from server.api.routing import resource_router
 from server.schemas import RewardAccepted, RewardCreate, RewardPublic, RewardsPublic
 
@@ -27,6 +30,7 @@ async def inject_reward(
     store: StoreDep,
     engines: EnginesDep,
     state: StateDep,
+    who: PrincipalDep,
 ) -> RewardAccepted:
     """Reward a running run now: answered once the reward is in the reward log.
 
@@ -35,10 +39,18 @@ async def inject_reward(
     limiter = state.rewards_limiter
     # The trainer: the token when writes need it (checked: this is a write), unless a
     # trusted proxy names each client: SRLAB_TOKEN is one secret all trainers share.
+    # A participant is their pseudonym, wherever they are.
     by_token = state.settings.writes_need_token and not state.settings.forwarded_allow_ips
     token = bearer(request) if by_token else None
     address = request.client.host if request.client else None
-    client = client_key(address, token)
+    client = client_key(address, token, participant=who.participant)
+    if who.participant is not None and who.study is not None:
+        studies = state.studies
+        assert studies is not None
+        if (await current(who, studies, store, engines)).status is ParticipantStatus.DONE:
+            raise HTTPException(
+                status.HTTP_403_FORBIDDEN, "this participant's budget is spent: no more rewards"
+            )
     wait = limiter.allow(client, run=run_id)
     if wait > 0:
         settings = state.settings

@@ -15,6 +15,7 @@ from core.ports import StoredRun
 from core.run.trace import unpack
 from core.sim.track import TrackGeometry
 from core.sim.worlds import load_world
+from server.api.access import PrincipalDep
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
@@ -50,7 +51,8 @@ def _of_stored(run: StoredRun) -> RunPublic:
     return run_public(run.id, run.spec, run.status.value, run.error, run.totals, None)
 
 
-async def _run(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
+async def run_now(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPublic:
+    """A run's state: live while it runs here, else as stored."""
     live = engines.get(run_id)
     if live is not None:
         return run_of_state(live.spec, live.state)
@@ -95,14 +97,21 @@ async def create_run(
         snap = await io(networks.snapshot, body.network, body.network_version)
         network = snap.associations
     run_id = await io(engines.create, spec, network)
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 @router.get("")
 async def list_runs(
-    store: StoreDep, engines: EnginesDep, offset: Offset = 0, limit: Limit = 100
+    store: StoreDep, engines: EnginesDep, who: PrincipalDep, offset: Offset = 0, limit: Limit = 100
 ) -> RunsPublic:
-    """The stored runs, oldest first, a page at a time (`count` is how many are stored)."""
+    """The stored runs, oldest first, a page at a time (`count` is how many are stored).
+
+    A participant's token lists their own run only.
+    """
+    if who.participant is not None:
+        own = who.participant.run_id
+        mine = [] if own is None or offset > 0 else [await run_now(store, engines, own)]
+        return RunsPublic(data=mine, count=0 if own is None else 1)
     page, total = await io(store.run_summaries, offset, limit)
     data = []
     for r in page:
@@ -114,7 +123,7 @@ async def list_runs(
 @router.get("/{run_id}")
 async def get_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPublic:
     """A run's state, with its live figures while it runs."""
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 @router.post("/{run_id}/start", dependencies=[WriteGuard])
@@ -126,7 +135,7 @@ async def start_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunP
     await io(store.run_summary, run_id)
     await engines.start(run_id)  # from its checkpoint and log
     await engines.started(run_id)
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 def _live(engines: EnginesDep, run_id: int) -> LiveRun:
@@ -146,7 +155,7 @@ async def _control(
     """
     await io(store.run_summary, run_id)
     await _live(engines, run_id).send(command)
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 @router.post("/{run_id}/pause", dependencies=[WriteGuard])
@@ -174,7 +183,7 @@ async def step_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPu
     """
     await io(store.run_summary, run_id)
     await _live(engines, run_id).step()  # RunStateError (409) unless paused and realtime
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 @router.post(
@@ -229,7 +238,7 @@ async def get_run_world(run_id: RunId, store: StoreDep, engines: EnginesDep) -> 
 
     What moves (pose, lamp colour, sonar readings, obstacle) comes with each tick event.
     """
-    run = await _run(store, engines, run_id)
+    run = await run_now(store, engines, run_id)
     return world_public(run.world)
 
 
@@ -255,7 +264,7 @@ async def stop_run(
     await _control(run_id, store, engines, Stop())
     if not await engines.ended(run_id, STOP_WAIT_S):
         response.status_code = status.HTTP_202_ACCEPTED
-    return await _run(store, engines, run_id)
+    return await run_now(store, engines, run_id)
 
 
 def _memory(values: dict[tuple[str, str], float]) -> MemoryPublic:

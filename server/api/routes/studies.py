@@ -1,0 +1,250 @@
+"""Trainer studies: the organiser's routes, and a participant's own (by their token)."""
+
+from __future__ import annotations
+
+import contextlib
+import secrets
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Path, Request, status
+from starlette.concurrency import run_in_threadpool as io
+
+from core.engine.messages import Stop
+from core.errors import RunStateError
+from core.studies import (
+    Assignment,
+    NewParticipant,
+    Participant,
+    ParticipantStatus,
+    Study,
+    StudyRepository,
+    StudySpec,
+    budget_spent,
+    token_digest,
+)
+from server.api.access import PARTICIPANT_PREFIX, Principal, PrincipalDep, Role
+from server.api.deps import EnginesDep, StateDep, StoreDep
+from server.api.routes.runs import run_now
+from server.api.routing import resource_router
+from server.schemas.common import Text
+from server.schemas.studies import (
+    ConsentCreate,
+    EpisodeBudget,
+    IdentitiesDeleted,
+    ParticipantInvited,
+    ParticipantPublic,
+    ParticipantsAnonymous,
+    ParticipantsInvited,
+    ParticipantsNamed,
+    ParticipantsPublic,
+    ParticipantView,
+    StudiesPublic,
+    StudyCreate,
+    StudyPublic,
+    TimeBudget,
+)
+from server.services.runspec import run_spec
+
+router = resource_router("/studies", tag="studies")
+participant_router = resource_router("/participant", tag="participant")
+StudyName = Annotated[Text, Path(max_length=100, description="a study's name")]
+PARTICIPANT_HZ = 10.0
+"""A participant's run ticks in realtime at this rate."""
+
+
+async def _studies(state: StateDep) -> StudyRepository:
+    if state.studies is None:
+        raise RunStateError("this service's storage keeps no studies")
+    return state.studies
+
+
+StudiesDep = Annotated[StudyRepository, Depends(_studies)]
+
+
+async def _organiser(request: Request, who: PrincipalDep) -> None:
+    if who.role is not Role.ORGANISER:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "studies are the organiser's: `Authorization: Bearer <SRLAB_TOKEN>`",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+
+
+Organiser = Depends(_organiser)
+
+
+async def _participant(who: PrincipalDep) -> Principal:
+    if who.participant is None:
+        raise HTTPException(
+            status.HTTP_401_UNAUTHORIZED,
+            "this needs a participant's token: `Authorization: Bearer <token of their link>`",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
+    return who
+
+
+ParticipantDep = Annotated[Principal, Depends(_participant)]
+
+
+def study_public(study: Study) -> StudyPublic:
+    """A study as answered: never its secret."""
+    s = study.spec
+    return StudyPublic(
+        id=study.id, name=s.name, conditions=list(s.conditions), assignment=s.assignment.value,
+        budget_episodes=s.budget_episodes, budget_s=s.budget_s, consent_text=s.consent_text,
+        consent_version=s.consent_version, questionnaire=list(s.questionnaire),
+        completion_code=s.completion_code, redirect_url=s.redirect_url,
+        created_at=study.created_at,
+        progress={k.value: v for k, v in study.progress.items()},
+    )  # fmt: skip
+
+
+def participant_public(p: Participant) -> ParticipantPublic:
+    """A participant as the organiser sees them: by pseudonym, never an external id."""
+    return ParticipantPublic(
+        id=p.id, pseudonym=p.pseudonym, status=p.status.value, condition=p.condition,
+        run_id=p.run_id, consent_version=p.consent_version, consented_at=p.consented_at,
+    )  # fmt: skip
+
+
+@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[Organiser])
+async def create_study(body: StudyCreate, studies: StudiesDep) -> StudyPublic:
+    """Create a study; its pseudonyms' secret is made here and never served."""
+    spec = StudySpec(
+        name=body.name, conditions=tuple(body.conditions),
+        assignment=Assignment(body.assignment),
+        budget_episodes=body.budget.episodes if isinstance(body.budget, EpisodeBudget) else None,
+        budget_s=body.budget.seconds if isinstance(body.budget, TimeBudget) else None,
+        consent_text=body.consent_text,
+        consent_version=body.consent_version, questionnaire=tuple(body.questionnaire),
+        completion_code=body.completion_code, redirect_url=body.redirect_url,
+    )  # fmt: skip
+    return study_public(await io(studies.create, spec, secrets.token_hex(32)))
+
+
+@router.get("", dependencies=[Organiser])
+async def list_studies(studies: StudiesDep) -> StudiesPublic:
+    """Every study with its progress (participants per status), oldest first."""
+    data = [study_public(s) for s in await io(studies.studies)]
+    return StudiesPublic(data=data, count=len(data))
+
+
+@router.get("/{name}", dependencies=[Organiser])
+async def get_study(name: StudyName, studies: StudiesDep) -> StudyPublic:
+    """A study with its progress (participants per status)."""
+    return study_public(await io(studies.get, name))
+
+
+@router.get("/{name}/participants", dependencies=[Organiser])
+async def list_participants(name: StudyName, studies: StudiesDep) -> ParticipantsPublic:
+    """A study's participants by pseudonym, in the order they were added."""
+    data = [participant_public(p) for p in await io(studies.participants, name)]
+    return ParticipantsPublic(data=data, count=len(data))
+
+
+@router.post("/{name}/participants", status_code=status.HTTP_201_CREATED, dependencies=[Organiser])
+async def add_participants(
+    name: StudyName,
+    body: ParticipantsNamed | ParticipantsAnonymous,
+    studies: StudiesDep,
+    request: Request,
+) -> ParticipantsInvited:
+    """Invite participants by recruiter's id, or N anonymous ones.
+
+    Each one's link and token are answered here, once only: only their digest is stored.
+    """
+    ids: list[str | None] = (
+        list(body.external_ids) if isinstance(body, ParticipantsNamed) else [None] * body.count
+    )
+    tokens = [PARTICIPANT_PREFIX + secrets.token_urlsafe(32) for _ in ids]
+    entries = [NewParticipant(i, token_digest(t)) for i, t in zip(ids, tokens, strict=True)]
+    made = await io(studies.add_participants, name, entries)
+    base = str(request.base_url).rstrip("/")
+    data = [
+        ParticipantInvited(
+            **participant_public(p).model_dump(), token=t, link=f"{base}/#/study/{t}"
+        )
+        for p, t in zip(made, tokens, strict=True)
+    ]
+    return ParticipantsInvited(data=data, count=len(data))
+
+
+@router.delete("/{name}/identities", dependencies=[Organiser])
+async def delete_identities(name: StudyName, studies: StudiesDep) -> IdentitiesDeleted:
+    """Delete the study's external id to pseudonym mapping (the pseudonyms stay)."""
+    return IdentitiesDeleted(deleted=await io(studies.delete_identities, name))
+
+
+async def current(
+    who: Principal, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+) -> Participant:
+    """The participant as they are now: done once their run has spent the budget."""
+    p = who.participant
+    assert p is not None and who.study is not None
+    if p.status is not ParticipantStatus.TRAINING or p.run_id is None:
+        return p
+    run = await run_now(store, engines, p.run_id)
+    if not budget_spent(who.study.spec, run.episodes_done, run.ticks, run.hz):
+        return p
+    done = await io(studies.finish, p.id)
+    live = engines.get(p.run_id)
+    if live is not None:  # a time budget: the run would go on ticking for no one
+        with contextlib.suppress(RunStateError):
+            await live.send(Stop())
+    return done
+
+
+def _view(who: Principal, p: Participant) -> ParticipantView:
+    assert who.study is not None
+    s = who.study.spec
+    done = p.status is ParticipantStatus.DONE
+    return ParticipantView(
+        study=s.name, pseudonym=p.pseudonym, status=p.status.value,
+        consent_text=s.consent_text, consent_version=s.consent_version,
+        questionnaire=list(s.questionnaire), condition=p.condition, run_id=p.run_id,
+        budget_episodes=s.budget_episodes, budget_s=s.budget_s,
+        completion_code=s.completion_code if done else None,
+        redirect_url=s.redirect_url if done else None,
+    )  # fmt: skip
+
+
+@participant_router.get("")
+async def get_participant(
+    who: ParticipantDep, studies: StudiesDep, store: StoreDep, engines: EnginesDep
+) -> ParticipantView:
+    """The caller's study: consent text, questionnaire, their run, and once done, the code."""
+    return _view(who, await current(who, studies, store, engines))
+
+
+@participant_router.post("/consent")
+async def consent(
+    body: ConsentCreate,
+    who: ParticipantDep,
+    studies: StudiesDep,
+    store: StoreDep,
+    engines: EnginesDep,
+) -> ParticipantView:
+    """Consent to the version read: a condition is assigned and their run made and started.
+
+    409 when that version is no longer the study's. Consenting again answers the same
+    run (and starts it if it could not start before, e.g. at the cap on running runs).
+    """
+    assert who.participant is not None and who.study is not None
+    p = await io(studies.consent, who.participant.id, body.consent_version)
+    if p.run_id is None:
+        assert p.condition is not None
+        spec = run_spec(
+            condition=p.condition,
+            seed=int(p.pseudonym[:7], 16),  # the participant's, reproducibly
+            episodes=who.study.spec.budget_episodes,
+            mode="realtime",
+            hz=PARTICIPANT_HZ,
+        )
+        run_id = await io(engines.create, spec, None)
+        p = await io(studies.set_run, p.id, run_id)
+    assert p.run_id is not None
+    run = await run_now(store, engines, p.run_id)
+    if run.status in ("created", "interrupted") and p.status is ParticipantStatus.TRAINING:
+        await engines.start(p.run_id)  # 429 at the cap: consenting again starts it
+        await engines.started(p.run_id)
+    return _view(who, p)
