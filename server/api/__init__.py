@@ -32,4 +32,5 @@ ROUTERS = (
         )
     ),
     studies.participant_router,
+    exports.study_router,
 )

@@ -20,9 +20,8 @@ from starlette.concurrency import run_in_threadpool
 
 from core.studies import Participant, ParticipantStatus, Study, token_digest
 from server.api.deps import StateDep, bearer
+from server.services.studies import PARTICIPANT_PREFIX
 
-PARTICIPANT_PREFIX = "srp_"
-"""How a participant's token starts: what tells it from the organiser's."""
 REWARDS_PATH = "/api/runs/{run_id}/rewards"
 PARTICIPANT_TAGS = frozenset({"catalog", "health", "participant"})
 """Routes a participant may call besides their run's: their study's, the catalogue's."""
@@ -128,3 +127,24 @@ async def authorise(request: Request, who: PrincipalDep) -> None:
 
 
 Authorise = Depends(authorise)
+
+
+async def organiser(who: PrincipalDep) -> None:
+    """Only the organiser: a participant's token is refused (403), anyone else asked (401).
+
+    For what holds every participant's data (studies, exports): without a token set, the
+    organiser is whoever is on loopback, as for writes.
+    """
+    if who.role is Role.ORGANISER:
+        return
+    if who.role is Role.PARTICIPANT:
+        raise _forbidden("this is the organiser's: a participant's token may not use it")
+    raise HTTPException(
+        status.HTTP_401_UNAUTHORIZED,
+        "this is the organiser's: `Authorization: Bearer <SRLAB_TOKEN>`",
+        headers={"WWW-Authenticate": "Bearer"},
+    )
+
+
+Organiser = Depends(organiser)
+"""A route's dependency: the organiser's alone."""

@@ -1,12 +1,13 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
-`simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise` and
-`export` have a module each; `tune` holds `tune` and `qlambda-sweep`, `world` holds
-`probe` and `world-check`, `run` holds `run` and `runs`, `db` and `serve` the database
-and the service. `common` has what they share: argument types and groups, the backend
-choice, progress bars and tables. Each module adds its parsers with a `handler`, and
-imports what only its handler needs (storage, the service, the report writers) when it
-runs, so that a command starts without the others' dependencies.
+`simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise`,
+`export` and `study` (its actions: create, add, status, forget, export) have a module
+each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`,
+`run` holds `run` and `runs`, `db` and `serve` the database and the service. `common` has
+what they share: argument types and groups, the backend choice, progress bars and tables.
+Each module adds its parsers with a `handler`, and imports what only its handler needs
+(storage, the service, the report writers) when it runs, so that a command starts without
+the others' dependencies.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from server.cli import (
     run,
     serve,
     simulate,
+    study,
     sweep,
     teachers,
     tune,
@@ -61,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_parser(sub)
     run.add_runs_parser(sub)
     export.add_parser(sub)
+    study.add_parser(sub)
     return parser
 
 

@@ -330,6 +330,14 @@ def command_line(args: argparse.Namespace) -> str:
     return "srlab " + shlex.join(argv) if argv else f"srlab {args.command}"
 
 
+def check_out_folder(out: Path, force: bool) -> None:
+    """An export's --out: a folder, empty unless --force (`UsageError` otherwise)."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file, not a folder")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise UsageError(f"--out {out} is not empty: choose another folder, or add --force")
+
+
 def print_table(out: IO[str], table: Table) -> Console:
     """Print `table` to `out`; returns the console used, for what follows it.
 

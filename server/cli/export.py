@@ -10,7 +10,7 @@ from typing import IO
 from rich.console import Console
 from rich.progress import TaskID
 
-from server.cli.common import UsageError, positive_int, progress_bar
+from server.cli.common import check_out_folder, positive_int, progress_bar
 from server.cli.db import open_store
 
 
@@ -44,10 +44,7 @@ def export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
 
     out: Path = args.out
     runs: list[int] = list(dict.fromkeys(args.runs))
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out} is a file, not a folder")
-    if out.is_dir() and any(out.iterdir()) and not args.force:
-        raise UsageError(f"--out {out} is not empty: choose another folder, or add --force")
+    check_out_folder(out, args.force)
     if args.minari:
         require_minari()
     store, db_engine = open_store(args.url)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import secrets
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
@@ -11,25 +10,14 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.engine.messages import Stop
 from core.errors import RunStateError
-from core.studies import (
-    Assignment,
-    NewParticipant,
-    Participant,
-    ParticipantStatus,
-    Study,
-    StudyRepository,
-    StudySpec,
-    budget_spent,
-    token_digest,
-)
-from server.api.access import PARTICIPANT_PREFIX, Principal, PrincipalDep, Role
+from core.studies import Participant, ParticipantStatus, Study, StudyRepository, budget_spent
+from server.api.access import Organiser, Principal, PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import run_now
 from server.api.routing import resource_router
 from server.schemas.common import Text
 from server.schemas.studies import (
     ConsentCreate,
-    EpisodeBudget,
     IdentitiesDeleted,
     ParticipantInvited,
     ParticipantPublic,
@@ -41,9 +29,9 @@ from server.schemas.studies import (
     StudiesPublic,
     StudyCreate,
     StudyPublic,
-    TimeBudget,
 )
 from server.services.runspec import run_spec
+from server.services.studies import invite, new_study
 
 router = resource_router("/studies", tag="studies")
 participant_router = resource_router("/participant", tag="participant")
@@ -59,18 +47,6 @@ async def _studies(state: StateDep) -> StudyRepository:
 
 
 StudiesDep = Annotated[StudyRepository, Depends(_studies)]
-
-
-async def _organiser(request: Request, who: PrincipalDep) -> None:
-    if who.role is not Role.ORGANISER:
-        raise HTTPException(
-            status.HTTP_401_UNAUTHORIZED,
-            "studies are the organiser's: `Authorization: Bearer <SRLAB_TOKEN>`",
-            headers={"WWW-Authenticate": "Bearer"},
-        )
-
-
-Organiser = Depends(_organiser)
 
 
 async def _participant(who: PrincipalDep) -> Principal:
@@ -110,16 +86,7 @@ def participant_public(p: Participant) -> ParticipantPublic:
 @router.post("", status_code=status.HTTP_201_CREATED, dependencies=[Organiser])
 async def create_study(body: StudyCreate, studies: StudiesDep) -> StudyPublic:
     """Create a study; its pseudonyms' secret is made here and never served."""
-    spec = StudySpec(
-        name=body.name, conditions=tuple(body.conditions),
-        assignment=Assignment(body.assignment),
-        budget_episodes=body.budget.episodes if isinstance(body.budget, EpisodeBudget) else None,
-        budget_s=body.budget.seconds if isinstance(body.budget, TimeBudget) else None,
-        consent_text=body.consent_text,
-        consent_version=body.consent_version, questionnaire=tuple(body.questionnaire),
-        completion_code=body.completion_code, redirect_url=body.redirect_url,
-    )  # fmt: skip
-    return study_public(await io(studies.create, spec, secrets.token_hex(32)))
+    return study_public(await io(new_study, studies, body))
 
 
 @router.get("", dependencies=[Organiser])
@@ -156,15 +123,12 @@ async def add_participants(
     ids: list[str | None] = (
         list(body.external_ids) if isinstance(body, ParticipantsNamed) else [None] * body.count
     )
-    tokens = [PARTICIPANT_PREFIX + secrets.token_urlsafe(32) for _ in ids]
-    entries = [NewParticipant(i, token_digest(t)) for i, t in zip(ids, tokens, strict=True)]
-    made = await io(studies.add_participants, name, entries)
-    base = str(request.base_url).rstrip("/")
+    made = await io(invite, studies, name, ids, str(request.base_url))
     data = [
         ParticipantInvited(
-            **participant_public(p).model_dump(), token=t, link=f"{base}/#/study/{t}"
+            **participant_public(i.participant).model_dump(), token=i.token, link=i.link
         )
-        for p, t in zip(made, tokens, strict=True)
+        for i in made
     ]
     return ParticipantsInvited(data=data, count=len(data))
 

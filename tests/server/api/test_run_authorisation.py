@@ -105,6 +105,8 @@ def test_the_walk_finds_the_run_routes() -> None:
         "/api/runs/{run_id}/episodes/{episode}",
     } <= paths
     assert ("POST", "/api/runs") in OTHER_ROUTES and ("GET", "/api/comparisons") in OTHER_ROUTES
+    assert ("GET", "/api/runs/{run_id}/export") in RUN_ROUTES
+    assert ("GET", "/api/studies/{name}/export") in OTHER_ROUTES
 
 
 @pytest.mark.parametrize(("method", "path"), RUN_ROUTES)
@@ -172,3 +174,17 @@ async def test_a_participant_may_not_control_their_own_run(
 
     assert r.status_code == 403 and "the organiser's" in r.json()["detail"]
     assert (await client.get(f"/api/runs/{run_id}")).json()["status"] == "running"
+
+
+async def test_a_participant_may_not_export_their_own_run(
+    service: tuple[httpx.AsyncClient, dict[str, Any]],
+) -> None:
+    client, ctx = service
+    run_id = ctx["runs"][0]
+
+    r = await client.get(
+        f"/api/runs/{run_id}/export", headers={"Authorization": f"Bearer {ctx['tokens'][0]}"}
+    )
+
+    assert r.status_code == 403 and "the organiser's" in r.json()["detail"]
+    assert (await client.get(f"/api/runs/{run_id}/export")).status_code == 200
