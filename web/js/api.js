@@ -1,6 +1,9 @@
 // The HTTP API, with errors turned into sentences a person can act on.
 
 const TOKEN_KEY = "srlab.token";
+// A study participant's token, from their link: this tab's only (sessionStorage), so the
+// organiser's own tabs in the same browser keep the organiser's token.
+const PARTICIPANT_KEY = "srlab.participant";
 
 /** An API call that failed: `status` 0 means the service did not answer. */
 export class ApiError extends Error {
@@ -18,6 +21,26 @@ export function token() {
 export function setToken(value) {
   if (value) localStorage.setItem(TOKEN_KEY, value);
   else localStorage.removeItem(TOKEN_KEY);
+}
+
+/** The participant's token this tab holds ("" when it is not a participant's page). */
+export function participantToken() {
+  return sessionStorage.getItem(PARTICIPANT_KEY) || "";
+}
+
+export function setParticipantToken(value) {
+  if (value) sessionStorage.setItem(PARTICIPANT_KEY, value);
+  else sessionStorage.removeItem(PARTICIPANT_KEY);
+}
+
+/**
+ * The bearer a request carries: a participant's token on every request (their reads are
+ * held to their own run by it); else the organiser's saved token on writes, and on reads
+ * that ask for it (`auth`: the organiser's study routes).
+ */
+function bearer(method, auth) {
+  if (participantToken()) return participantToken();
+  return (auth ?? method !== "GET") ? token() : "";
 }
 
 const listeners = new Set();
@@ -49,16 +72,18 @@ export function describe(status, body) {
 
 /**
  * `method` `path` (under /api) with an optional JSON `body` and `query` parameters.
- * Resolves to the parsed JSON (null for 204); rejects with an ApiError.
+ * Resolves to the parsed JSON (null for 204); rejects with an ApiError. `auth` sends the
+ * organiser's token on a read too.
  */
-export async function api(method, path, { body, query, raw = false } = {}) {
+export async function api(method, path, { body, query, raw = false, auth } = {}) {
   const url = new URL(`/api${path}`, location.origin);
   for (const [k, v] of Object.entries(query || {})) {
     if (v !== undefined && v !== null && v !== "") url.searchParams.set(k, String(v));
   }
   const headers = {};
   if (body !== undefined) headers["Content-Type"] = "application/json";
-  if (method !== "GET" && token()) headers.Authorization = `Bearer ${token()}`;
+  const given = bearer(method, auth);
+  if (given) headers.Authorization = `Bearer ${given}`;
   let response;
   try {
     response = await fetch(url, {

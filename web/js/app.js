@@ -1,9 +1,12 @@
-// The page: routing between the editor and the console, the connection to the service,
-// and recovery when the service restarts.
+// The page: routing between the editor, the console and the organiser's studies, a study
+// participant's page (their link), the connection to the service, and recovery when the
+// service restarts.
 
-import { get, onReachability, setToken, token } from "./api.js";
+import { get, onReachability, participantToken, setParticipantToken, setToken, token } from "./api.js";
 import * as console_ from "./console/console.js";
 import * as editor from "./editor/editor.js";
+import * as participant from "./participant.js";
+import * as studies from "./studies.js";
 import { $, $$, toast, typing } from "./ui.js";
 
 const RETRY_MS = 1500;
@@ -43,6 +46,10 @@ async function recover() {
     } catch {
       return;
     }
+    if (participantToken()) {
+      await route();
+      return;
+    }
     await editor.reload();
     await console_.reload(health);
   } finally {
@@ -51,23 +58,41 @@ async function recover() {
 }
 
 function parseHash() {
-  const [, view, arg] = location.hash.match(/^#\/(editor|console)(?:\/(.+))?$/) || [];
+  const [, view, arg] = location.hash.match(/^#\/(editor|console|studies|study)(?:\/(.+))?$/) || [];
   return { view: view || "editor", arg: arg ? decodeURIComponent(arg) : null };
 }
 
-async function route() {
+/** A participant's link keeps its token for this tab: from then on the tab is theirs. */
+function keepParticipant() {
   const { view, arg } = parseHash();
+  if (view === "study" && arg) setParticipantToken(arg);
+  document.body.classList.toggle("participant", Boolean(participantToken()));
+}
+
+const TITLES = { editor: "S-R editor", console: "trainer console", studies: "studies" };
+
+async function route() {
+  keepParticipant();
+  const { view, arg } = parseHash();
+  if (participantToken()) {
+    // Their page only; a run the URL names (#/console/<id>) is shown if it is theirs.
+    for (const v of ["#view-editor", "#view-studies"]) $(v).hidden = true;
+    participant.hide();
+    await participant.show(view === "console" && arg ? Number(arg) : null, health);
+    return;
+  }
   for (const tab of $$(".tabs a")) tab.setAttribute("aria-selected", tab.dataset.view === view ? "true" : "false");
   $("#view-editor").hidden = view !== "editor";
   $("#view-console").hidden = view !== "console";
-  document.title = `srlab · ${view === "editor" ? "S-R editor" : "trainer console"}`;
-  if (view === "editor") {
-    console_.hide();
-    await editor.show(arg);
-  } else {
-    editor.hide();
-    await console_.show(arg, health);
-  }
+  $("#view-studies").hidden = view !== "studies";
+  $("#view-study").hidden = true;
+  document.title = `srlab · ${TITLES[view] || view}`;
+  if (view !== "editor") editor.hide();
+  if (view !== "console") console_.hide();
+  if (view !== "studies") studies.hide();
+  if (view === "editor") await editor.show(arg);
+  else if (view === "console") await console_.show(arg, health);
+  else if (view === "studies") await studies.show();
 }
 
 async function boot() {
@@ -86,12 +111,21 @@ async function boot() {
   document.addEventListener("keydown", (e) => {
     if (e.key === "?" && !typing(e)) $("#help-dialog").showModal();
   });
+  keepParticipant();
   // Wait for the service (it may be starting), then load the catalogue once.
   for (;;) {
     try {
       health = await get("/health");
       break;
-    } catch {
+    } catch (error) {
+      if (error.status === 401 && participantToken()) {
+        // A participant's link the service does not know: say so, not a page that waits.
+        setOnline(true);
+        $("#view-study").hidden = false;
+        participant.fail(error);
+        document.body.dataset.ready = "true";
+        return;
+      }
       await new Promise((r) => setTimeout(r, RETRY_MS));
     }
   }
@@ -100,6 +134,7 @@ async function boot() {
   const catalog = { stimuli, behaviours, sensors };
   editor.init(catalog);
   console_.init(catalog);
+  studies.init();
   ready = true;
   window.addEventListener("hashchange", route);
   await route();

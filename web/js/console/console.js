@@ -4,6 +4,7 @@
 // learning curve. This module picks the run and controls it; the parts beside it draw.
 
 import { get, post } from "../api.js";
+import { watchFields } from "../forms.js";
 import { $, $$, attempt, el, throttle, toast, typing } from "../ui.js";
 import "../view2d.js"; // the 2D view listens for srlab:run and srlab:tick
 import { drawCurve } from "./episodes.js";
@@ -37,9 +38,7 @@ export function init(catalog) {
   $("#view3d").addEventListener("click", openView);
   const form = $("#new-run-form");
   form.addEventListener("submit", setup.onCreate);
-  // A field the browser refuses says why beside it, even where its bubble would not show.
-  form.addEventListener("invalid", (e) => setup.fieldError(e.target, e.target.validationMessage), true);
-  form.addEventListener("input", (e) => setup.clearFieldError(e.target));
+  watchFields(form);
   form.condition.addEventListener("change", setup.describeCondition);
   for (const radio of $$('input[name="memory"]')) radio.addEventListener("change", () => loadMemory());
   document.addEventListener("keydown", onKey);
@@ -56,20 +55,29 @@ export function init(catalog) {
   });
 }
 
-/** Show the console for run `id` (or the newest run). */
-export async function show(id, health) {
+/**
+ * Show the console for run `id` (or the newest run). A study participant's console
+ * (`participant`) shows their run only, with no run control: what it would need (networks,
+ * worlds, other runs) is not theirs to read. Resolves to the error that kept the run from
+ * showing (an ApiError: a 403 for another's run), or null.
+ */
+export async function show(id, health, { participant = false } = {}) {
   state.active = true;
+  state.participant = participant;
   state.viserPort = health ? health.viser_port : state.viserPort;
-  if (!$("#new-run-form").network.options.length || $("#new-run-form").network.options.length < 2) {
-    const list = await attempt(() => get("/networks"));
-    if (list) setup.fillNetworks(list.data);
+  if (!participant) {
+    if (!$("#new-run-form").network.options.length || $("#new-run-form").network.options.length < 2) {
+      const list = await attempt(() => get("/networks"));
+      if (list) setup.fillNetworks(list.data);
+    }
+    if ($("#new-run-form").world.options.length < 2) await setup.fillSetup();
   }
-  if ($("#new-run-form").world.options.length < 2) await setup.fillSetup();
   if (!state.conditions.size) await setup.fillConditions();
   await loadRuns();
-  await select(id ? Number(id) : defaultRun());
+  const failed = await select(id ? Number(id) : defaultRun());
   clearInterval(state.poll);
   state.poll = setInterval(poll, POLL_MS);
+  return failed;
 }
 
 /**
@@ -94,7 +102,7 @@ export function hide() {
 /** After the service comes back: reload everything and follow the run again. */
 export async function reload(health) {
   if (!state.active) return;
-  await show(state.run ? state.run.id : null, health);
+  await show(state.run ? state.run.id : null, health, { participant: state.participant });
 }
 
 async function select(id) {
@@ -120,24 +128,27 @@ async function select(id) {
     await loadMemory();
     drawCurve();
     drawRewards();
-    return;
+    return null;
   }
-  localStorage.setItem(LAST_KEY, String(id));
+  // A participant's run is not the one the organiser's console should open on next.
+  if (!state.participant) localStorage.setItem(LAST_KEY, String(id));
   let run;
   try {
     run = await get(`/runs/${id}`);
   } catch (error) {
-    toast(`Run ${id}: ${error.message}`, "error", { offline: error.status === 0 });
+    // A participant's page says why in place of the console, not in a corner.
+    if (!state.participant) toast(`Run ${id}: ${error.message}`, "error", { offline: error.status === 0 });
     showRun(null);
     await loadMemory();
     drawCurve();
     drawRewards();
-    return;
+    return error;
   }
   $("#run-select").value = String(id);
   showRun(run);
   await loadStored();
   if (LIVE.has(run.status)) follow();
+  return null;
 }
 
 /** Choose the run in the 3D view (a write: a POST), then open the link's /run/<id> URL. */
@@ -182,7 +193,7 @@ function onKey(event) {
   if (document.querySelector("dialog[open]")) return;
   const plus = event.key === "+" || event.key === "=";
   const minus = event.key === "-" || event.key === "_";
-  const pause = event.key === "P" && event.shiftKey;
+  const pause = event.key === "P" && event.shiftKey && !state.participant; // run control is the organiser's
   if (!(plus || minus || pause)) return;
   event.preventDefault();
   if (event.repeat) return; // a held key is one reward, not one per repeat

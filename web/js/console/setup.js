@@ -2,6 +2,7 @@
 // name, what the chosen condition means, and the API's refusal beside the field it names.
 
 import { get, post } from "../api.js";
+import { clearFormErrors, showApiErrors } from "../forms.js";
 import { $, attempt, el, toast } from "../ui.js";
 import { state } from "./state.js";
 import { aboutRewards, showRun } from "./status.js";
@@ -48,64 +49,10 @@ export function describeCondition() {
   $("#condition-about").textContent = c ? aboutRewards(c) : "";
 }
 
-/** Show `message` beside the form's field `input` (and mark it) until it is changed. */
-export function fieldError(input, message) {
-  if (!input || !input.closest) return;
-  const labelEl = input.closest("label");
-  if (!labelEl) return;
-  labelEl.classList.add("invalid");
-  let note = $(".field-error", labelEl);
-  if (!note) {
-    note = el("span", { class: "field-error", role: "alert" });
-    labelEl.append(note);
-  }
-  note.textContent = message;
-}
-
-export function clearFieldError(input) {
-  const labelEl = input && input.closest ? input.closest("label") : null;
-  if (!labelEl) return;
-  labelEl.classList.remove("invalid");
-  const note = $(".field-error", labelEl);
-  if (note) note.remove();
-  if (input.setCustomValidity) input.setCustomValidity("");
-}
-
-function clearFormErrors(form) {
-  for (const input of form.elements) clearFieldError(input);
-  $("#new-run-error").hidden = true;
-  $("#new-run-error").textContent = "";
-}
-
-/** The API's refusal on the form: a 422 names each field; anything else goes under it. */
-function showCreateError(form, error) {
-  const detail = error.body && error.body.detail;
-  const rest = [];
-  let first = null;
-  if (Array.isArray(detail)) {
-    for (const d of detail) {
-      const name = [...(d.loc || [])].reverse().find((p) => typeof p === "string" && form.elements[p]);
-      const input = name ? form.elements[name] : null;
-      if (input && input.closest && input.closest("label")) {
-        fieldError(input, d.msg);
-        first = first || input;
-      } else {
-        rest.push(d.msg);
-      }
-    }
-  } else {
-    rest.push(error.message);
-  }
-  const box = $("#new-run-error");
-  box.textContent = rest.length ? `Not created: ${rest.join("; ")}` : "Not created: see the marked field.";
-  box.hidden = false;
-  if (first) first.focus();
-}
-
 export async function onCreate(event) {
   event.preventDefault();
   const form = event.target;
-  clearFormErrors(form);
+  clearFormErrors(form, $("#new-run-error"));
   const number = (input) => (input.value === "" ? undefined : Number(input.value));
   const params = {};
   if (form.eta.value !== "") params.eta = Number(form.eta.value);
@@ -126,7 +73,7 @@ export async function onCreate(event) {
     run = await post("/runs", body);
   } catch (error) {
     // The form stays open with what was typed, the refusal beside the field it names.
-    showCreateError(form, error);
+    showApiErrors(form, $("#new-run-error"), error);
     toast(`Creating the run: ${error.message}`, "error", { offline: error.status === 0 });
     return;
   }

@@ -25,6 +25,7 @@ export const state = {
   source: null,
   poll: null,
   active: false,
+  participant: false, // a study participant's console: their run only, no run control
   viserPort: null,
   lastReward: null,
   credited: new Set(),

@@ -1,0 +1,149 @@
+"""A study in the browser: the organiser's page and three participants' pages.
+
+The organiser makes a study on the page (a refused field says why beside it), invites
+three participants by recruiters' ids and copies their links; three people, each in a
+browser context of their own, open their link, consent, reward their run with + and -,
+cannot see another's run, and reach the completion code once the budget is spent. Every
+reward each gave is in their own run's log and in no other run's.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from browser import artifact
+from playwright.sync_api import Browser, BrowserContext, Page, expect
+from webpage import open_view
+
+from bench.liveserver import LiveServer
+
+BUDGET_S = 30
+"""Each participant's budget: long enough to consent and reward on a busy machine."""
+CODE = "C0DE42"
+
+
+def create_study(page: Page) -> None:
+    form = page.locator("#new-study-form")
+    form.locator('[name="name"]').fill("pilot")
+    form.locator('[name="conditions"]').fill("trainer, rp")
+    form.locator('[name="budget"]').fill(str(BUDGET_S))
+    form.locator('[name="budget_unit"]').select_option("seconds")
+    form.locator('[name="consent_text"]').fill("You will train a simulated robot.")
+    form.locator('[name="consent_version"]').fill("v1")
+    form.locator('[name="completion_code"]').fill(CODE)
+    # The API refuses a redirect that is not http(s): beside that field, and nothing made.
+    form.locator('[name="redirect_url"]').fill("ftp://example.org")
+    form.locator('button[type="submit"]').click()
+    refused = page.locator("label.invalid:has(input[name='redirect_url']) .field-error")
+    expect(refused).to_contain_text("match pattern")
+    expect(page.locator("#studies-list")).to_contain_text("No study yet")
+    form.locator('[name="redirect_url"]').fill("")
+    expect(page.locator("label.invalid")).to_have_count(0)
+    form.locator('button[type="submit"]').click()
+    expect(page.locator('#studies-list tr[data-study="pilot"]')).to_be_visible()
+
+
+def invite(page: Page, ids: list[str]) -> list[str]:
+    form = page.locator("#invite-form")
+    expect(form.locator('[name="study"]')).to_have_value("pilot")
+    form.locator('[name="external_ids"]').fill("\n".join(ids))
+    form.locator('button[type="submit"]').click()
+    links = page.locator("#invited input.link")
+    expect(links).to_have_count(len(ids))
+    expect(page.locator("#invited")).to_contain_text("shown this once")
+    return [links.nth(i).input_value() for i in range(len(ids))]
+
+
+def reward(page: Page, press: str) -> dict[str, Any]:
+    """Press + or - (the key, or the button) and answer the service's acknowledgement."""
+    with page.expect_response(
+        lambda r: r.request.method == "POST" and r.url.endswith("/rewards")
+    ) as answer:
+        if press in "+-":
+            page.keyboard.press("+" if press == "+" else "-")
+        else:
+            page.click(press)
+    response = answer.value
+    assert response.status == 202, response.text()
+    ack: dict[str, Any] = response.json()
+    return ack
+
+
+def consent(page: Page, link: str) -> int:
+    """Open the link, read the consent, agree: answers the participant's run."""
+    page.goto(link)
+    page.wait_for_selector("body[data-ready=true]")
+    expect(page.locator("#consent-text")).to_have_text("You will train a simulated robot.")
+    expect(page.locator("#consent-version")).to_contain_text("v1")
+    # A participant sees neither the tabs nor run control, nor the token button.
+    for hidden in ("#tab-editor", "#run-start", "#new-run", "#view3d", "#token-button"):
+        expect(page.locator(hidden)).to_be_hidden()
+    with page.expect_response(lambda r: r.url.endswith("/api/participant/consent")) as answer:
+        page.click("#consent-agree")
+    run_id: int = answer.value.json()["run_id"]
+    expect(page.locator("#view-console")).to_be_visible()
+    expect(page.locator("#run-status")).to_have_text("running")
+    expect(page.locator("#reward-plus")).to_be_enabled()
+    expect(page.locator("#view2d-toggle")).to_be_hidden()
+    return run_id
+
+
+def test_a_study_from_invitation_to_completion(
+    server: LiveServer, browser: Browser, page: Page
+) -> None:
+    open_view(page, server, "studies")
+    create_study(page)
+    links = invite(page, ["prolific-a", "prolific-b", "prolific-c"])
+    assert all(re.search(r"/#/study/srp_", link) for link in links)
+    page.screenshot(path=str(artifact("studies-organiser.png")), full_page=True)
+
+    contexts: list[BrowserContext] = []
+    pages: list[Page] = []
+    runs: list[int] = []
+    given: list[list[dict[str, Any]]] = []
+    try:
+        for i, link in enumerate(links):
+            context = browser.new_context(viewport={"width": 1280, "height": 800})
+            contexts.append(context)
+            participant = context.new_page()
+            pages.append(participant)
+            runs.append(consent(participant, link))
+            given.append([reward(participant, "+"), reward(participant, "-")])
+            given[i].append(reward(participant, "#reward-plus"))
+        assert len(set(runs)) == 3
+        last = pages[-1]
+        last.screenshot(path=str(artifact("study-participant.png")))
+        # Another's run, named in the URL: a clear refusal in place of the console.
+        last.evaluate(f"location.hash = '#/console/{runs[0]}'")
+        expect(last.locator(".study-error")).to_contain_text("only their own run")
+        expect(last.locator("#view-console")).to_be_hidden()
+        last.evaluate(f"location.hash = '#/study/{links[-1].split('/#/study/')[1]}'")
+        for participant in pages:
+            expect(participant.locator("#completion-code")).to_have_text(CODE)
+            expect(participant.locator("#view-console")).to_be_hidden()
+    finally:
+        for context in contexts:
+            context.close()
+
+    # Each reward is in its giver's run's log (the organiser's view), and in no other.
+    for run_id, acks in zip(runs, given, strict=True):
+        log = server.client.get(f"/api/runs/{run_id}/rewards", params={"limit": 1000}).json()
+        trainer = [(r["id"], r["value"]) for r in log["data"] if r["source"] == "trainer"]
+        assert trainer == [(a["id"], a["value"]) for a in acks]
+    assert [a["value"] for a in given[0]] == [1, -1, 1]
+
+    # Progress on the organiser's page; then the recruiters' ids go, after a confirmation.
+    done = page.locator('#studies-list tr[data-study="pilot"] td[data-status="done"]')
+    expect(done).to_have_text("3")
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.locator('#studies-list tr[data-study="pilot"] button').click()
+    expect(page.locator("#toasts")).to_contain_text("3 recruiter ids of pilot deleted")
+
+
+def test_an_unknown_link_says_so(server: LiveServer, page: Page) -> None:
+    page.goto(f"{server.url}/#/study/srp_not-a-token")
+    page.wait_for_selector("body[data-ready=true]")
+    expect(page.locator(".study-error")).to_contain_text("This link is not known here")
+    expect(page.locator("#view-console")).to_be_hidden()
+    expect(page.locator("#tab-editor")).to_be_hidden()

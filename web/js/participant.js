@@ -1,0 +1,144 @@
+// A study participant's page (their link: #/study/<token>): the consent text and its
+// version with "I agree", then the trainer console for their run only, then, once their
+// budget is spent, the completion code or the way on. The token goes with every request
+// (api.js), so whatever is not theirs answers 403, and the page says so in place.
+
+import { participantToken, post, get } from "./api.js";
+import * as console_ from "./console/console.js";
+import { $, el, toast } from "./ui.js";
+
+const POLL_MS = 2000;
+let poll = null;
+let me = null;
+let health = null;
+
+const body = () => $("#study-body");
+
+/** Why a link does not work, as the participant can act on it. */
+function refusal(error) {
+  if (error.status === 401) {
+    return `This link is not known here: ${error.message}. Check that the whole link was copied, or ask the study's organiser for a new one.`;
+  }
+  if (error.status === 403) return `This is not yours to see: ${error.message}.`;
+  return error.message;
+}
+
+/** Show `message` in place of the page (an unknown link, another's run, the service away). */
+export function fail(error, { back = false } = {}) {
+  stopConsole();
+  body().replaceChildren(el("p", { class: "note study-error", role: "alert", text: refusal(error) }),
+    back ? el("p", {}, el("a", { href: `#/study/${participantToken()}`, text: "Back to your robot" })) : null);
+}
+
+function stopConsole() {
+  console_.hide();
+  $("#view-console").hidden = true;
+}
+
+/** Show the page; `asked` is a run the URL names (#/console/<id>), else their own. */
+export async function show(asked, health_) {
+  health = health_;
+  $("#view-study").hidden = false;
+  document.title = "srlab · study";
+  try {
+    me = await get("/participant");
+  } catch (error) {
+    fail(error);
+    return;
+  }
+  await render(asked);
+}
+
+export function hide() {
+  clearInterval(poll);
+  poll = null;
+  stopConsole();
+}
+
+async function render(asked = null) {
+  $("#study-title").textContent = `Study ${me.study}`;
+  if (me.status === "done") {
+    done();
+    return;
+  }
+  if (me.status !== "training" || me.run_id === null) {
+    consentForm();
+    return;
+  }
+  body().replaceChildren(el("p", { id: "study-training" },
+    `You are training robot #${me.run_id}. Press `, el("kbd", { text: "+" }), " (or + good) when it does well and ",
+    el("kbd", { text: "-" }), " (or − bad) when it does badly. ",
+    el("span", { class: "muted", text: me.budget_episodes !== null
+      ? `The study ends after ${me.budget_episodes} episode${me.budget_episodes === 1 ? "" : "s"}.`
+      : `The study ends after ${Math.round(me.budget_s)} s of training.` })));
+  $("#view-console").hidden = false;
+  const failed = await console_.show(asked ?? me.run_id, health, { participant: true });
+  if (failed) {
+    fail(failed, { back: true });
+    return;
+  }
+  clearInterval(poll);
+  poll = setInterval(check, POLL_MS);
+}
+
+/** Whether the budget is spent: the service says so on this read (and stops the run). */
+async function check() {
+  let now;
+  try {
+    now = await get("/participant");
+  } catch {
+    return; // the service away: the banner says so, the next poll tries again
+  }
+  if (now.status === "done" && me.status !== "done") {
+    me = now;
+    done();
+  }
+}
+
+function consentForm() {
+  const agree = el("button", { type: "button", id: "consent-agree", class: "primary", text: "I agree" });
+  const message = el("p", { class: "form-error", role: "alert", hidden: true });
+  agree.addEventListener("click", async () => {
+    agree.disabled = true;
+    try {
+      me = await post("/participant/consent", { consent_version: me.consent_version });
+    } catch (error) {
+      agree.disabled = false;
+      message.hidden = false;
+      if (error.status === 409) {
+        message.textContent = `${error.message}. The text above is read again: read it, then agree.`;
+        me = await get("/participant").catch(() => me);
+        $("#consent-text").textContent = me.consent_text;
+        $("#consent-version").textContent = `Version ${me.consent_version}`;
+      } else if (error.status === 429) {
+        message.textContent = `${error.message}. Your place is kept: press "I agree" again in a moment.`;
+      } else {
+        message.textContent = refusal(error);
+      }
+      return;
+    }
+    await render();
+  });
+  body().replaceChildren(
+    el("h2", { text: "Consent" }),
+    el("div", { id: "consent-text", class: "consent-text", text: me.consent_text }),
+    el("p", { id: "consent-version", class: "muted small", text: `Version ${me.consent_version}` }),
+    agree, message);
+}
+
+function done() {
+  clearInterval(poll);
+  poll = null;
+  stopConsole();
+  const parts = [el("h2", { text: "Thank you: you have finished." })];
+  if (me.completion_code) {
+    const copy = el("button", { type: "button", class: "small", text: "Copy" });
+    copy.addEventListener("click", async () => {
+      await navigator.clipboard.writeText(me.completion_code).then(() => toast("Code copied.", "ok"), () => {});
+    });
+    parts.push(el("p", {}, "Your completion code: ", el("strong", { id: "completion-code", class: "code", text: me.completion_code }), " ", copy));
+  }
+  if (me.redirect_url) parts.push(el("p", {}, el("a", { id: "completion-link", class: "button primary", href: me.redirect_url, text: "Continue" })));
+  if (!me.completion_code && !me.redirect_url) parts.push(el("p", { class: "muted", text: "You may close this page." }));
+  body().replaceChildren(...parts);
+}
