@@ -2,11 +2,17 @@
 
 A reader can hold its parts one at a time:
 
-- `engine`: `RunEngine`, a run's lifecycle and public calls, the tick task and the reward
-  task.
+- `engine`: `RunEngine`, a run's lifecycle and the calls the outside makes.
+- `build`: a new run's simulation (stored first) or a stored one's, from its checkpoint.
+- `tick_task`: `TickTask`, the paper's first thread: ticks with their boundaries, and
+  episodes.
+- `reward_task`: `RewardTask`, the paper's second thread: rewards applied at their
+  boundaries.
 - `boundary`: `Boundary`, the one hand-over between those two tasks (a reward is applied
   at the tick boundary it was stamped with, and the tick after waits for it).
-- `pacing`: the realtime tick rate's bounds, the `Pacer` clock, exact sleeps.
+- `pacing`: the tick task's one loop and its policies (fast, realtime, replay), the
+  controls the outside sets, the realtime tick rate's bounds, the `Pacer` clock, exact
+  sleeps.
 - `jobs`: what the tasks hand each other (`RewardJob`, `CommandJob`, `EpisodeJob`) on typed
   queues.
 - `writer`: `RunWriter`, the acknowledgement task, the learning writer and the episode
@@ -27,9 +33,10 @@ from core.engine.bus import (
     SubscriptionClosed,
     TickPublished,
 )
-from core.engine.engine import FAST_YIELD_TICKS, RunEngine
+from core.engine.engine import RunEngine
 from core.engine.jobs import RewardAck
 from core.engine.pacing import (
+    FAST_YIELD_TICKS,
     HZ_MAX,
     HZ_MIN,
     MonotonicPacer,

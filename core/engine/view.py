@@ -162,16 +162,21 @@ class RunView:
 
     def released_by_kp(self, snap: Snapshot) -> bool:
         """Whether `snap`'s behaviour was released through an association KP taught."""
-        if snap.how.value != "released":
-            return False
-        network, b = self._engine.sim.brain.network, snap.behaviour
-        for s in snap.stimuli:
-            a = network.get(s, b)
-            if a is not None and a.source == "kp":
-                return True
-        return False
+        return released_by_kp(self._engine.sim.brain.network, snap)
 
     @property
     def tick_watchers(self) -> int:
         """How many subscriptions take tick snapshots (0: a tick publishes nothing)."""
         return self._engine.bus.tick_subscribers
+
+
+def released_by_kp(network: BehaviourNetwork, snap: Snapshot) -> bool:
+    """Whether `snap`'s behaviour was released through an association of `network` KP taught."""
+    if snap.how.value != "released":
+        return False
+    b = snap.behaviour
+    for s in snap.stimuli:
+        a = network.get(s, b)
+        if a is not None and a.source == "kp":
+            return True
+    return False

@@ -92,7 +92,7 @@ def test_each_stored_episode_traces_exactly_its_ticks_as_the_headless_loop_ran_t
 
 def test_a_watched_fast_run_ticks_as_an_unwatched_one() -> None:
     # Unwatched, fast mode ticks in a loop that checks subscribers and held rewards once
-    # per burst (`RunEngine._burst`); watched, every tick goes through `_tick`. Both must
+    # per burst (`TickTask.burst`); watched, every tick goes through `_tick`. Both must
     # store the same run and count every tick.
     plain = headless_run(get_condition("kp"), 6, 5, catalog=CATALOG)
     runs = []

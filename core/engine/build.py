@@ -1,0 +1,162 @@
+"""A run's simulation as the engine starts it: a new run's, stored first, or a stored one's.
+
+`RunEngine.create` and `RunEngine.restore` are these functions and the engine around what
+they return; they check the spec (condition, learning parameters, world and sensor
+definition, rate) before anything is stored or ticks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from core.brain.brain import BrainConfig
+from core.brain.catalog import Catalog
+from core.brain.network import Association, BehaviourNetwork
+from core.engine.learning import pair
+from core.engine.pacing import check_hz
+from core.errors import CatalogError, RunStateError
+from core.params import applicable, configure
+from core.ports import Checkpoint, Mode, RunSpec, RunStatus, RunStore, RunTotals, StoredRun
+from core.run.checkpoint import decode, encode, export_state, restore_simulation
+from core.run.conditions import Condition, get_condition
+from core.run.setup import Setup, condition_network
+from core.run.simulation import Simulation
+from core.sim.world import WorldConfig
+
+
+def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
+    """The spec's condition and brain settings (`RunStateError`, `ValueError` if unfit)."""
+    found = get_condition(spec.condition)
+    if found.agent != "brain":
+        raise RunStateError(f"condition {found.name!r} is not run by the engine")
+    params = dict(spec.params)
+    unknown = set(params) - {"eta", "epsilon", "synthesize"}
+    if unknown:
+        raise ValueError(f"unknown learning parameters: {', '.join(sorted(unknown))}")
+    # The API accepts these for every condition and ignores those a condition does not use.
+    return configure(found, applicable(found, params))
+
+
+def setup(spec: RunSpec, catalog: Catalog | None) -> tuple[Setup, Catalog]:
+    """The run's setup and catalogue: `catalog` if given (it must fit), else the setup's.
+
+    A spec that names no sensor definition takes the given catalogue's.
+    """
+    sensors = spec.sensors or (catalog.definition if catalog is not None else "")
+    chosen = Setup(spec.world, sensors)
+    if catalog is None:
+        return chosen, chosen.catalog()
+    if catalog.definition and catalog.definition != chosen.sensors_name:
+        raise CatalogError(
+            f"the catalogue uses sensor definition {catalog.definition!r}, the run "
+            f"{chosen.sensors_name!r}"
+        )
+    return chosen, catalog
+
+
+def new_simulation(
+    spec: RunSpec,
+    catalog: Catalog,
+    world_config: WorldConfig,
+    network: tuple[Association, ...] | None,
+) -> Simulation:
+    """A fresh simulation for a run.
+
+    Its network is `network`, else the spec's knowledge set, else the condition's own;
+    a knowledge set is taken in its variant for the catalogue's sensor definition
+    (`core.run.setup.condition_network`).
+    """
+    cond, config = condition(spec)
+    if network is not None:
+        net = BehaviourNetwork(len(catalog.stimuli), network)
+    else:
+        base = cond if spec.network is None else replace(cond, network=spec.network)
+        net = condition_network(catalog, base)
+    return Simulation(
+        cond,
+        spec.seed,
+        catalog=catalog,
+        world_config=world_config,
+        network=net,
+        brain_config=config,
+        defer_rewards=True,
+    )
+
+
+def create_run(
+    spec: RunSpec,
+    store: RunStore,
+    *,
+    catalog: Catalog | None,
+    world_config: WorldConfig | None,
+    network: tuple[Association, ...] | None,
+) -> tuple[int, RunSpec, Simulation]:
+    """A new run stored with status created: its id, its spec as stored, its simulation.
+
+    The spec is stored with its world preset and sensor definition resolved by name.
+    """
+    check_hz(spec.hz)
+    chosen, catalog = setup(spec, catalog)
+    chosen = chosen.resolved()
+    spec = replace(spec, world=chosen.world, sensors=chosen.sensors)
+    sim = new_simulation(spec, catalog, world_config or chosen.world_config(), network)
+    pairs = tuple(pair(sim, a) for a in sim.brain.network)
+    run_id = store.create_run(spec, pairs)
+    # A checkpoint before the first tick: a run can be rebuilt whatever network it
+    # started from (an edited one may change later) and however early it stopped.
+    state = export_state(sim)
+    state["last_external_reward_id"] = 0
+    store.end_episodes(run_id, (), Checkpoint(0, 0, encode(state)), RunTotals(0, 0, 0))
+    return run_id, spec, sim
+
+
+@dataclass(frozen=True, slots=True)
+class Restored:
+    """A stored run rebuilt from its last checkpoint, with the log it replays from there."""
+
+    spec: RunSpec
+    """As stored, in the mode asked for."""
+    sim: Simulation
+    stored: StoredRun
+    totals: RunTotals
+    last_external_id: int
+    """The newest trainer's reward the checkpoint holds."""
+
+
+def restore_run(
+    run_id: int,
+    store: RunStore,
+    *,
+    catalog: Catalog | None,
+    world_config: WorldConfig | None,
+    mode: Mode | None,
+) -> Restored:
+    """A stored run (neither finished nor running) rebuilt from its last checkpoint.
+
+    It runs in the world and sensor definition it was stored with (the defaults for a
+    run stored before runs kept them).
+    """
+    stored = store.load_run(run_id)
+    if stored.status in (RunStatus.FINISHED, RunStatus.RUNNING):
+        raise RunStateError(f"run {run_id} is {stored.status.value}: nothing to resume")
+    spec = stored.spec
+    chosen, catalog = setup(spec, catalog)
+    world_config = world_config or chosen.world_config()
+    if mode is not None:
+        spec = replace(spec, mode=mode)
+    cond, config = condition(spec)
+    if stored.checkpoint is None:  # stored before runs got a checkpoint at creation
+        sim = new_simulation(spec, catalog, world_config, None)
+        return Restored(spec, sim, stored, RunTotals(0, 0, 0), 0)
+    state = decode(stored.checkpoint.state)
+    sim = restore_simulation(
+        cond,
+        spec.seed,
+        state,
+        catalog,
+        world_config=world_config,
+        defer_rewards=True,
+        brain_config=config,
+    )
+    skip = int(state.get("last_external_reward_id", 0))
+    return Restored(spec, sim, stored, stored.totals, skip)
