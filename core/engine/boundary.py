@@ -67,6 +67,17 @@ class Boundary:
             self.queue(job)
         self.held.clear()
 
+    def release(self, boundary: int) -> None:
+        """Release the rewards due up to `boundary` without waiting: a paused run's.
+
+        The reward task applies them in stamp order; the tick task's `settle` of that
+        boundary, when the run goes on, finds them applied.
+        """
+        for job in self.due:
+            if job.stamp > boundary:
+                break
+            job.release.set()
+
     async def settle(self, boundary: int, *, internal_only: bool, limit: float) -> None:
         """Apply, in order, every reward stamped up to `limit`, each waiting for the last.
 

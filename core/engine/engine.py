@@ -205,18 +205,19 @@ class RunEngine:
         """Inject a reward; returns once it is in the reward log (durable).
 
         It is stamped with the next tick boundary, so it credits every STM record so far.
+        A paused run takes it too and applies it at once, at the boundary it is paused at.
         `uid` is its id from its arrival on ("": one made of its source, episode, boundary
         and how many rewards this engine took).
         """
         # Refused before it is queued: a note no database stores would fail the writer
         # that logs it, and with it the run. (A logged note is replayed as it was.)
         check_storable(note, "a reward's note")
-        self._check_running()
+        self._check_running(paused=True)
         if not self._ticks.replayed.is_set():
             # A resumed run replays its log first; a new reward stamped inside the replay
             # would be applied in an order a later replay could not repeat.
             await self._ticks.replayed.wait()
-            self._check_running()
+            self._check_running(paused=True)
         next_boundary = self.sim.tick_count + 1
         stamp = self._boundary.stamp(next_boundary)
         self._arrivals += 1
@@ -230,6 +231,7 @@ class RunEngine:
             arrived=time.perf_counter(),
         )
         self._boundary.add(job, next_boundary)
+        self._ticks.credit_paused()
         self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack

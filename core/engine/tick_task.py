@@ -309,6 +309,17 @@ class TickTask:
         if self.controls.paused:
             self._apply_commands(job.stamp)
 
+    def credit_paused(self) -> None:
+        """A paused run's rewards due at its boundary apply now, not at the next tick.
+
+        Nothing ticks before that boundary, so they credit what they would credit there:
+        the STM records before it. Not while the boundary is being settled (a step runs:
+        a reward then is held for the next) nor once the episode ended (its rewards apply
+        after the reset, as a replay applies them).
+        """
+        if self.controls.paused and not self.need_reset and not self.boundary.settling:
+            self.boundary.release(self.sim.tick_count + 1)
+
     async def settle(
         self, boundary: int, *, internal_only: bool = False, until: float | None = None
     ) -> None:

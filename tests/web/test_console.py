@@ -103,7 +103,9 @@ def test_rewarding_a_run_that_is_not_running_shows_why(page: Page, server: LiveS
     open_view(page, server, f"console/{run_id}")
     expect(page.locator("#run-status")).to_have_text("created")
     page.keyboard.press("+")
-    expect(page.locator(".toast.error").last).to_contain_text("rewards go to a running run")
+    expect(page.locator(".toast.error").last).to_contain_text(
+        "rewards go to a running or paused run"
+    )
     assert server.client.get(f"/api/runs/{run_id}/rewards").json()["count"] == 0
 
 

@@ -32,9 +32,10 @@ async def inject_reward(
     state: StateDep,
     who: PrincipalDep,
 ) -> RewardAccepted:
-    """Reward a running run now: answered once the reward is in the reward log.
+    """Reward a running or paused run now: answered once the reward is in the reward log.
 
-    It is stamped with the next tick boundary and credits the STM records before it.
+    It is stamped with the next tick boundary and credits the STM records before it (a
+    paused run's at once, at the boundary it is paused at).
     """
     limiter = state.rewards_limiter
     # The trainer: the token when writes need it (checked: this is a write), unless a

@@ -197,7 +197,7 @@ def test_shutdown_with_a_pending_reward_commits_it_and_leaves_no_task() -> None:
     assert store.load_run(engine.run_id).status is RunStatus.STOPPED
 
 
-def test_pause_resume_and_rewards_need_a_running_run() -> None:
+def test_pause_resume_and_rewards_need_a_running_or_paused_run() -> None:
     store = InMemoryRunStore(CATALOG)
     engine = RunEngine.create(realtime("delayed", 4, hz=500.0), store, catalog=CATALOG)
     sub = engine.subscribe(maxsize=1000)
@@ -207,8 +207,8 @@ def test_pause_resume_and_rewards_need_a_running_run() -> None:
         e.pause()
         await asyncio.sleep(0.01)
         frozen = e.sim.tick_count
-        with pytest.raises(RunStateError):
-            await e.reward(1.0)
+        ack = await e.reward(1.0)
+        assert ack.tick == frozen + 1
         await asyncio.sleep(0.05)
         assert e.sim.tick_count == frozen
         e.resume()
@@ -229,6 +229,52 @@ def test_pause_resume_and_rewards_need_a_running_run() -> None:
             await engine.reward(1.0)
 
     asyncio.run(not_running())
+
+
+def test_a_paused_run_credits_a_reward_at_its_boundary_and_a_stepping_trainer_its_step() -> None:
+    """Pause, reward what the robot did; step a tick, reward what it just did: each reward
+    is applied while the run stays paused, crediting exactly the records before the
+    boundary it is paused at, and a replay of the log learns the same."""
+    store = InMemoryRunStore(CATALOG)
+    engine = RunEngine.create(realtime("kp", 3, hz=500.0), store, catalog=CATALOG)
+    sub = engine.subscribe(maxsize=100_000)
+    seen: list[tuple[int, RewardApplied]] = []
+
+    async def applied() -> RewardApplied:
+        async with asyncio.timeout(30):  # a bound for a hang, not a speed test
+            while True:
+                for ev in sub.drain():
+                    if isinstance(ev, RewardApplied) and ev.source == "trainer":
+                        return ev
+                await asyncio.sleep(0.001)
+
+    async def script(e: RunEngine) -> None:
+        await wait_ticks(e, 40)
+        e.pause()
+        while e.status is not RunStatus.PAUSED:
+            await asyncio.sleep(0.001)
+        await asyncio.sleep(0.02)
+        frozen = e.sim.tick_count
+        ack = await e.reward(1.0, note="paused")
+        seen.append((ack.tick, await applied()))
+        for value in (-0.5, 0.5, 1.0):
+            tick = await e.step()
+            ack = await e.reward(value)
+            assert ack.tick == tick + 1
+            seen.append((ack.tick, await applied()))
+        assert e.sim.tick_count == frozen + 3 and e.status is RunStatus.PAUSED
+        e.stop()
+
+    asyncio.run(drive(engine, script))
+    assert len(seen) == 4
+    for stamp, event in seen:
+        assert event.tick == stamp
+        assert all(c.tick < stamp for c in event.credits)
+    assert seen[0][1].credits, "the paused reward found the episode's records"
+    assert sum(len(ev.credits) for _, ev in seen[1:]) >= 1, "a step's record was credited"
+    assert all(c.d_k == 1 for _, ev in seen[1:] for c in ev.credits)
+    assert [r.applied for r in store.rewards(engine.run_id)] == [True] * 4
+    assert store.ltm(engine.run_id) == headless_ltm("kp", 3, store.rewards(engine.run_id))
 
 
 def test_an_edit_reaches_the_robot_at_the_next_boundary_and_is_logged() -> None:

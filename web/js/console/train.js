@@ -94,8 +94,8 @@ export async function reward(value, note) {
     button.classList.add("pressed");
     setTimeout(() => button.classList.remove("pressed"), 150);
   }
-  if (run.status !== RunStatus.running) {
-    toast(`Run ${run.id} is ${run.status}: rewards go to a running run.`, "error");
+  if (run.status !== RunStatus.running && run.status !== RunStatus.paused) {
+    toast(`Run ${run.id} is ${run.status}: rewards go to a running or paused run.`, "error");
     return;
   }
   const input = $("#reward-note");
