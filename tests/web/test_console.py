@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ from liveharness import wait_status
 from playwright.sync_api import Browser, Page, expect
 from webpage import cell, eventually, open_view
 
-from bench.liveserver import LiveServer, start_server, stop_server
+from bench.liveserver import LiveServer, stop_server
 
 
 def create_run(server: LiveServer, **body: Any) -> int:
@@ -159,7 +160,7 @@ def test_a_bad_run_shows_the_apis_message_and_keeps_the_form(
 
 @pytest.mark.parametrize("view", ["editor", "console"])
 def test_the_page_recovers_when_the_server_restarts(
-    browser: Browser, tmp_path: Path, view: str
+    browser: Browser, tmp_path: Path, view: str, start_server: Callable[..., LiveServer]
 ) -> None:
     first = start_server(tmp_path / "restart.db")
     context = browser.new_context(viewport={"width": 1280, "height": 800})

@@ -9,6 +9,7 @@ behind a dialog or per key repeat, and messages that do not pile up while offlin
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +20,7 @@ from liveharness import wait_status
 from playwright.sync_api import Browser, Page, Route, expect
 from webpage import eventually, open_view
 
-from bench.liveserver import LiveServer, start_server, stop_server
+from bench.liveserver import LiveServer, stop_server
 
 WIDTHS = [1024, 1440]
 
@@ -358,7 +359,7 @@ def test_episodes_the_first_load_missed_are_fetched_while_the_run_goes_on(
 
 
 def test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back(
-    browser: Browser, tmp_path: Path
+    browser: Browser, tmp_path: Path, start_server: Callable[..., LiveServer]
 ) -> None:
     first = start_server(tmp_path / "offline.db")
     try:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -212,7 +212,7 @@ def test_two_viewers_watch_different_runs_without_steering_each_other(
 
 
 def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
-    browser: Browser, tmp_path: Path
+    browser: Browser, tmp_path: Path, start_server: Callable[..., LiveServer]
 ) -> None:
     # viser's page reconnects by itself after a restart, as a new viewer; on / it would
     # follow the newest run, on /run/<id> it gets its run back.
@@ -270,7 +270,7 @@ def test_a_view_opened_on_a_runs_url_keeps_its_run_across_a_restart(
 
 
 def test_a_view_past_max_viewers_says_it_is_full_then_opens_when_one_leaves(
-    browser: Browser, tmp_path: Path
+    browser: Browser, tmp_path: Path, start_server: Callable[..., LiveServer]
 ) -> None:
     full = start_server(tmp_path / "full.db", env={"SRLAB_VISER_MAX_VIEWERS": "1"})
     pages: list[Page] = []

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import Any, TypeVar
 
-from playwright.sync_api import Locator, Page, Request, expect
+from playwright.sync_api import ConsoleMessage, Error, Locator, Page, Request, Response, expect
 from playwright.sync_api import TimeoutError as PlaywrightTimeoutError
 
 from bench.liveserver import LiveServer
@@ -17,37 +17,65 @@ T = TypeVar("T")
 def open_view(page: Page, server: LiveServer, route: str) -> None:
     """Open the page at `route` (e.g. "editor/mine") and wait until it has loaded.
 
-    A page that never gets ready fails with what it showed (its toasts, the service's
-    health), so a rare stall says where it stood.
+    A page that never gets ready fails with what it showed and did (its toasts, its
+    connection badge, the requests it still waits for, the answers that were not 2xx, the
+    requests that failed, its console's errors, the service's health), so a rare stall
+    says where it stood.
     """
-    pending: dict[Request, float] = {}
     began = time.monotonic()
+    pending: dict[Request, float] = {}
+    seen: list[str] = []
+
+    def at() -> str:
+        return f"{time.monotonic() - began:.1f} s"
 
     def sent(request: Request) -> None:
         pending[request] = time.monotonic() - began
 
-    def done(request: Request) -> None:
+    def finished(request: Request) -> None:
         pending.pop(request, None)
 
-    page.on("request", sent)
-    page.on("requestfinished", done)
-    page.on("requestfailed", done)
+    def failed(request: Request) -> None:
+        pending.pop(request, None)
+        seen.append(f"{request.method} {request.url} failed ({request.failure}) at {at()}")
+
+    def answered(response: Response) -> None:
+        if not 200 <= response.status < 300:
+            seen.append(f"{response.request.method} {response.url} -> {response.status} at {at()}")
+
+    def console(message: ConsoleMessage) -> None:
+        if message.type == "error":
+            seen.append(f"console error at {at()}: {message.text}")
+
+    def error(exc: Error) -> None:
+        seen.append(f"page error at {at()}: {exc}")
+
+    listeners: list[tuple[str, Callable[[Any], None]]] = [
+        ("request", sent),
+        ("requestfinished", finished),
+        ("requestfailed", failed),
+        ("response", answered),
+        ("console", console),
+        ("pageerror", error),
+    ]
+    for event, listener in listeners:
+        page.on(event, listener)  # type: ignore[call-overload]
     try:
         page.goto(f"{server.url}/#/{route}")
         page.wait_for_selector("body[data-ready=true]")
     except PlaywrightTimeoutError:
         toasts = page.locator(".toast").all_inner_texts()
+        badge = page.locator("#conn").get_attribute("class", timeout=5000)
         health = server.client.get("/api/health")
         unanswered = [f"{r.method} {r.url} (sent at {t:.1f} s)" for r, t in pending.items()]
         raise AssertionError(
-            f"the page at #/{route} never got ready; its toasts: {toasts}; "
-            f"requests it still waits for: {unanswered}; "
+            f"the page at #/{route} never got ready; its toasts: {toasts}; its badge: "
+            f"{badge}; requests it still waits for: {unanswered}; what went wrong: {seen}; "
             f"the service's health: {health.status_code} {health.text}"
         ) from None
     finally:
-        page.remove_listener("request", sent)
-        page.remove_listener("requestfinished", done)
-        page.remove_listener("requestfailed", done)
+        for event, listener in listeners:
+            page.remove_listener(event, listener)
 
 
 def cell(page: Page, stimulus: str, behaviour: str, where: str = "#matrix") -> str:

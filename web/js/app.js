@@ -112,10 +112,15 @@ async function boot() {
     if (e.key === "?" && !typing(e)) $("#help-dialog").showModal();
   });
   keepParticipant();
-  // Wait for the service (it may be starting), then load the catalogue once.
+  // Wait for the service (it may be starting) and load the catalogue once: a request
+  // that fails on the way (the service restarting, a connection dropped) is tried again,
+  // so the page never waits for good on a first load that went wrong.
+  let catalog;
   for (;;) {
     try {
       health = await get("/health");
+      const [stimuli, behaviours, sensors] = await Promise.all([get("/stimuli"), get("/behaviours"), get("/sensors")]);
+      catalog = { stimuli, behaviours, sensors };
       break;
     } catch (error) {
       if (error.status === 401 && participantToken()) {
@@ -130,14 +135,17 @@ async function boot() {
     }
   }
   setOnline(true);
-  const [stimuli, behaviours, sensors] = await Promise.all([get("/stimuli"), get("/behaviours"), get("/sensors")]);
-  const catalog = { stimuli, behaviours, sensors };
   editor.init(catalog);
   console_.init(catalog);
   studies.init();
   ready = true;
   window.addEventListener("hashchange", route);
-  await route();
+  try {
+    await route();
+  } catch (error) {
+    // Shown, not swallowed: the page stays usable (the tabs, the next poll) and says why.
+    toast(error.message || String(error), "error");
+  }
   setTimeout(heartbeat, HEARTBEAT_MS);
   document.body.dataset.ready = "true";
 }
