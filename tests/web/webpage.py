@@ -13,6 +13,9 @@ from bench.liveserver import LiveServer
 
 T = TypeVar("T")
 
+NETWORK_CHANGE_WAIT_MS = 15_000
+"""How long a page may take to get ready before a load Chromium aborted is tried again."""
+
 
 def open_view(page: Page, server: LiveServer, route: str) -> None:
     """Open the page at `route` (e.g. "editor/mine") and wait until it has loaded.
@@ -62,7 +65,19 @@ def open_view(page: Page, server: LiveServer, route: str) -> None:
         page.on(event, listener)  # type: ignore[call-overload]
     try:
         page.goto(f"{server.url}/#/{route}")
-        page.wait_for_selector("body[data-ready=true]")
+        try:
+            page.wait_for_selector("body[data-ready=true]", timeout=NETWORK_CHANGE_WAIT_MS)
+        except PlaywrightTimeoutError:
+            if not any("ERR_NETWORK_CHANGED" in line for line in seen):
+                page.wait_for_selector("body[data-ready=true]")
+            else:
+                # Chromium aborts what it is loading when the machine's interfaces change
+                # (podman's tests add and remove networks beside the browser tests): a
+                # module that never loaded leaves a page that never starts. Load it again,
+                # as a person would.
+                seen.append("reloaded after ERR_NETWORK_CHANGED")
+                page.reload()
+                page.wait_for_selector("body[data-ready=true]")
     except PlaywrightTimeoutError:
         toasts = page.locator(".toast").all_inner_texts()
         badge = page.locator("#conn").get_attribute("class", timeout=5000)
