@@ -10,7 +10,6 @@ study's participant routes and the catalogue, and nothing more (403), whatever t
 
 from __future__ import annotations
 
-import hmac
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Annotated
@@ -19,7 +18,7 @@ from fastapi import Depends, HTTPException, Request, status
 from starlette.concurrency import run_in_threadpool
 
 from core.studies import Participant, ParticipantStatus, Study, token_digest
-from server.api.deps import StateDep, bearer
+from server.api.deps import StateDep, bearer, holds_token
 from server.services.studies import PARTICIPANT_PREFIX
 
 REWARDS_PATH = "/api/runs/{run_id}/rewards"
@@ -75,11 +74,7 @@ async def principal(request: Request, state: StateDep) -> Principal:
             raise _unknown()
         who = Principal(Role.PARTICIPANT, *found)
     else:
-        settings = state.settings
-        token = settings.token or ""
-        organiser = not settings.writes_need_token or (
-            given is not None and hmac.compare_digest(given.encode(), token.encode())
-        )
+        organiser = holds_token(state.settings, given)
         who = Principal(Role.ORGANISER if organiser else Role.ANONYMOUS)
     request.scope[SCOPE_KEY] = who
     return who

@@ -76,17 +76,24 @@ def bearer(request: Request) -> str | None:
     return (given.strip() or None) if scheme.lower() == "bearer" else None
 
 
+def holds_token(settings: Settings, given: str | None) -> bool:
+    """Whether a request carrying `given` has the organiser's rights.
+
+    It has when no token is needed here, or when `given` is `SRLAB_TOKEN` (compared in
+    constant time).
+    """
+    if not settings.writes_need_token:
+        return True
+    token = settings.token or ""
+    return bool(given) and hmac.compare_digest((given or "").encode(), token.encode())
+
+
 async def require_write(request: Request, state: StateDep) -> None:
     """Writes need `Authorization: Bearer $SRLAB_TOKEN` when the service is reachable."""
-    settings = state.settings
-    if not settings.writes_need_token:
-        return
     who = request.scope.get("srlab.principal")  # `server.api.access.SCOPE_KEY`
     if who is not None and who.participant is not None:
         return  # a participant's token, already held to their own run (`server.api.access`)
-    given = bearer(request) or ""
-    token = settings.token or ""
-    if not given or not hmac.compare_digest(given.encode(), token.encode()):
+    if not holds_token(state.settings, bearer(request)):
         raise HTTPException(
             status.HTTP_401_UNAUTHORIZED,
             "this write needs `Authorization: Bearer <SRLAB_TOKEN>`",
