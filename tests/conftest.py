@@ -274,7 +274,6 @@ SLOW_MODULES = frozenset(
         "reliability/test_serve_kill.py",
         "reliability/test_sigterm.py",
         "reliability/test_storage_errors.py",
-        "reliability/test_store_restart.py",
         "benches/test_benches.py",  # each bench in a subprocess
         "server/test_e2e_serve.py",
         "server/test_listening_sockets.py",
