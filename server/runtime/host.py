@@ -5,7 +5,8 @@ takes the closed message set of `core.engine.messages` and nothing else: a comma
 (`perform`), a query (answered by the handler registered for its type), a subscription
 to a run's events. What it tells the outside goes to its `Outlet`: each run's start, its
 `RunState` (after tick boundaries at most every `STATE_PERIOD_S`, on every status change,
-and before every answer), its events, its end. The service reaches a host through a link
+before every answer, and before events its catalogue has changed for), its events, its
+end. The service reaches a host through a link
 (`server.runtime.links`): in its own process, or in a process of its own.
 
 A created run is stored with a checkpoint before its first tick, and a run that has ended
@@ -243,8 +244,11 @@ class RunHost:
 
     # --- what the host says -------------------------------------------------------------
 
-    def sync(self, run_id: int) -> None:
-        """Publish the run's state if it changed since it was last published."""
+    def sync(self, run_id: int, *, catalog_only: bool = False) -> None:
+        """Publish the run's state if it changed since it was last published.
+
+        With `catalog_only`, only if its catalogue did (what names a run's events).
+        """
         engine = self._engines.get(run_id)
         last = self._sent.get(run_id)
         if engine is None or last is None:
@@ -255,7 +259,7 @@ class RunHost:
         new_catalog = catalog is not sent_catalog
         if new_catalog:
             version += 1
-        if not new_catalog and _same(sent, view):
+        if not new_catalog and (catalog_only or _same(sent, view)):
             return
         state = state_of(view, version)
         self._sent[run_id] = (state, catalog, version)
@@ -282,7 +286,10 @@ class RunHost:
                 except SubscriptionClosed:
                     return
                 events = [first, *sub.drain()]
-                self.sync(run_id)  # a new catalogue before the events that name it
+                # A new catalogue before the events that name it; the figures the events
+                # move follow every STATE_PERIOD_S (a state per event batch would double
+                # what crosses to the service for every followed run).
+                self.sync(run_id, catalog_only=True)
                 await deliver(events)
         finally:
             self._unsubscribe(run_id, sub)
