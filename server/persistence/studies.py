@@ -3,10 +3,11 @@
 Each method is one transaction. The recruiters' ids live in `participant_identities`
 only; the study's secret is read here, to make pseudonyms, and never leaves.
 
-A participant found by their token is kept for `TOKEN_CACHE_S` (`recent_token`): every
-request of theirs is authorised by it, and a query each would cost more than the request.
-Any write through the repository forgets them all; a write by another service sharing the
-database shows here within `TOKEN_CACHE_S`.
+A participant found by their token once they train (their run is theirs for good) is kept
+for `TOKEN_CACHE_S` (`recent_token`): every request of theirs is authorised by it, and a
+query each would cost more than the request. Any write through the repository forgets them
+all. Another service sharing the database may finish them meanwhile; the routes that
+depend on it (rewards, their page) check the budget on the run itself.
 """
 
 from __future__ import annotations
@@ -39,8 +40,10 @@ from server.persistence.orm import ParticipantIdentityRow, ParticipantRow, Study
 
 ANONYMOUS = "anonymous:"
 """What an anonymous participant's pseudonym is made from, before their token's digest."""
-TOKEN_CACHE_S = 5.0
-"""How long a participant read by their token is answered from memory."""
+TOKEN_CACHE_S = 60.0
+"""How long a participant read by their token is answered from memory, once they train."""
+SETTLED = frozenset({ParticipantStatus.TRAINING, ParticipantStatus.DONE})
+"""Participants kept: those before (invited, consented) change on their next steps."""
 TOKEN_CACHE_MAX = 100_000
 """The most participants kept; past it, all are forgotten (and read again as they call)."""
 
@@ -222,14 +225,17 @@ class SqlAlchemyStudyRepository:
             study = s.get_one(StudyRow, row.study_id)
             found = _participant(row, study.name), _study(s, study)
         with self._recent_lock:
-            if self._writes == writes:  # no write began meanwhile
+            if self._writes == writes and found[0].status in SETTLED:  # no write meanwhile
                 if len(self._recent) >= TOKEN_CACHE_MAX:
                     self._recent.clear()
                 self._recent[digest] = (time.monotonic(), found)
         return found
 
     def recent_token(self, digest: str) -> tuple[Participant, Study] | None:
-        """`by_token`'s answer of the last `TOKEN_CACHE_S`, without a query; None if none."""
+        """`by_token`'s answer of the last `TOKEN_CACHE_S`, without a query; None if none.
+
+        Only participants who train (or are done) are kept.
+        """
         with self._recent_lock:
             kept = self._recent.get(digest)
         if kept is None or time.monotonic() - kept[0] > TOKEN_CACHE_S:
