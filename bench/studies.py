@@ -43,6 +43,7 @@ from typing import Any
 
 from bench.figures import percentile
 from bench.liveserver import ROOT
+from bench.procs import tree_cpu_seconds
 from bench.service.clients import HOST, RawClient
 from bench.service.cpu import CpuMeter
 from bench.service.harness import Server, call, print_log, wait_healthy
@@ -588,18 +589,24 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
         spec = {"trainers": people, "seconds": args.seconds, "seed": args.seed, "poll": args.poll}
         (folder / "spec.json").write_text(json.dumps(spec))
         meter = CpuMeter(servers[0].pid)
+        others = [(s.pid, tree_cpu_seconds(s.pid)) for s in servers[1:]]
+        wall0 = time.perf_counter()
         subprocess.run(
             [sys.executable, "-m", "bench.studies", "--worker", str(folder)],
             cwd=ROOT,
             check=True,
         )
         cpu = meter.report("trainers")
+        for k, (pid, before) in enumerate(others, 1):
+            after = tree_cpu_seconds(pid)
+            if before is not None and after is not None:
+                share = (after - before) / (time.perf_counter() - wall0)
+                cpu += f"; service {k} {share:.0%}"
         load1 = os.getloadavg()
         tallies = json.loads((folder / "tallies.json").read_text())
         states, log = asyncio.run(collect(seats))
         result = figures(tallies, states, log)
-        first = " (of the first service)" if len(servers) > 1 else ""
-        print(f"CPU while the trainers ran: {cpu}{first}")
+        print(f"CPU while the trainers ran: {cpu}")
         print(f"load average (1 min) before / after: {load0[0]:.2f} / {load1[0]:.2f}")
         print_figures(result, states)
         return result
