@@ -279,10 +279,11 @@ class RunHost:
         while True:
             runs = list(self._engines)
             period = max(STATE_PERIOD_S, len(runs) / STATES_PER_S)
-            for run_id in runs or [None]:
-                await asyncio.sleep(period / max(1, len(runs)))
-                if run_id is not None:
-                    self.sync(run_id)
+            if not runs:
+                await asyncio.sleep(period)
+            for run_id in runs:
+                await asyncio.sleep(period / len(runs))
+                self.sync(run_id)
 
     async def _watch(self, engine: RunEngine) -> None:
         """Publish a run's status changes as they come (cancelled when its task ends)."""
