@@ -134,6 +134,7 @@ bench: install
 	$(BIN)/python -m bench.slices
 	$(BIN)/python -m bench.store
 	$(BIN)/python -m bench.service
+	$(BIN)/python -m bench.studies --trainers 64
 	$(BIN)/python -m bench.viewer
 
 migrate: install

@@ -167,6 +167,13 @@ class StudyRepository(Protocol):
         """The participant whose token has this digest, and their study; None if none."""
         ...
 
+    def recent_token(self, digest: str) -> tuple[Participant, Study] | None:
+        """`by_token`'s answer if it was read lately, without waiting on storage; else None.
+
+        A request's authorisation asks this first and `by_token` only when it answers None.
+        """
+        ...
+
     def consent(self, participant_id: int, version: str) -> Participant:
         """Record consent to `version` and assign a condition, in one step.
 

@@ -23,11 +23,14 @@ class Settings(BaseSettings):
         token: bearer token every write needs when the service is reachable from beyond
             this machine (`reachable_through`); it is required then.
         max_runs: runs that may tick at the same time; past it, starting one is refused
-            with 429.
+            with 429. The default is as many 10 Hz realtime runs, each followed and
+            rewarded by its trainer, as a 2-core machine paced within the study goals
+            (docs/studies.md, "How far one machine goes").
         max_streams: live event streams (GET /api/runs/{id}/events) open at once, over
             every run; past it, or past `max_streams_per_run` on one run, a new stream is
             refused with 503 and `Retry-After`. Each stream costs the event loop that paces
-            realtime ticks some encoding per event.
+            realtime ticks some encoding per event. The default is two per run at
+            `max_runs`: a trainer's console and someone watching.
         max_streams_per_run: live event streams one run may have open at once.
         reward_rate_per_s: rewards a client may inject per second (a token bucket).
         reward_burst: how many rewards it may inject at once.
@@ -67,8 +70,8 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=1, le=65535)
     token: str | None = None
-    max_runs: int = Field(8, ge=1)
-    max_streams: int = Field(64, ge=1)
+    max_runs: int = Field(64, ge=1)
+    max_streams: int = Field(128, ge=1)
     max_streams_per_run: int = Field(16, ge=1)
     reward_rate_per_s: float = Field(20.0, gt=0)
     reward_burst: int = Field(40, ge=1)

@@ -54,14 +54,21 @@ class RawClient:
 
     name = "raw asyncio streams"
 
-    def __init__(self, port: int, connections: int, timeout_s: float) -> None:
+    def __init__(
+        self,
+        port: int,
+        connections: int,
+        timeout_s: float,
+        headers: dict[str, str] | None = None,
+    ) -> None:
         self._port = port
         self._timeout_s = timeout_s
         self._size = connections
         self._idle: asyncio.Queue[_Conn | None] = asyncio.Queue()
         for _ in range(connections):
             self._idle.put_nowait(None)  # opened when first used
-        self._host_header = f"Host: {HOST}:{port}\r\n"
+        extra = "".join(f"{k}: {v}\r\n" for k, v in (headers or {}).items())
+        self._host_header = f"Host: {HOST}:{port}\r\n{extra}"
 
     def _message(self, method: str, path: str, body: Any) -> bytes:
         head = f"{method} {path} HTTP/1.1\r\n{self._host_header}"

@@ -2,12 +2,20 @@
 
 Each method is one transaction. The recruiters' ids live in `participant_identities`
 only; the study's secret is read here, to make pseudonyms, and never leaves.
+
+A participant found by their token once they train (their run is theirs for good) is kept
+for `TOKEN_CACHE_S` (`recent_token`): every request of theirs is authorised by it, and a
+query each would cost more than the request. Any write through the repository forgets them
+all. Another service sharing the database may finish them meanwhile; the routes that
+depend on it (rewards, their page) check the budget on the run itself.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from contextlib import AbstractContextManager
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import AbstractContextManager, contextmanager
 from datetime import UTC, datetime
 
 from sqlalchemy import delete, func, select
@@ -32,6 +40,12 @@ from server.persistence.orm import ParticipantIdentityRow, ParticipantRow, Study
 
 ANONYMOUS = "anonymous:"
 """What an anonymous participant's pseudonym is made from, before their token's digest."""
+TOKEN_CACHE_S = 60.0
+"""How long a participant read by their token is answered from memory, once they train."""
+SETTLED = frozenset({ParticipantStatus.TRAINING, ParticipantStatus.DONE})
+"""Participants kept: those before (invited, consented) change on their next steps."""
+TOKEN_CACHE_MAX = 100_000
+"""The most participants kept; past it, all are forgotten (and read again as they call)."""
 
 
 def _utc(when: datetime) -> datetime:
@@ -91,9 +105,30 @@ class SqlAlchemyStudyRepository:
 
     def __init__(self, sessions: Callable[[], Session]) -> None:
         self._sessions = sessions
+        self._recent: dict[str, tuple[float, tuple[Participant, Study]]] = {}
+        self._recent_lock = threading.Lock()
+        self._writes = 0
+        """Writes begun: a read that saw another write begin keeps nothing."""
 
     def _transaction(self, what: str, *, write: bool) -> AbstractContextManager[Session]:
-        return transaction(self._sessions, what, write=write)
+        if write:
+            return self._writing(what)
+        return transaction(self._sessions, what, write=False)
+
+    @contextmanager
+    def _writing(self, what: str) -> Iterator[Session]:
+        """A write transaction; the participants kept by token are forgotten either side."""
+        self._forget()
+        try:
+            with transaction(self._sessions, what, write=True) as s:
+                yield s
+        finally:
+            self._forget()
+
+    def _forget(self) -> None:
+        with self._recent_lock:
+            self._writes += 1
+            self._recent.clear()
 
     def create(self, spec: StudySpec, secret: str) -> Study:
         """Store a new study; `StudyExistsError` when its name is taken."""
@@ -181,12 +216,31 @@ class SqlAlchemyStudyRepository:
 
     def by_token(self, digest: str) -> tuple[Participant, Study] | None:
         """The participant whose token has this digest, and their study."""
+        with self._recent_lock:
+            writes = self._writes
         with self._transaction("reading a participant", write=False) as s:
             row = s.scalar(select(ParticipantRow).where(ParticipantRow.token_hash == digest))
             if row is None:
                 return None
             study = s.get_one(StudyRow, row.study_id)
-            return _participant(row, study.name), _study(s, study)
+            found = _participant(row, study.name), _study(s, study)
+        with self._recent_lock:
+            if self._writes == writes and found[0].status in SETTLED:  # no write meanwhile
+                if len(self._recent) >= TOKEN_CACHE_MAX:
+                    self._recent.clear()
+                self._recent[digest] = (time.monotonic(), found)
+        return found
+
+    def recent_token(self, digest: str) -> tuple[Participant, Study] | None:
+        """`by_token`'s answer of the last `TOKEN_CACHE_S`, without a query; None if none.
+
+        Only participants who train (or are done) are kept.
+        """
+        with self._recent_lock:
+            kept = self._recent.get(digest)
+        if kept is None or time.monotonic() - kept[0] > TOKEN_CACHE_S:
+            return None
+        return kept[1]
 
     def _row(self, s: Session, participant_id: int) -> tuple[ParticipantRow, StudyRow]:
         row = s.get_one(ParticipantRow, participant_id)

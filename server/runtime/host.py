@@ -4,9 +4,10 @@
 takes the closed message set of `core.engine.messages` and nothing else: a command
 (`perform`), a query (answered by the handler registered for its type), a subscription
 to a run's events. What it tells the outside goes to its `Outlet`: each run's start, its
-`RunState` (after tick boundaries at most every `STATE_PERIOD_S`, on every status change,
-and before every answer), its events, its end. The service reaches a host through a link
-(`server.runtime.links`): in its own process, or in a process of its own.
+`RunState` (after tick boundaries at most every `STATE_PERIOD_S`, or less often past
+`STATES_PER_S` over all runs; on every status change, before every answer, and before
+events its catalogue has changed for), its events, its end. The service reaches a host
+through a link (`server.runtime.links`): in its own process, or in a process of its own.
 
 A created run is stored with a checkpoint before its first tick, and a run that has ended
 has all of its state in storage: neither keeps an engine here, so memory does not grow with
@@ -34,6 +35,10 @@ log = logging.getLogger("srlab.engines")
 
 STATE_PERIOD_S = 0.1
 """The shortest time between two `RunState`s of a run published for its ticks alone."""
+STATES_PER_S = 500.0
+"""The most `RunState`s published a second for ticks alone, over all runs (256 runs: each
+every 0.5 s): each is built, and with the engines in a process of their own, pickled and
+read by the service."""
 
 QueryHandler = Callable[[RunView, Any], object]
 """Answers one type of `Query` from a run's view, on the host's loop: a value."""
@@ -243,8 +248,11 @@ class RunHost:
 
     # --- what the host says -------------------------------------------------------------
 
-    def sync(self, run_id: int) -> None:
-        """Publish the run's state if it changed since it was last published."""
+    def sync(self, run_id: int, *, catalog_only: bool = False) -> None:
+        """Publish the run's state if it changed since it was last published.
+
+        With `catalog_only`, only if its catalogue did (what names a run's events).
+        """
         engine = self._engines.get(run_id)
         last = self._sent.get(run_id)
         if engine is None or last is None:
@@ -255,17 +263,26 @@ class RunHost:
         new_catalog = catalog is not sent_catalog
         if new_catalog:
             version += 1
-        if not new_catalog and _same(sent, view):
+        if not new_catalog and (catalog_only or _same(sent, view)):
             return
         state = state_of(view, version)
         self._sent[run_id] = (state, catalog, version)
         self.outlet.run_state(run_id, state, catalog if new_catalog else None)
 
     async def _publish(self) -> None:
-        """Every `STATE_PERIOD_S`, the state of each run that ticked since."""
+        """Every `STATE_PERIOD_S`, the state of each run that ticked since.
+
+        One run at a time, spread over the period (all at once, hundreds of runs' states
+        would hold up their ticks), and at most `STATES_PER_S` a second over all runs: the
+        period grows with the number of runs past that.
+        """
         while True:
-            await asyncio.sleep(STATE_PERIOD_S)
-            for run_id in list(self._engines):
+            runs = list(self._engines)
+            period = max(STATE_PERIOD_S, len(runs) / STATES_PER_S)
+            if not runs:
+                await asyncio.sleep(period)
+            for run_id in runs:
+                await asyncio.sleep(period / len(runs))
                 self.sync(run_id)
 
     async def _watch(self, engine: RunEngine) -> None:
@@ -282,7 +299,10 @@ class RunHost:
                 except SubscriptionClosed:
                     return
                 events = [first, *sub.drain()]
-                self.sync(run_id)  # a new catalogue before the events that name it
+                # A new catalogue before the events that name it; the figures the events
+                # move follow every STATE_PERIOD_S (a state per event batch would double
+                # what crosses to the service for every followed run).
+                self.sync(run_id, catalog_only=True)
                 await deliver(events)
         finally:
             self._unsubscribe(run_id, sub)

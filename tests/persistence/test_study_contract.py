@@ -130,6 +130,67 @@ def test_by_token_finds_the_participant_and_their_study(studies: StudyRepository
     assert studies.by_token(token_digest("nobody")) is None
 
 
+def _training(studies: StudyRepository, engine: Engine) -> int:
+    """A study whose one participant ("a", token "token-a-0") trains; their id."""
+    studies.create(STUDY, SECRET)
+    [pid] = invite(studies, "a")
+    studies.consent(pid, "v2")
+    studies.set_run(pid, SqlAlchemyRunStore(make_sessionmaker(engine)).create_run(SPEC, ()))
+    return pid
+
+
+def test_a_training_participant_read_by_token_is_kept_until_a_write(
+    studies: StudyRepository, engine: Engine
+) -> None:
+    pid = _training(studies, engine)
+    digest = token_digest("token-a-0")
+    assert studies.recent_token(digest) is None  # never read
+
+    read = studies.by_token(digest)
+
+    assert read is not None and studies.recent_token(digest) == read
+    assert studies.recent_token(token_digest("nobody")) is None
+    studies.finish(pid)  # any write forgets what was kept
+    assert studies.recent_token(digest) is None
+    again = studies.by_token(digest)
+    assert again is not None and again[0].status is ParticipantStatus.DONE
+    assert studies.recent_token(digest) == again
+
+
+def test_a_participant_before_training_is_read_each_time(studies: StudyRepository) -> None:
+    studies.create(STUDY, SECRET)
+    [pid] = invite(studies, "a")
+    digest = token_digest("token-a-0")
+    assert studies.by_token(digest) is not None
+    assert studies.recent_token(digest) is None  # invited: consent is their next step
+    studies.consent(pid, "v2")
+    assert studies.by_token(digest) is not None
+    assert studies.recent_token(digest) is None  # consented: their run comes next
+
+
+def test_a_kept_participant_is_read_again_after_the_cache_time(
+    engine: Engine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from server.persistence import studies as module
+
+    here = SqlAlchemyStudyRepository(make_sessionmaker(engine))
+    elsewhere = SqlAlchemyStudyRepository(make_sessionmaker(engine))  # another service's
+    pid = _training(here, engine)
+    digest = token_digest("token-a-0")
+    clock = [1000.0]
+    monkeypatch.setattr("server.persistence.studies.time.monotonic", lambda: clock[0])
+    assert here.by_token(digest) is not None
+    elsewhere.finish(pid)
+
+    clock[0] += module.TOKEN_CACHE_S  # still kept: the other service's write is not seen
+    kept = here.recent_token(digest)
+    assert kept is not None and kept[0].status is ParticipantStatus.TRAINING
+    clock[0] += 0.001
+    assert here.recent_token(digest) is None  # too old: read again
+    fresh = here.by_token(digest)
+    assert fresh is not None and fresh[0].status is ParticipantStatus.DONE
+
+
 def test_consent_assigns_balanced_conditions_in_order(studies: StudyRepository) -> None:
     studies.create(STUDY, SECRET)
     ids = invite(studies, "a", "b", "c", "d", "e")

@@ -276,3 +276,36 @@ async def test_a_reward_keeps_the_id_it_got_on_arrival(tmp_path: Path, engines: 
         assert mine == {a["uid"]: a["id"] for a in answers}
         own = [r["uid"] for r in log if r["source"] != "trainer"]
         assert all(own) and len(set(own)) == len(own)  # the run's own rewards have theirs
+
+
+async def test_a_followed_run_sends_its_figures_on_their_clock_not_with_each_event(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Before each batch of a stream's events the host publishes the run's catalogue if it
+    # changed, not the whole state: with hundreds of followed runs that doubled what
+    # crossed to the service. The figures follow every STATE_PERIOD_S (here: never).
+    from server.runtime import host
+
+    monkeypatch.setattr(host, "STATE_PERIOD_S", 3600.0)
+    states: list[int] = []
+    heard = LocalLink.run_state
+
+    def counted(self: LocalLink, run_id: int, *args: object) -> None:
+        states.append(run_id)
+        heard(self, run_id, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(LocalLink, "run_state", counted)
+    async with client_for(settings_for(tmp_path, engines="local")) as (client, app):
+        runs = _runs(app)
+        run_id = await started_realtime(client)
+        sub = runs.subscribe(run_id, maxsize=64, tick_hz=50.0)
+        ticks = 0
+        async with asyncio.timeout(30):  # a hang guard, not a timing
+            while ticks < 2:  # the stream is fed
+                ticks += type(await sub.get()).__name__ == "TickPublished"
+            before = len(states)
+            while ticks < 12:
+                ticks += type(await sub.get()).__name__ == "TickPublished"
+        assert len(states) == before  # ten ticks' events, no state with them
+        await client.post(f"/api/runs/{run_id}/stop")
+        runs.unsubscribe(run_id, sub)
