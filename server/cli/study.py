@@ -348,10 +348,11 @@ def _links_file(out: Path | None) -> Iterator[IO[str] | None]:
 
 def _status(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     from core.studies import ParticipantStatus
+    from server.services.studies import settle_stored
 
-    with _stores(args.url) as (_, studies):
+    with _stores(args.url) as (runs, studies):
+        participants = settle_stored(studies, runs, args.name)
         found = studies.get(args.name)
-        participants = studies.participants(args.name)
     spec = found.spec
     budget = (
         f"{spec.budget_episodes} episodes"

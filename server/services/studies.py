@@ -10,13 +10,16 @@ import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from core.ports import RunQueries
 from core.studies import (
     Assignment,
     NewParticipant,
     Participant,
+    ParticipantStatus,
     Study,
     StudyRepository,
     StudySpec,
+    budget_spent,
     token_digest,
 )
 from server.schemas.studies import EpisodeBudget, StudyCreate, TimeBudget
@@ -73,3 +76,19 @@ def invite(
         Invited(p, i, t, participant_link(service, t))
         for p, i, t in zip(made, external_ids, tokens, strict=True)
     ]
+
+
+def settle_stored(studies: StudyRepository, runs: RunQueries, name: str) -> tuple[Participant, ...]:
+    """A study's participants, those whose stored run has spent the budget marked done.
+
+    What the shell reads, without the service: its runs as last stored.
+    """
+    spec = studies.get(name).spec
+    out = []
+    for p in studies.participants(name):
+        if p.status is ParticipantStatus.TRAINING and p.run_id is not None:
+            run = runs.run_summary(p.run_id)
+            if budget_spent(spec, run.totals.episodes, run.totals.ticks, run.spec.hz):
+                p = studies.finish(p.id)
+        out.append(p)
+    return tuple(out)

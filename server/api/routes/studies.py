@@ -10,7 +10,14 @@ from starlette.concurrency import run_in_threadpool as io
 
 from core.engine.messages import Stop
 from core.errors import RunStateError
-from core.studies import Participant, ParticipantStatus, Study, StudyRepository, budget_spent
+from core.studies import (
+    Participant,
+    ParticipantStatus,
+    Study,
+    StudyRepository,
+    StudySpec,
+    budget_spent,
+)
 from server.api.access import Organiser, Principal, PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import run_now
@@ -90,22 +97,29 @@ async def create_study(body: StudyCreate, studies: StudiesDep) -> StudyPublic:
 
 
 @router.get("", dependencies=[Organiser])
-async def list_studies(studies: StudiesDep) -> StudiesPublic:
+async def list_studies(studies: StudiesDep, store: StoreDep, engines: EnginesDep) -> StudiesPublic:
     """Every study with its progress (participants per status), oldest first."""
+    for found in await io(studies.studies):
+        await settle_study(found.spec.name, studies, store, engines)
     data = [study_public(s) for s in await io(studies.studies)]
     return StudiesPublic(data=data, count=len(data))
 
 
 @router.get("/{name}", dependencies=[Organiser])
-async def get_study(name: StudyName, studies: StudiesDep) -> StudyPublic:
-    """A study with its progress (participants per status)."""
+async def get_study(
+    name: StudyName, studies: StudiesDep, store: StoreDep, engines: EnginesDep
+) -> StudyPublic:
+    """A study with its progress (participants per status, done as soon as spent)."""
+    await settle_study(name, studies, store, engines)
     return study_public(await io(studies.get, name))
 
 
 @router.get("/{name}/participants", dependencies=[Organiser])
-async def list_participants(name: StudyName, studies: StudiesDep) -> ParticipantsPublic:
+async def list_participants(
+    name: StudyName, studies: StudiesDep, store: StoreDep, engines: EnginesDep
+) -> ParticipantsPublic:
     """A study's participants by pseudonym, in the order they were added."""
-    data = [participant_public(p) for p in await io(studies.participants, name)]
+    data = [participant_public(p) for p in await settle_study(name, studies, store, engines)]
     return ParticipantsPublic(data=data, count=len(data))
 
 
@@ -139,16 +153,19 @@ async def delete_identities(name: StudyName, studies: StudiesDep) -> IdentitiesD
     return IdentitiesDeleted(deleted=await io(studies.delete_identities, name))
 
 
-async def current(
-    who: Principal, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+async def settle(
+    p: Participant, spec: StudySpec, studies: StudyRepository, store: StoreDep, engines: EnginesDep
 ) -> Participant:
-    """The participant as they are now: done once their run has spent the budget."""
-    p = who.participant
-    assert p is not None and who.study is not None
+    """A participant as they are now: done once their run has spent the budget.
+
+    Whoever reads first (the participant, or the organiser watching progress) marks it,
+    from the run as it is (live here, else as stored): right after a restart too, and
+    whether or not the participant's tab is still open.
+    """
     if p.status is not ParticipantStatus.TRAINING or p.run_id is None:
         return p
     run = await run_now(store, engines, p.run_id)
-    if not budget_spent(who.study.spec, run.episodes_done, run.ticks, run.hz):
+    if not budget_spent(spec, run.episodes_done, run.ticks, run.hz):
         return p
     done = await io(studies.finish, p.id)
     live = engines.get(p.run_id)
@@ -156,6 +173,23 @@ async def current(
         with contextlib.suppress(RunStateError):
             await live.send(Stop())
     return done
+
+
+async def settle_study(
+    name: str, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+) -> tuple[Participant, ...]:
+    """A study's participants, each settled (`settle`), in the order they were added."""
+    spec = (await io(studies.get, name)).spec
+    found = await io(studies.participants, name)
+    return tuple([await settle(p, spec, studies, store, engines) for p in found])
+
+
+async def current(
+    who: Principal, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+) -> Participant:
+    """The calling participant as they are now (`settle`)."""
+    assert who.participant is not None and who.study is not None
+    return await settle(who.participant, who.study.spec, studies, store, engines)
 
 
 def _view(who: Principal, p: Participant) -> ParticipantView:

@@ -213,3 +213,53 @@ async def test_each_participant_has_a_reward_limit_of_their_own(tmp_path: Path) 
 
     # On one loopback address: each participant's first reward goes, their second waits.
     assert answers == [202, 429, 202, 429]
+
+
+async def _ticked(client: httpx.AsyncClient, run_id: int, ticks: int) -> None:
+    """Wait, on the organiser's read of the run (which settles no one), until it has ticked."""
+    async with asyncio.timeout(60):  # a hang guard
+        while (await client.get(f"/api/runs/{run_id}")).json()["ticks"] < ticks:
+            await asyncio.sleep(0.05)
+
+
+async def test_a_participant_is_done_once_spent_though_they_never_read_again(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # a budget of 1 s: 10 ticks at 10 Hz
+        [gone, stays] = [p["token"] for p in await invited(client, {"count": 2})]
+        run = (await consented(client, gone))["run_id"]
+        await consented(client, stays)
+
+        await _ticked(client, run, 10)  # their tab is closed: no one reads /api/participant
+        progress = (await client.get("/api/studies/pilot")).json()["progress"]
+
+        assert progress == {"invited": 0, "consented": 0, "training": 1, "done": 1} or (
+            progress["done"] == 2  # the other one's second may have passed as well
+        )
+        listed = (await client.get("/api/studies/pilot/participants")).json()["data"]
+        assert [p["status"] for p in listed if p["run_id"] == run] == ["done"]
+        studies = (await client.get("/api/studies")).json()["data"]
+        assert studies[0]["progress"]["done"] >= 1
+        async with asyncio.timeout(60):  # a time budget: the run is stopped, not left ticking
+            while (await client.get(f"/api/runs/{run}")).json()["status"] != "stopped":
+                await asyncio.sleep(0.05)
+
+
+async def test_a_participant_spent_before_a_restart_is_done_after_it(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json={**STUDY, "budget": {"episodes": 1}})
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+    # Stored as if its one episode ended just before the service stopped, with no one
+    # reading since: the participant is still training in storage.
+    with sqlite3.connect(tmp_path / "api.db") as con:
+        con.execute("UPDATE runs SET episodes_done = 1 WHERE id = ?", (run,))
+    [(status,)] = sqlite3.connect(tmp_path / "api.db").execute("SELECT status FROM participants")
+    assert status == "training"
+
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        progress = (await client.get("/api/studies/pilot")).json()["progress"]
+        assert progress["done"] == 1 and progress["training"] == 0
+        view = (await client.get("/api/participant", headers=as_participant(token))).json()
+        assert (view["status"], view["completion_code"]) == ("done", "C0DE42")
