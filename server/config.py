@@ -22,6 +22,10 @@ class Settings(BaseSettings):
         port: port `srlab serve` binds.
         token: bearer token every write needs when the service is reachable from beyond
             this machine (`reachable_through`); it is required then.
+        reads: who may read the API: ``open`` (the default), anyone who may reach it; or
+            ``token``, only who may write (the organiser: the token's bearer, or anyone
+            on loopback when no token is set) and participants, each their own run (a
+            study's data is theirs). `/api/health` stays open to anyone either way.
         max_runs: runs that may tick at the same time; past it, starting one is refused
             with 429.
         max_streams: live event streams (GET /api/runs/{id}/events) open at once, over
@@ -67,6 +71,7 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=1, le=65535)
     token: str | None = None
+    reads: Literal["open", "token"] = "open"
     max_runs: int = Field(8, ge=1)
     max_streams: int = Field(64, ge=1)
     max_streams_per_run: int = Field(16, ge=1)
