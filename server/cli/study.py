@@ -401,13 +401,15 @@ def _export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     from server.export import export_study
     from server.export.dataset import require_minari
     from server.export.study import clear
+    from server.services.studies import settle_stored
 
     out: Path = args.out
     check_out_folder(out, args.force)
     if args.minari:
         require_minari()
     with _stores(args.url) as (runs, studies):
-        participants = studies.participants(args.name)  # an unknown study before writing
+        # An unknown study before writing; each status as stored runs say (`status`).
+        participants = settle_stored(studies, runs, args.name)
         if out.is_dir():
             clear(out, participants)
         err = Console(file=stderr, stderr=True)
