@@ -427,7 +427,7 @@ def _export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
             )
     Console(file=stdout).print(
         f"study {done.study}: {done.participants} participants, {done.runs} runs, "
-        f"{done.rewards} rewards, {done.episodes} episodes -> {out}",
+        f"{done.rewards} rewards, {done.episodes} episodes, {done.answers} answers -> {out}",
         highlight=False,
         soft_wrap=True,
     )

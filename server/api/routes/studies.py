@@ -6,6 +6,7 @@ import contextlib
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
+from fastapi.exceptions import RequestValidationError
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine.messages import Stop
@@ -24,6 +25,7 @@ from server.api.routes.runs import run_now
 from server.api.routing import resource_router
 from server.schemas.common import Text
 from server.schemas.studies import (
+    AnswersCreate,
     ConsentCreate,
     IdentitiesDeleted,
     ParticipantInvited,
@@ -192,18 +194,23 @@ async def current(
     return await settle(who.participant, who.study.spec, studies, store, engines)
 
 
-def _view(who: Principal, p: Participant) -> ParticipantView:
+def _view(who: Principal, p: Participant, answered: bool) -> ParticipantView:
     assert who.study is not None
     s = who.study.spec
-    done = p.status is ParticipantStatus.DONE
+    # The code comes once the budget is spent and the questionnaire, if any, answered.
+    done = p.status is ParticipantStatus.DONE and (answered or not s.questionnaire)
     return ParticipantView(
         study=s.name, pseudonym=p.pseudonym, status=p.status.value,
         consent_text=s.consent_text, consent_version=s.consent_version,
         questionnaire=list(s.questionnaire), condition=p.condition, run_id=p.run_id,
-        budget_episodes=s.budget_episodes, budget_s=s.budget_s,
+        budget_episodes=s.budget_episodes, budget_s=s.budget_s, answered=answered,
         completion_code=s.completion_code if done else None,
         redirect_url=s.redirect_url if done else None,
     )  # fmt: skip
+
+
+async def _answered(studies: StudyRepository, p: Participant) -> bool:
+    return bool(await io(studies.answers, p.study, p.id))
 
 
 @participant_router.get("")
@@ -211,7 +218,8 @@ async def get_participant(
     who: ParticipantDep, studies: StudiesDep, store: StoreDep, engines: EnginesDep
 ) -> ParticipantView:
     """The caller's study: consent text, questionnaire, their run, and once done, the code."""
-    return _view(who, await current(who, studies, store, engines))
+    p = await current(who, studies, store, engines)
+    return _view(who, p, await _answered(studies, p))
 
 
 @participant_router.post("/consent")
@@ -245,4 +253,40 @@ async def consent(
     if run.status in ("created", "interrupted") and p.status is ParticipantStatus.TRAINING:
         await engines.start(p.run_id)  # 429 at the cap: consenting again starts it
         await engines.started(p.run_id)
-    return _view(who, p)
+    return _view(who, p, await _answered(studies, p))
+
+
+@participant_router.post("/answers", status_code=status.HTTP_201_CREATED)
+async def answer(
+    body: AnswersCreate,
+    who: ParticipantDep,
+    studies: StudiesDep,
+    store: StoreDep,
+    engines: EnginesDep,
+) -> ParticipantView:
+    """Answer the study's questionnaire, once, after training: then the completion code.
+
+    422 unless there is one answer per question; 409 when the study has no questionnaire,
+    the participant's budget is not spent yet, or they have answered already.
+    """
+    assert who.study is not None
+    questions = who.study.spec.questionnaire
+    if not questions:
+        raise RunStateError(f"study {who.study.spec.name!r} has no questionnaire")
+    if len(body.answers) != len(questions):
+        raise RequestValidationError(
+            [
+                {
+                    "type": "value_error",
+                    "loc": ["body", "answers"],
+                    "msg": f"{len(body.answers)} answers for {len(questions)} questions: "
+                    "give one answer per question, in their order",
+                    "input": body.answers,
+                }
+            ]
+        )
+    p = await current(who, studies, store, engines)
+    if p.status is not ParticipantStatus.DONE:
+        raise RunStateError("the questionnaire comes once your training is done")
+    await io(studies.answer, p.id, body.answers)
+    return _view(who, p, answered=True)

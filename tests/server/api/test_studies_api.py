@@ -186,7 +186,13 @@ async def test_study_flow_consent_assignment_rewards_and_completion(tmp_path: Pa
                 "status"
             ] != "done":
                 await asyncio.sleep(0.05)
-        assert (view["completion_code"], view["run_id"]) == ("C0DE42", runs[0])
+        # The questionnaire first, then the code.
+        assert (view["completion_code"], view["answered"], view["run_id"]) == (None, False, runs[0])
+        answered = await client.post(
+            "/api/participant/answers", json={"answers": ["Easy."]}, headers=first
+        )
+        assert answered.status_code == 201, answered.text
+        assert (answered.json()["completion_code"], answered.json()["answered"]) == ("C0DE42", True)
         spent = await client.post(f"/api/runs/{runs[0]}/rewards", json={"value": 1}, headers=first)
         assert spent.status_code == 403 and "budget" in spent.json()["detail"]
         progress = (await client.get("/api/studies/pilot")).json()["progress"]
@@ -248,7 +254,8 @@ async def test_a_participant_is_done_once_spent_though_they_never_read_again(
 
 async def test_a_participant_spent_before_a_restart_is_done_after_it(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
-        await client.post("/api/studies", json={**STUDY, "budget": {"episodes": 1}})
+        study = {**STUDY, "budget": {"episodes": 1}, "questionnaire": []}
+        await client.post("/api/studies", json=study)
         [token] = [p["token"] for p in await invited(client, {"count": 1})]
         run = (await consented(client, token))["run_id"]
     # Stored as if its one episode ended just before the service stopped, with no one
@@ -263,3 +270,83 @@ async def test_a_participant_spent_before_a_restart_is_done_after_it(tmp_path: P
         assert progress["done"] == 1 and progress["training"] == 0
         view = (await client.get("/api/participant", headers=as_participant(token))).json()
         assert (view["status"], view["completion_code"]) == ("done", "C0DE42")
+
+
+async def _spent(client: httpx.AsyncClient, token: str) -> None:
+    async with asyncio.timeout(60):  # a hang guard: the budget is one second of the run's clock
+        while (await client.get("/api/participant", headers=as_participant(token))).json()[
+            "status"
+        ] != "done":
+            await asyncio.sleep(0.05)
+
+
+def _answers(path: Path) -> list[tuple[object, ...]]:
+    sql = (
+        "SELECT participant_id, question_no, question, answer FROM questionnaire_answers "
+        "ORDER BY participant_id, question_no"
+    )
+    with sqlite3.connect(path) as con:
+        return list(con.execute(sql))
+
+
+async def test_answers_are_checked_stored_once_and_open_the_completion_code(
+    tmp_path: Path,
+) -> None:
+    study = {**STUDY, "questionnaire": ["How hard was it?", "Would you again?"]}
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=study)
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        me = as_participant(token)
+        await consented(client, token)
+        early = await client.post(
+            "/api/participant/answers", json={"answers": ["a", "b"]}, headers=me
+        )
+        assert early.status_code == 409 and "training is done" in early.json()["detail"]
+        await _spent(client, token)
+
+        for body, field in (
+            ({"answers": ["only one"]}, "answers"),
+            ({"answers": ["a", "b", "c"]}, "answers"),
+            ({"answers": ["a", ""]}, "answers"),
+            ({"answers": []}, "answers"),
+            ({}, "answers"),
+            ({"answers": ["a", "b"], "extra": 1}, "extra"),
+        ):
+            bad = await client.post("/api/participant/answers", json=body, headers=me)
+            assert bad.status_code == 422, (body, bad.text)
+            assert any(field in e["loc"] for e in bad.json()["detail"]), bad.text
+        assert _answers(tmp_path / "api.db") == []
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert (view["status"], view["answered"], view["completion_code"]) == ("done", False, None)
+
+        given = await client.post(
+            "/api/participant/answers", json={"answers": ["Hard.", "Yes"]}, headers=me
+        )
+        assert given.status_code == 201, given.text
+        assert (given.json()["answered"], given.json()["completion_code"]) == (True, "C0DE42")
+        again = await client.post(
+            "/api/participant/answers", json={"answers": ["Easy.", "No"]}, headers=me
+        )
+        assert again.status_code == 409 and "already" in again.json()["detail"]
+        assert _answers(tmp_path / "api.db") == [
+            (1, 1, "How hard was it?", "Hard."),
+            (1, 2, "Would you again?", "Yes"),
+        ]
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert (view["answered"], view["completion_code"]) == (True, "C0DE42")
+        organiser = await client.post("/api/participant/answers", json={"answers": ["a", "b"]})
+        assert organiser.status_code == 401
+
+
+async def test_a_study_without_a_questionnaire_takes_no_answers(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json={**STUDY, "questionnaire": []})
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        await consented(client, token)
+        await _spent(client, token)
+        me = as_participant(token)
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert view["completion_code"] == "C0DE42"  # no questions: the code straight away
+        r = await client.post("/api/participant/answers", json={"answers": ["a"]}, headers=me)
+        assert r.status_code == 409 and "no questionnaire" in r.json()["detail"]
+        assert _answers(tmp_path / "api.db") == []
