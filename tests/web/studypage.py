@@ -11,7 +11,7 @@ BUDGET_S = 30
 CODE = "C0DE42"
 
 
-def create_study(page: Page, budget_s: int = BUDGET_S) -> None:
+def create_study(page: Page, budget_s: int = BUDGET_S, questions: tuple[str, ...] = ()) -> None:
     """Make study "pilot" on the organiser's page, a refused field said beside it first."""
     form = page.locator("#new-study-form")
     form.locator('[name="name"]').fill("pilot")
@@ -21,12 +21,14 @@ def create_study(page: Page, budget_s: int = BUDGET_S) -> None:
     form.locator('[name="consent_text"]').fill("You will train a simulated robot.")
     form.locator('[name="consent_version"]').fill("v1")
     form.locator('[name="completion_code"]').fill(CODE)
+    form.locator('[name="questionnaire"]').fill("\n".join(questions))
     # The API refuses a redirect that is not http(s): beside that field, and nothing made.
     form.locator('[name="redirect_url"]').fill("ftp://example.org")
     form.locator('button[type="submit"]').click()
     refused = page.locator("label.invalid:has(input[name='redirect_url']) .field-error")
     expect(refused).to_contain_text("match pattern")
-    expect(page.locator("#studies-list")).to_contain_text("No study yet")
+    expect(page.locator("#studies-list")).to_be_visible()
+    expect(page.locator('#studies-list tr[data-study="pilot"]')).to_have_count(0)
     form.locator('[name="redirect_url"]').fill("")
     expect(page.locator("label.invalid")).to_have_count(0)
     form.locator('button[type="submit"]').click()
