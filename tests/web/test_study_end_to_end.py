@@ -42,7 +42,7 @@ STUDY: dict[str, Any] = {
 @pytest.fixture(scope="module")
 def closed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
     """`srlab serve` whose reads need a token; its client holds the organiser's."""
-    env = {"SRLAB_READS": "token", "SRLAB_TOKEN": TOKEN}
+    env = {"SRLAB_READS": "token", "SRLAB_TOKEN": TOKEN, "SRLAB_VISER": "false"}
     with live_server(tmp_path_factory.mktemp("closed") / "web.db", env) as server:
         server.client.headers["Authorization"] = f"Bearer {TOKEN}"
         yield server
