@@ -12,6 +12,7 @@ import pytest
 from apphelpers import client_for, settings_for
 
 from core.studies import token_digest
+from server.services import studies as studies_service
 
 pytestmark = pytest.mark.anyio
 
@@ -350,3 +351,61 @@ async def test_a_study_without_a_questionnaire_takes_no_answers(tmp_path: Path) 
         r = await client.post("/api/participant/answers", json={"answers": ["a"]}, headers=me)
         assert r.status_code == 409 and "no questionnaire" in r.json()["detail"]
         assert _answers(tmp_path / "api.db") == []
+
+
+def _status_stored(path: Path) -> list[str]:
+    with sqlite3.connect(path) as con:
+        return [s for (s,) in con.execute("SELECT status FROM participants ORDER BY id")]
+
+
+async def _stored_done(path: Path) -> None:
+    """Wait on storage alone (no route that settles is read) until everyone is done."""
+    async with asyncio.timeout(60):  # a hang guard
+        while set(_status_stored(path)) != {"done"}:
+            await asyncio.sleep(0.05)
+
+
+async def test_a_spent_time_budget_is_marked_and_stopped_with_no_one_reading(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # 1 s
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+
+        await _stored_done(tmp_path / "api.db")
+
+        async with asyncio.timeout(60):  # the service stopped it: no one would watch it
+            while (await client.get(f"/api/runs/{run}")).json()["status"] != "stopped":
+                await asyncio.sleep(0.05)
+
+
+async def test_a_run_that_ends_between_two_looks_is_heard(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        await client.post("/api/studies", json={**STUDY, "budget": {"episodes": 1}})
+        [person] = await invited(client, {"count": 1})
+        # Their run, fast: it starts and ends well within one look of the watch.
+        r = await client.post(
+            "/api/runs", json={"condition": "expert", "episodes": 1, "seed": 3, "mode": "fast"}
+        )
+        studies = app.state.srlab.studies
+        studies.consent(person["id"], "v2")
+        studies.set_run(person["id"], r.json()["id"])
+        assert (await client.post(f"/api/runs/{r.json()['id']}/start")).status_code == 200
+
+        await _stored_done(tmp_path / "api.db")
+
+
+async def test_a_budget_spent_just_before_a_stop_is_marked_on_the_way_out(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(studies_service, "SETTLE_EVERY_S", 3600.0)  # no look while it runs
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # 1 s
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+        await _ticked(client, run, 10)
+        assert _status_stored(tmp_path / "api.db") == ["training"]
+    # Stopped with no one having read: the unfinished episode's ticks are not stored, but
+    # the watch's last look, after the runs' shutdown, saw them spent.
+    assert _status_stored(tmp_path / "api.db") == ["done"]
