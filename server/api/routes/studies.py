@@ -210,6 +210,8 @@ def _view(who: Principal, p: Participant, answered: bool) -> ParticipantView:
 
 
 async def _answered(studies: StudyRepository, p: Participant) -> bool:
+    if p.status is not ParticipantStatus.DONE:
+        return False  # no one answers before their training is done: no need to ask
     return bool(await io(studies.answers, p.study, p.id))
 
 
