@@ -78,10 +78,12 @@ def test_a_participants_console_goes_live_with_their_token(
 
 
 def test_the_organisers_pages_read_with_the_saved_token(closed: LiveServer, page: Page) -> None:
+    made = closed.client.post("/api/studies", json={**STUDY, "name": "watched"})
+    assert made.status_code == 201, made.text
     page.add_init_script(f"localStorage.setItem('srlab.token', {TOKEN!r})")
     page.goto(f"{closed.url}/#/studies")
     page.wait_for_selector("body[data-ready=true]")
-    expect(page.locator('#studies-list tr[data-study="closed"]')).to_be_visible()
+    expect(page.locator('#studies-list tr[data-study="watched"]')).to_be_visible()
 
 
 QUESTIONS = ("How hard was it?", "What did you reward?")
