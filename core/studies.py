@@ -35,6 +35,10 @@ class StaleConsentError(RunStateError):
     """A participant consented to a consent text that is no longer the study's."""
 
 
+class AnsweredError(RunStateError):
+    """A participant's questionnaire is answered already (answers are given once)."""
+
+
 class Assignment(StrEnum):
     """How a consenting participant's condition is chosen."""
 
@@ -96,6 +100,19 @@ class Participant:
     consent_version: str | None
     consented_at: datetime | None
     created_at: datetime
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """A participant's answer to one question of their study's questionnaire."""
+
+    participant: str
+    """Their pseudonym."""
+    question_no: int
+    """The question's place in the questionnaire, from 1."""
+    question: str
+    answer: str
+    answered_at: datetime
 
 
 @dataclass(frozen=True, slots=True)
@@ -192,4 +209,18 @@ class StudyRepository(Protocol):
 
     def delete_identities(self, name: str) -> int:
         """Delete the study's external id to pseudonym mapping; how many rows went."""
+        ...
+
+    def answer(self, participant_id: int, answers: Sequence[str]) -> tuple[Answer, ...]:
+        """Store a participant's answers, one per question of the questionnaire, in order.
+
+        `AnsweredError` when they have answered already (nothing is stored then).
+        """
+        ...
+
+    def answers(self, name: str, participant_id: int | None = None) -> tuple[Answer, ...]:
+        """A study's answers by participant (in the order they were added) and question.
+
+        Only one participant's when `participant_id` is given.
+        """
         ...

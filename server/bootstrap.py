@@ -26,6 +26,14 @@ from server.config import Settings
 from server.persistence.storage import StorageFactory, open_storage
 from server.runtime import open_runs
 from server.runtime.tuning import step_back, warm_up
+from server.services.studies import StudyWatch
+
+
+async def _cancelled(task: asyncio.Task[None]) -> None:
+    """Cancel `task` and wait until it has ended (its cancellation is not ours to raise)."""
+    task.cancel()
+    await asyncio.wait([task])
+
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
 """Threads for the routes' blocking work: 6 on two cores, as asyncio's default executor."""
@@ -48,7 +56,14 @@ async def service(
         # Undone in reverse: the 3D view, the runs, the engines' process, then storage.
         stack.push_async_callback(asyncio.to_thread, opened.close)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
+        watch = None if opened.studies is None else StudyWatch(opened.studies)
+        if watch is not None:  # its last look comes after the runs' shutdown
+            stack.push_async_callback(watch.flush)
         manager = await open_runs(settings, opened.runs, stack)
+        if watch is not None:
+            watch.attach(manager)
+            watching = asyncio.create_task(watch.run(), name="study budgets")
+            stack.push_async_callback(_cancelled, watching)
         if settings.engines == "process":
             step_back(settings.service_nice)
         # The kernel only where the runs tick.

@@ -22,6 +22,10 @@ class Settings(BaseSettings):
         port: port `srlab serve` binds.
         token: bearer token every write needs when the service is reachable from beyond
             this machine (`reachable_through`); it is required then.
+        reads: who may read the API: ``open`` (the default), anyone who may reach it; or
+            ``token``, only who may write (the organiser: the token's bearer, or anyone
+            on loopback when no token is set) and participants, each their own run (a
+            study's data is theirs). `/api/health` stays open to anyone either way.
         max_runs: runs that may tick at the same time; past it, starting one is refused
             with 429. The default is as many 10 Hz realtime runs, each followed and
             rewarded by its trainer, as a 2-core machine paced within the study goals
@@ -70,6 +74,7 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=1, le=65535)
     token: str | None = None
+    reads: Literal["open", "token"] = "open"
     max_runs: int = Field(64, ge=1)
     max_streams: int = Field(128, ge=1)
     max_streams_per_run: int = Field(16, ge=1)
@@ -185,11 +190,21 @@ class Settings(BaseSettings):
         return bool(self.reachable_through()) or self.token is not None
 
     def check(self) -> None:
-        """Refuse to serve beyond this machine without a token, or two servers on one port."""
+        """Refuse what cannot be served safely.
+
+        Beyond this machine without a token, two servers on one port, or reads kept to
+        tokens beside a 3D view that asks for none.
+        """
         if self.viser and self.viser_port == self.port:
             raise ValueError(
                 f"SRLAB_VISER_PORT and SRLAB_PORT are both {self.port}: the 3D view needs a "
                 "port of its own"
+            )
+        if self.reads == "token" and self.viser:
+            raise ValueError(
+                "SRLAB_READS=token keeps the API's reads to a token's holders, but the 3D view "
+                "(SRLAB_VISER) asks for no token: whoever reaches its port would watch every "
+                "run. Set SRLAB_VISER=false with it"
             )
         why = self.reachable_through()
         if why and not self.token:

@@ -6,6 +6,7 @@ else may read and, where writes need no token, write, exactly as before studies.
 token that starts with `PARTICIPANT_PREFIX` is a participant's, and nothing else: an
 unknown one is refused (401), and a known one may read and reward its own run, read its
 study's participant routes and the catalogue, and nothing more (403), whatever the route.
+With `SRLAB_READS=token` anyone else is refused every route but the health check (401).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ from server.services.studies import PARTICIPANT_PREFIX
 REWARDS_PATH = "/api/runs/{run_id}/rewards"
 PARTICIPANT_TAGS = frozenset({"catalog", "health", "participant"})
 """Routes a participant may call besides their run's: their study's, the catalogue's."""
+OPEN_TAGS = frozenset({"health"})
+"""Routes anyone may read even when reads need a token (`Settings.reads`)."""
 SAFE_METHODS = frozenset({"GET", "HEAD"})
 SCOPE_KEY = "srlab.principal"
 
@@ -88,11 +91,24 @@ def _forbidden(detail: str) -> HTTPException:
     return HTTPException(status.HTTP_403_FORBIDDEN, detail)
 
 
-async def authorise(request: Request, who: PrincipalDep) -> None:
-    """Refuse a participant what is not theirs; everyone else as before (403 otherwise)."""
+async def authorise(request: Request, who: PrincipalDep, state: StateDep) -> None:
+    """Refuse a participant what is not theirs (403); the organiser nothing.
+
+    Anyone else, everything but the health check when reads need a token (401).
+    """
+    route = request.scope.get("route")
+    if who.role is Role.ANONYMOUS:
+        tags = set(getattr(route, "tags", ()))
+        if state.settings.reads == "token" and not tags & OPEN_TAGS:
+            raise HTTPException(
+                status.HTTP_401_UNAUTHORIZED,
+                "reads need a token here (SRLAB_READS=token): `Authorization: Bearer "
+                "<SRLAB_TOKEN>`, or a participant's token for their own run",
+                headers={"WWW-Authenticate": "Bearer"},
+            )
+        return
     if who.participant is None:
         return
-    route = request.scope.get("route")
     path: str = getattr(route, "path", request.url.path)
     method = request.method
     if "{run_id}" in path:

@@ -348,10 +348,11 @@ def _links_file(out: Path | None) -> Iterator[IO[str] | None]:
 
 def _status(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     from core.studies import ParticipantStatus
+    from server.services.studies import settle_stored
 
-    with _stores(args.url) as (_, studies):
+    with _stores(args.url) as (runs, studies):
+        participants = settle_stored(studies, runs, args.name)
         found = studies.get(args.name)
-        participants = studies.participants(args.name)
     spec = found.spec
     budget = (
         f"{spec.budget_episodes} episodes"
@@ -400,13 +401,15 @@ def _export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     from server.export import export_study
     from server.export.dataset import require_minari
     from server.export.study import clear
+    from server.services.studies import settle_stored
 
     out: Path = args.out
     check_out_folder(out, args.force)
     if args.minari:
         require_minari()
     with _stores(args.url) as (runs, studies):
-        participants = studies.participants(args.name)  # an unknown study before writing
+        # An unknown study before writing; each status as stored runs say (`status`).
+        participants = settle_stored(studies, runs, args.name)
         if out.is_dir():
             clear(out, participants)
         err = Console(file=stderr, stderr=True)
@@ -424,7 +427,7 @@ def _export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
             )
     Console(file=stdout).print(
         f"study {done.study}: {done.participants} participants, {done.runs} runs, "
-        f"{done.rewards} rewards, {done.episodes} episodes -> {out}",
+        f"{done.rewards} rewards, {done.episodes} episodes, {done.answers} answers -> {out}",
         highlight=False,
         soft_wrap=True,
     )

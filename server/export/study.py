@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from core.ports import RunQueries
-from core.studies import Participant, Study, StudyRepository
+from core.studies import Answer, Participant, Study, StudyRepository
 from server.export.run import SCHEMA_VERSION, code_version, export_run
 from server.export.tables import (
+    ANSWER_COLUMNS,
     EPISODE_COLUMNS,
     REWARD_COLUMNS,
     TableWriter,
@@ -27,7 +28,14 @@ from server.export.tables import (
 )
 
 MANIFEST = "study.json"
-TABLES = ("rewards.jsonl", "rewards.csv", "episodes.jsonl", "episodes.csv")
+TABLES = (
+    "rewards.jsonl",
+    "rewards.csv",
+    "episodes.jsonl",
+    "episodes.csv",
+    "answers.jsonl",
+    "answers.csv",
+)
 Progress = Callable[[Participant, int, int], None]
 """Told (the participant just exported, done, in all) as a study's export goes."""
 
@@ -43,6 +51,16 @@ class StudyExport:
     """Participants with a run, each a folder named by their pseudonym."""
     rewards: int
     episodes: int
+    answers: int
+    """Questionnaire answers, one a participant and question."""
+
+
+def answer_row(a: Answer) -> dict[str, Any]:
+    """A questionnaire answer as a row of `answers.jsonl` (`ANSWER_COLUMNS`)."""
+    return {
+        "participant": a.participant, "question_no": a.question_no, "question": a.question,
+        "answer": a.answer, "answered_at": a.answered_at.isoformat(),
+    }  # fmt: skip
 
 
 def study_files(participants: tuple[Participant, ...]) -> list[str]:
@@ -115,6 +133,9 @@ def export_study(
             listed.append(entry)
             if progress is not None:
                 progress(p, done, len(participants))
+    with TableWriter(out / "answers", ANSWER_COLUMNS) as answers:
+        for a in studies.answers(name):
+            answers.write(answer_row(a))
     spec = study.spec
     runs = sum(p.run_id is not None for p in participants)
     document = {
@@ -136,6 +157,7 @@ def export_study(
             "runs": runs,
             "rewards": rewards.rows,
             "episodes": episodes.rows,
+            "answers": answers.rows,
         },
         "files": study_files(participants),
         "minari": minari,
@@ -143,4 +165,6 @@ def export_study(
     (out / MANIFEST).write_text(
         json.dumps(document, indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
     )
-    return StudyExport(spec.name, out, len(participants), runs, rewards.rows, episodes.rows)
+    return StudyExport(
+        spec.name, out, len(participants), runs, rewards.rows, episodes.rows, answers.rows
+    )

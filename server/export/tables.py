@@ -39,6 +39,8 @@ EPISODE_COLUMNS = (
     "rewards",
 )
 """`episodes.jsonl`'s keys and `episodes.csv`'s columns, in order (docs/export.md)."""
+ANSWER_COLUMNS = ("participant", "question_no", "question", "answer", "answered_at")
+"""A study's `answers.jsonl` keys and `answers.csv` columns, in order (docs/export.md)."""
 Row = dict[str, Any]
 T = TypeVar("T")
 

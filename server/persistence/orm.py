@@ -381,6 +381,20 @@ class ParticipantRow(Base):
     )
 
 
+class QuestionnaireAnswerRow(Base):
+    """A participant's answer to one question, with the question as it was asked."""
+
+    __tablename__ = "questionnaire_answers"
+
+    participant_id: Mapped[int] = mapped_column(
+        ForeignKey("participants.id", ondelete="CASCADE"), primary_key=True
+    )
+    question_no: Mapped[int] = mapped_column(primary_key=True)
+    question: Mapped[str] = mapped_column(Text)
+    answer: Mapped[str] = mapped_column(Text)
+    answered_at: Mapped[datetime]
+
+
 class ParticipantIdentityRow(Base):
     """The mapping from a recruiter's id to a pseudonym, apart so it can be deleted."""
 

@@ -22,6 +22,8 @@ from sqlalchemy import delete, func, select
 from sqlalchemy.orm import Session
 
 from core.studies import (
+    Answer,
+    AnsweredError,
     Assignment,
     NewParticipant,
     Participant,
@@ -36,7 +38,12 @@ from core.studies import (
     pseudonym,
 )
 from server.persistence.db import transaction
-from server.persistence.orm import ParticipantIdentityRow, ParticipantRow, StudyRow
+from server.persistence.orm import (
+    ParticipantIdentityRow,
+    ParticipantRow,
+    QuestionnaireAnswerRow,
+    StudyRow,
+)
 
 ANONYMOUS = "anonymous:"
 """What an anonymous participant's pseudonym is made from, before their token's digest."""
@@ -300,3 +307,47 @@ class SqlAlchemyStudyRepository:
                 delete(ParticipantIdentityRow).where(ParticipantIdentityRow.study_id == study.id)
             )
             return int(gone.rowcount)  # type: ignore[attr-defined]
+
+    def answer(self, participant_id: int, answers: Sequence[str]) -> tuple[Answer, ...]:
+        """Store a participant's answers, once (`AnsweredError` after)."""
+        with self._transaction("storing a participant's answers", write=True) as s:
+            row, study = self._row(s, participant_id)
+            # One participant's answers at a time (SQLite: its write lock already).
+            s.execute(
+                select(ParticipantRow.id).where(ParticipantRow.id == row.id).with_for_update()
+            )
+            given = select(QuestionnaireAnswerRow.question_no).where(
+                QuestionnaireAnswerRow.participant_id == row.id
+            )
+            if s.scalar(given.limit(1)) is not None:
+                raise AnsweredError("this participant has answered the questionnaire already")
+            questions = list(study.questionnaire)
+            assert len(answers) == len(questions), "the route checks the count"
+            now = datetime.now(UTC)
+            rows = [
+                QuestionnaireAnswerRow(
+                    participant_id=row.id, question_no=n, question=q, answer=a, answered_at=now
+                )
+                for n, (q, a) in enumerate(zip(questions, answers, strict=True), 1)
+            ]
+            s.add_all(rows)
+            s.flush()
+            return tuple(_answer(r, row.pseudonym) for r in rows)
+
+    def answers(self, name: str, participant_id: int | None = None) -> tuple[Answer, ...]:
+        """A study's answers by participant and question (or one participant's)."""
+        with self._transaction(f"reading the answers of study {name!r}", write=False) as s:
+            study = _study_row(s, name)
+            query = (
+                select(QuestionnaireAnswerRow, ParticipantRow.pseudonym)
+                .join(ParticipantRow, ParticipantRow.id == QuestionnaireAnswerRow.participant_id)
+                .where(ParticipantRow.study_id == study.id)
+                .order_by(ParticipantRow.id, QuestionnaireAnswerRow.question_no)
+            )
+            if participant_id is not None:
+                query = query.where(ParticipantRow.id == participant_id)
+            return tuple(_answer(r, alias) for r, alias in s.execute(query))
+
+
+def _answer(row: QuestionnaireAnswerRow, alias: str) -> Answer:
+    return Answer(alias, row.question_no, row.question, row.answer, _utc(row.answered_at))

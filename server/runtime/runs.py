@@ -13,7 +13,7 @@ import asyncio
 import contextlib
 import logging
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from typing import Any, Protocol, TypeVar
 
@@ -231,6 +231,9 @@ class Runs:
         """The service's storage: runs are created here, and failures stored when the host
         is gone (the host has its own for everything else)."""
         self.link: Link
+        self.ended_hooks: list[Callable[[int, RunState], None]] = []
+        """Told each run's end as it is heard (its last state), on the service's loop: for
+        what must know at once, not poll (`server.services.studies.StudyWatch`)."""
         self._runs: dict[int, LiveRun] = {}
         self._new: dict[int, LiveRun] = {}
         """Runs just started, until `start` takes them (they may have ended and been let go
@@ -254,6 +257,8 @@ class Runs:
 
     def heard_ended(self, run_id: int, state: RunState, let_go: bool) -> None:
         """A run's task ended on the host (`let_go`: its end is stored)."""
+        for hook in self.ended_hooks:
+            hook(run_id, state)
         if (live := self._runs.get(run_id)) is not None:
             live.state = state
             live.done.set()

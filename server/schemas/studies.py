@@ -152,6 +152,16 @@ class ConsentCreate(Strict):
     )
 
 
+class AnswersCreate(Strict):
+    """A participant's answers to their study's questionnaire, one per question, in order."""
+
+    EXAMPLES = ({"answers": ["Hard at first, then easier."]},)
+
+    answers: list[Annotated[Text, Field(min_length=1, max_length=2000)]] = Field(
+        min_length=1, max_length=100, description="one answer per question, in their order"
+    )
+
+
 class ParticipantView(BaseModel):
     study: str
     pseudonym: str
@@ -163,5 +173,8 @@ class ParticipantView(BaseModel):
     run_id: int | None
     budget_episodes: int | None
     budget_s: float | None
-    completion_code: str | None = Field(description="shown once their budget is spent")
+    answered: bool = Field(description="whether they have answered the questionnaire")
+    completion_code: str | None = Field(
+        description="shown once their budget is spent and the questionnaire (if any) answered"
+    )
     redirect_url: str | None = Field(description="shown once their budget is spent")

@@ -25,6 +25,7 @@ from server.persistence import (
     upgrade,
 )
 from server.persistence.migrate import ROOT
+from server.persistence.studies import SqlAlchemyStudyRepository
 
 TABLES = {
     "logical_sensors",
@@ -43,6 +44,7 @@ TABLES = {
     "studies",
     "participants",
     "participant_identities",
+    "questionnaire_answers",
 }
 
 
@@ -231,3 +233,42 @@ def test_rewards_logged_before_0004_read_with_no_uid(sqlite_url: str) -> None:
     finally:
         engine.dispose()
     assert drift(sqlite_url) == []
+
+
+def test_participants_stored_before_0006_have_no_answers_and_may_answer(sqlite_url: str) -> None:
+    command.upgrade(alembic_config(sqlite_url), "0005")
+    engine = make_engine(sqlite_url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO studies (id, name, conditions, assignment, budget_s, "
+                    "consent_text, consent_version, questionnaire, secret) VALUES "
+                    "(1, 'pilot', '[\"kp\"]', 'balanced', 60, 'ok', '1', '[\"How hard?\"]', 'x')"
+                )
+            )
+            connection.execute(
+                text(
+                    "INSERT INTO participants (id, study_id, pseudonym, token_hash, status) "
+                    "VALUES (1, 1, 'ab12', 'cd34', 'done')"
+                )
+            )
+    finally:
+        engine.dispose()
+
+    upgrade(sqlite_url, seed=False)
+
+    engine = make_engine(sqlite_url)
+    try:
+        studies = SqlAlchemyStudyRepository(make_sessionmaker(engine))
+        assert studies.answers("pilot") == ()
+        [given] = studies.answer(1, ["Hard."])
+        assert (given.participant, given.question_no, given.question, given.answer) == (
+            "ab12", 1, "How hard?", "Hard.",
+        )  # fmt: skip
+    finally:
+        engine.dispose()
+    assert drift(sqlite_url) == []
+    command.downgrade(alembic_config(sqlite_url), "0005")  # the answers go, the rest stays
+    assert "questionnaire_answers" not in tables(sqlite_url)
+    assert "participants" in tables(sqlite_url)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 from contracthelpers import SPEC
 from sqlalchemy import Engine, select, text
 
 from core.errors import UnknownNameError
 from core.studies import (
+    AnsweredError,
     Assignment,
     NewParticipant,
     ParticipantExistsError,
@@ -253,3 +256,28 @@ def test_delete_identities_deletes_only_the_mapping(
         assert c.execute(select(ParticipantIdentityRow)).all() == []
         assert c.execute(select(StudyRow.secret)).scalar_one() == SECRET
     assert studies.delete_identities("pilot") == 0
+
+
+def test_answers_are_stored_once_by_pseudonym_in_question_order(
+    studies: StudyRepository,
+) -> None:
+    studies.create(replace(STUDY, questionnaire=("How hard?", "Again?")), SECRET)
+    first, second, _ = invite(studies, "a", "b", "c")
+
+    given = studies.answer(second, ["Hard.", "No"])
+    studies.answer(first, ["Easy.", "Yes"])
+    with pytest.raises(AnsweredError):
+        studies.answer(second, ["Changed my mind.", "Yes"])
+
+    names = {p.id: p.pseudonym for p in studies.participants("pilot")}
+    every = studies.answers("pilot")
+    assert [(a.participant, a.question_no, a.question, a.answer) for a in every] == [
+        (names[first], 1, "How hard?", "Easy."),
+        (names[first], 2, "Again?", "Yes"),
+        (names[second], 1, "How hard?", "Hard."),
+        (names[second], 2, "Again?", "No"),
+    ]
+    assert studies.answers("pilot", second) == given
+    assert all(a.answered_at.tzinfo is not None for a in every)
+    with pytest.raises(UnknownStudyError):
+        studies.answers("nope")

@@ -35,12 +35,17 @@ export function setParticipantToken(value) {
 
 /**
  * The bearer a request carries: a participant's token on every request (their reads are
- * held to their own run by it); else the organiser's saved token on writes, and on reads
- * that ask for it (`auth`: the organiser's study routes).
+ * held to their own run by it); else the organiser's saved token, on reads too (a service
+ * with `SRLAB_READS=token` answers reads only to a token).
  */
-function bearer(method, auth) {
-  if (participantToken()) return participantToken();
-  return (auth ?? method !== "GET") ? token() : "";
+function bearer() {
+  return participantToken() || token();
+}
+
+/** The headers that carry this tab's token (none when it holds none). */
+export function authHeaders() {
+  const given = bearer();
+  return given ? { Authorization: `Bearer ${given}` } : {};
 }
 
 const listeners = new Set();
@@ -66,24 +71,21 @@ export function describe(status, body) {
       .join("; ");
   }
   if (typeof detail === "string" && detail) return detail;
-  if (status === 401) return "This service needs its access token for changes: set it with ⚙ token.";
+  if (status === 401) return "This service needs its access token: set it with ⚙ token.";
   return `The service answered ${status}.`;
 }
 
 /**
  * `method` `path` (under /api) with an optional JSON `body` and `query` parameters.
- * Resolves to the parsed JSON (null for 204); rejects with an ApiError. `auth` sends the
- * organiser's token on a read too.
+ * Resolves to the parsed JSON (null for 204); rejects with an ApiError.
  */
-export async function api(method, path, { body, query, raw = false, auth } = {}) {
+export async function api(method, path, { body, query, raw = false } = {}) {
   const url = new URL(`/api${path}`, location.origin);
   for (const [k, v] of Object.entries(query || {})) {
     if (v !== undefined && v !== null && v !== "") url.searchParams.set(k, String(v));
   }
-  const headers = {};
+  const headers = authHeaders();
   if (body !== undefined) headers["Content-Type"] = "application/json";
-  const given = bearer(method, auth);
-  if (given) headers.Authorization = `Bearer ${given}`;
   let response;
   try {
     response = await fetch(url, {

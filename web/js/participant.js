@@ -126,10 +126,45 @@ function consentForm() {
     agree, message);
 }
 
+/** The study's questions, asked once training is done and before the completion code. */
+function questionnaire() {
+  const form = el("form", { id: "questionnaire", class: "questionnaire" });
+  const fields = me.questionnaire.map((question, i) => {
+    const answer = el("textarea", { id: `answer-${i + 1}`, name: `answer-${i + 1}`, rows: 3, maxlength: 2000, required: true });
+    form.append(el("label", { class: "question" }, el("span", { text: question }), answer));
+    return answer;
+  });
+  const message = el("p", { class: "form-error", role: "alert", hidden: true });
+  const send = el("button", { type: "submit", id: "answers-submit", class: "primary", text: "Send my answers" });
+  form.append(send, message);
+  form.addEventListener("submit", async (e) => {
+    e.preventDefault();
+    send.disabled = true;
+    try {
+      me = await post("/participant/answers", { answers: fields.map((f) => f.value.trim()) });
+    } catch (error) {
+      send.disabled = false;
+      message.hidden = false;
+      message.textContent = error.status === 409 && error.message.includes("already")
+        ? "Your answers are in already."
+        : refusal(error);
+      if (error.status === 409) me = await get("/participant").catch(() => me);
+      if (!me.answered) return;
+    }
+    done();
+  });
+  body().replaceChildren(el("h2", { text: "Thank you: a few questions before you finish" }), form);
+  fields[0].focus();
+}
+
 function done() {
   clearInterval(poll);
   poll = null;
   stopConsole();
+  if (me.questionnaire.length && !me.answered) {
+    questionnaire();
+    return;
+  }
   const parts = [el("h2", { text: "Thank you: you have finished." })];
   if (me.completion_code) {
     const copy = el("button", { type: "button", class: "small", text: "Copy" });

@@ -3,7 +3,7 @@
 // shown this once, with a copy button: the service keeps only its digest) and delete a
 // study's recruiters' ids.
 
-import { api, seg } from "./api.js";
+import { api, get, seg } from "./api.js";
 import { clearFormErrors, showApiErrors, watchFields } from "./forms.js";
 import { $, attempt, el, fmt, toast } from "./ui.js";
 
@@ -14,8 +14,6 @@ let active = false;
 let poll = null;
 let studies = [];
 
-// The study routes are the organiser's: their reads carry the organiser's token too.
-const read = (path) => api("GET", path, { auth: true });
 
 export function init() {
   const form = $("#new-study-form");
@@ -52,7 +50,7 @@ async function refresh() {
   const message = $("#studies-message");
   let list;
   try {
-    list = await read("/studies");
+    list = await get("/studies");
   } catch (error) {
     message.textContent = error.status === 401
       ? `${error.message} (the studies are the organiser's: set the service's token with ⚙ token)`
@@ -102,7 +100,7 @@ async function loadParticipants() {
     $("#participants").replaceChildren();
     return;
   }
-  const list = await attempt(() => read(`/studies/${seg(name)}/participants`));
+  const list = await attempt(() => get(`/studies/${seg(name)}/participants`));
   if (!list || $("#invite-form").study.value !== name) return;
   $("#participants").replaceChildren(list.data.length
     ? el("table", { class: "participants" },

@@ -18,10 +18,10 @@ from starlette.background import BackgroundTask
 from starlette.concurrency import run_in_threadpool
 
 from server.api.access import Organiser
-from server.api.deps import StoreDep
+from server.api.deps import EnginesDep, StoreDep
 from server.api.errors import ErrorPublic
 from server.api.routes.runs import RunId
-from server.api.routes.studies import StudiesDep, StudyName
+from server.api.routes.studies import StudiesDep, StudyName, settle_study
 from server.api.routing import resource_router
 from server.export import MinariMissingError, export_run, export_study, zip_folder
 
@@ -85,6 +85,7 @@ async def export_study_zip(
     name: StudyName,
     store: StoreDep,
     studies: StudiesDep,
+    engines: EnginesDep,
     minari: MinariQuery = False,
 ) -> FileResponse:
     """The study's export, zipped under `study-{name}/`, as `srlab study export` writes it.
@@ -92,6 +93,7 @@ async def export_study_zip(
     A folder per participant with a run (named by their pseudonym: their run's export), the
     study-wide reward log and episodes, and `study.json`. Never a recruiter's id.
     """
+    await settle_study(name, studies, store, engines)  # each status as of now
 
     def write(folder: Path) -> object:
         return export_study(store, studies, name, folder, minari=minari)

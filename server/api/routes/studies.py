@@ -6,17 +6,26 @@ import contextlib
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Path, Request, status
+from fastapi.exceptions import RequestValidationError
 from starlette.concurrency import run_in_threadpool as io
 
 from core.engine.messages import Stop
 from core.errors import RunStateError
-from core.studies import Participant, ParticipantStatus, Study, StudyRepository, budget_spent
+from core.studies import (
+    Participant,
+    ParticipantStatus,
+    Study,
+    StudyRepository,
+    StudySpec,
+    budget_spent,
+)
 from server.api.access import Organiser, Principal, PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import run_now
 from server.api.routing import resource_router
 from server.schemas.common import Text
 from server.schemas.studies import (
+    AnswersCreate,
     ConsentCreate,
     IdentitiesDeleted,
     ParticipantInvited,
@@ -90,22 +99,29 @@ async def create_study(body: StudyCreate, studies: StudiesDep) -> StudyPublic:
 
 
 @router.get("", dependencies=[Organiser])
-async def list_studies(studies: StudiesDep) -> StudiesPublic:
+async def list_studies(studies: StudiesDep, store: StoreDep, engines: EnginesDep) -> StudiesPublic:
     """Every study with its progress (participants per status), oldest first."""
+    for found in await io(studies.studies):
+        await settle_study(found.spec.name, studies, store, engines)
     data = [study_public(s) for s in await io(studies.studies)]
     return StudiesPublic(data=data, count=len(data))
 
 
 @router.get("/{name}", dependencies=[Organiser])
-async def get_study(name: StudyName, studies: StudiesDep) -> StudyPublic:
-    """A study with its progress (participants per status)."""
+async def get_study(
+    name: StudyName, studies: StudiesDep, store: StoreDep, engines: EnginesDep
+) -> StudyPublic:
+    """A study with its progress (participants per status, done as soon as spent)."""
+    await settle_study(name, studies, store, engines)
     return study_public(await io(studies.get, name))
 
 
 @router.get("/{name}/participants", dependencies=[Organiser])
-async def list_participants(name: StudyName, studies: StudiesDep) -> ParticipantsPublic:
+async def list_participants(
+    name: StudyName, studies: StudiesDep, store: StoreDep, engines: EnginesDep
+) -> ParticipantsPublic:
     """A study's participants by pseudonym, in the order they were added."""
-    data = [participant_public(p) for p in await io(studies.participants, name)]
+    data = [participant_public(p) for p in await settle_study(name, studies, store, engines)]
     return ParticipantsPublic(data=data, count=len(data))
 
 
@@ -139,16 +155,19 @@ async def delete_identities(name: StudyName, studies: StudiesDep) -> IdentitiesD
     return IdentitiesDeleted(deleted=await io(studies.delete_identities, name))
 
 
-async def current(
-    who: Principal, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+async def settle(
+    p: Participant, spec: StudySpec, studies: StudyRepository, store: StoreDep, engines: EnginesDep
 ) -> Participant:
-    """The participant as they are now: done once their run has spent the budget."""
-    p = who.participant
-    assert p is not None and who.study is not None
+    """A participant as they are now: done once their run has spent the budget.
+
+    Whoever reads first (the participant, or the organiser watching progress) marks it,
+    from the run as it is (live here, else as stored): right after a restart too, and
+    whether or not the participant's tab is still open.
+    """
     if p.status is not ParticipantStatus.TRAINING or p.run_id is None:
         return p
     run = await run_now(store, engines, p.run_id)
-    if not budget_spent(who.study.spec, run.episodes_done, run.ticks, run.hz):
+    if not budget_spent(spec, run.episodes_done, run.ticks, run.hz):
         return p
     done = await io(studies.finish, p.id)
     live = engines.get(p.run_id)
@@ -158,18 +177,42 @@ async def current(
     return done
 
 
-def _view(who: Principal, p: Participant) -> ParticipantView:
+async def settle_study(
+    name: str, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+) -> tuple[Participant, ...]:
+    """A study's participants, each settled (`settle`), in the order they were added."""
+    spec = (await io(studies.get, name)).spec
+    found = await io(studies.participants, name)
+    return tuple([await settle(p, spec, studies, store, engines) for p in found])
+
+
+async def current(
+    who: Principal, studies: StudyRepository, store: StoreDep, engines: EnginesDep
+) -> Participant:
+    """The calling participant as they are now (`settle`)."""
+    assert who.participant is not None and who.study is not None
+    return await settle(who.participant, who.study.spec, studies, store, engines)
+
+
+def _view(who: Principal, p: Participant, answered: bool) -> ParticipantView:
     assert who.study is not None
     s = who.study.spec
-    done = p.status is ParticipantStatus.DONE
+    # The code comes once the budget is spent and the questionnaire, if any, answered.
+    done = p.status is ParticipantStatus.DONE and (answered or not s.questionnaire)
     return ParticipantView(
         study=s.name, pseudonym=p.pseudonym, status=p.status.value,
         consent_text=s.consent_text, consent_version=s.consent_version,
         questionnaire=list(s.questionnaire), condition=p.condition, run_id=p.run_id,
-        budget_episodes=s.budget_episodes, budget_s=s.budget_s,
+        budget_episodes=s.budget_episodes, budget_s=s.budget_s, answered=answered,
         completion_code=s.completion_code if done else None,
         redirect_url=s.redirect_url if done else None,
     )  # fmt: skip
+
+
+async def _answered(studies: StudyRepository, p: Participant) -> bool:
+    if p.status is not ParticipantStatus.DONE:
+        return False  # no one answers before their training is done: no need to ask
+    return bool(await io(studies.answers, p.study, p.id))
 
 
 @participant_router.get("")
@@ -177,7 +220,8 @@ async def get_participant(
     who: ParticipantDep, studies: StudiesDep, store: StoreDep, engines: EnginesDep
 ) -> ParticipantView:
     """The caller's study: consent text, questionnaire, their run, and once done, the code."""
-    return _view(who, await current(who, studies, store, engines))
+    p = await current(who, studies, store, engines)
+    return _view(who, p, await _answered(studies, p))
 
 
 @participant_router.post("/consent")
@@ -211,4 +255,40 @@ async def consent(
     if run.status in ("created", "interrupted") and p.status is ParticipantStatus.TRAINING:
         await engines.start(p.run_id)  # 429 at the cap: consenting again starts it
         await engines.started(p.run_id)
-    return _view(who, p)
+    return _view(who, p, await _answered(studies, p))
+
+
+@participant_router.post("/answers", status_code=status.HTTP_201_CREATED)
+async def answer(
+    body: AnswersCreate,
+    who: ParticipantDep,
+    studies: StudiesDep,
+    store: StoreDep,
+    engines: EnginesDep,
+) -> ParticipantView:
+    """Answer the study's questionnaire, once, after training: then the completion code.
+
+    422 unless there is one answer per question; 409 when the study has no questionnaire,
+    the participant's budget is not spent yet, or they have answered already.
+    """
+    assert who.study is not None
+    questions = who.study.spec.questionnaire
+    if not questions:
+        raise RunStateError(f"study {who.study.spec.name!r} has no questionnaire")
+    if len(body.answers) != len(questions):
+        raise RequestValidationError(
+            [
+                {
+                    "type": "value_error",
+                    "loc": ["body", "answers"],
+                    "msg": f"{len(body.answers)} answers for {len(questions)} questions: "
+                    "give one answer per question, in their order",
+                    "input": body.answers,
+                }
+            ]
+        )
+    p = await current(who, studies, store, engines)
+    if p.status is not ParticipantStatus.DONE:
+        raise RunStateError("the questionnaire comes once your training is done")
+    await io(studies.answer, p.id, body.answers)
+    return _view(who, p, answered=True)

@@ -5,18 +5,15 @@ The routes are walked from the app itself, so a route added later is checked too
 
 from __future__ import annotations
 
-import re
 from collections.abc import AsyncIterator
 from typing import Any
 
 import httpx
 import pytest
 from apphelpers import client_for, settings_for
-from fastapi.routing import APIRoute
+from routewalk import api_routes, consented_participants, fill
 
 from server.api.access import PARTICIPANT_TAGS
-from server.config import Settings
-from server.main import create_app
 
 pytestmark = pytest.mark.anyio
 
@@ -28,17 +25,7 @@ STUDY: dict[str, Any] = {
 }
 
 
-def _routes() -> list[tuple[str, str, frozenset[str]]]:
-    app = create_app(Settings(viser=False))
-    out = []
-    for route in app.routes:
-        if isinstance(route, APIRoute):
-            for method in sorted(route.methods or set()):
-                out.append((method, route.path, frozenset(str(t) for t in route.tags)))
-    return out
-
-
-ROUTES = _routes()
+ROUTES = api_routes()
 RUN_ROUTES = [(m, p) for m, p, _ in ROUTES if "{run_id}" in p]
 OTHER_ROUTES = [
     (m, p)
@@ -59,24 +46,7 @@ async def service(
     """Two consented participants with a live run each, and the organiser's client."""
     settings = settings_for(tmp_path_factory.mktemp("walk"))
     async with client_for(settings) as (client, _):
-        assert (await client.post("/api/studies", json=STUDY)).status_code == 201
-        r = await client.post("/api/studies/walk/participants", json={"count": 2})
-        tokens = [p["token"] for p in r.json()["data"]]
-        runs = []
-        for token in tokens:
-            r = await client.post(
-                "/api/participant/consent",
-                json={"consent_version": "1"},
-                headers={"Authorization": f"Bearer {token}"},
-            )
-            assert r.status_code == 200, r.text
-            runs.append(r.json()["run_id"])
-        yield client, {"tokens": tokens, "runs": runs}
-
-
-def _fill(path: str, run_id: int) -> str:
-    path = path.replace("{run_id}", str(run_id))
-    return re.sub(r"\{[a-z_]+\}", "0", path)  # any other parameter: a plausible value
+        yield client, await consented_participants(client, STUDY, 2)
 
 
 async def _stored(client: httpx.AsyncClient, run_id: int) -> tuple[Any, ...]:
@@ -119,7 +89,7 @@ async def test_a_run_route_refuses_a_foreign_participant_and_changes_nothing(
 
     r = await client.request(
         method,
-        _fill(path, foreign_run),
+        fill(path, foreign_run),
         json={} if method in ("POST", "PUT", "PATCH") else None,
         headers={"Authorization": f"Bearer {ctx['tokens'][0]}"},
     )
@@ -138,7 +108,7 @@ async def test_a_route_not_a_participants_refuses_their_token(
 
     r = await client.request(
         method,
-        _fill(path, ctx["runs"][0]),
+        fill(path, ctx["runs"][0]),
         json={} if method in ("POST", "PUT", "PATCH") else None,
         headers={"Authorization": f"Bearer {ctx['tokens'][0]}"},
     )

@@ -12,6 +12,7 @@ import pytest
 from apphelpers import client_for, settings_for
 
 from core.studies import token_digest
+from server.services import studies as studies_service
 
 pytestmark = pytest.mark.anyio
 
@@ -186,7 +187,13 @@ async def test_study_flow_consent_assignment_rewards_and_completion(tmp_path: Pa
                 "status"
             ] != "done":
                 await asyncio.sleep(0.05)
-        assert (view["completion_code"], view["run_id"]) == ("C0DE42", runs[0])
+        # The questionnaire first, then the code.
+        assert (view["completion_code"], view["answered"], view["run_id"]) == (None, False, runs[0])
+        answered = await client.post(
+            "/api/participant/answers", json={"answers": ["Easy."]}, headers=first
+        )
+        assert answered.status_code == 201, answered.text
+        assert (answered.json()["completion_code"], answered.json()["answered"]) == ("C0DE42", True)
         spent = await client.post(f"/api/runs/{runs[0]}/rewards", json={"value": 1}, headers=first)
         assert spent.status_code == 403 and "budget" in spent.json()["detail"]
         progress = (await client.get("/api/studies/pilot")).json()["progress"]
@@ -213,3 +220,191 @@ async def test_each_participant_has_a_reward_limit_of_their_own(tmp_path: Path) 
 
     # On one loopback address: each participant's first reward goes, their second waits.
     assert answers == [202, 429, 202, 429]
+
+
+async def _ticked(client: httpx.AsyncClient, run_id: int, ticks: int) -> None:
+    """Wait, on the organiser's read of the run (which settles no one), until it has ticked."""
+    async with asyncio.timeout(60):  # a hang guard
+        while (await client.get(f"/api/runs/{run_id}")).json()["ticks"] < ticks:
+            await asyncio.sleep(0.05)
+
+
+async def test_a_participant_is_done_once_spent_though_they_never_read_again(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # a budget of 1 s: 10 ticks at 10 Hz
+        [gone, stays] = [p["token"] for p in await invited(client, {"count": 2})]
+        run = (await consented(client, gone))["run_id"]
+        await consented(client, stays)
+
+        # Their tab is closed: no one reads /api/participant; the organiser watches.
+        async with asyncio.timeout(60):  # a hang guard
+            while (await client.get("/api/studies/pilot")).json()["progress"]["done"] < 1:
+                await asyncio.sleep(0.05)
+
+        listed = (await client.get("/api/studies/pilot/participants")).json()["data"]
+        assert [p["status"] for p in listed if p["run_id"] == run] == ["done"]
+        studies = (await client.get("/api/studies")).json()["data"]
+        assert studies[0]["progress"]["done"] >= 1
+        async with asyncio.timeout(60):  # a time budget: the run is stopped, not left ticking
+            while (await client.get(f"/api/runs/{run}")).json()["status"] != "stopped":
+                await asyncio.sleep(0.05)
+
+
+async def test_a_participant_spent_before_a_restart_is_done_after_it(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        study = {**STUDY, "budget": {"episodes": 1}, "questionnaire": []}
+        await client.post("/api/studies", json=study)
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+    # Stored as if its one episode ended just before the service stopped, with no one
+    # reading since: the participant is still training in storage.
+    with sqlite3.connect(tmp_path / "api.db") as con:
+        con.execute("UPDATE runs SET episodes_done = 1 WHERE id = ?", (run,))
+    [(status,)] = sqlite3.connect(tmp_path / "api.db").execute("SELECT status FROM participants")
+    assert status == "training"
+
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        progress = (await client.get("/api/studies/pilot")).json()["progress"]
+        assert progress["done"] == 1 and progress["training"] == 0
+        view = (await client.get("/api/participant", headers=as_participant(token))).json()
+        assert (view["status"], view["completion_code"]) == ("done", "C0DE42")
+
+
+async def _spent(client: httpx.AsyncClient, token: str) -> None:
+    async with asyncio.timeout(60):  # a hang guard: the budget is one second of the run's clock
+        while (await client.get("/api/participant", headers=as_participant(token))).json()[
+            "status"
+        ] != "done":
+            await asyncio.sleep(0.05)
+
+
+def _answers(path: Path) -> list[tuple[object, ...]]:
+    sql = (
+        "SELECT participant_id, question_no, question, answer FROM questionnaire_answers "
+        "ORDER BY participant_id, question_no"
+    )
+    with sqlite3.connect(path) as con:
+        return list(con.execute(sql))
+
+
+async def test_answers_are_checked_stored_once_and_open_the_completion_code(
+    tmp_path: Path,
+) -> None:
+    study = {**STUDY, "questionnaire": ["How hard was it?", "Would you again?"]}
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=study)
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        me = as_participant(token)
+        await consented(client, token)
+        early = await client.post(
+            "/api/participant/answers", json={"answers": ["a", "b"]}, headers=me
+        )
+        assert early.status_code == 409 and "training is done" in early.json()["detail"]
+        await _spent(client, token)
+
+        for body, field in (
+            ({"answers": ["only one"]}, "answers"),
+            ({"answers": ["a", "b", "c"]}, "answers"),
+            ({"answers": ["a", ""]}, "answers"),
+            ({"answers": []}, "answers"),
+            ({}, "answers"),
+            ({"answers": ["a", "b"], "extra": 1}, "extra"),
+        ):
+            bad = await client.post("/api/participant/answers", json=body, headers=me)
+            assert bad.status_code == 422, (body, bad.text)
+            assert any(field in e["loc"] for e in bad.json()["detail"]), bad.text
+        assert _answers(tmp_path / "api.db") == []
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert (view["status"], view["answered"], view["completion_code"]) == ("done", False, None)
+
+        given = await client.post(
+            "/api/participant/answers", json={"answers": ["Hard.", "Yes"]}, headers=me
+        )
+        assert given.status_code == 201, given.text
+        assert (given.json()["answered"], given.json()["completion_code"]) == (True, "C0DE42")
+        again = await client.post(
+            "/api/participant/answers", json={"answers": ["Easy.", "No"]}, headers=me
+        )
+        assert again.status_code == 409 and "already" in again.json()["detail"]
+        assert _answers(tmp_path / "api.db") == [
+            (1, 1, "How hard was it?", "Hard."),
+            (1, 2, "Would you again?", "Yes"),
+        ]
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert (view["answered"], view["completion_code"]) == (True, "C0DE42")
+        organiser = await client.post("/api/participant/answers", json={"answers": ["a", "b"]})
+        assert organiser.status_code == 401
+
+
+async def test_a_study_without_a_questionnaire_takes_no_answers(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json={**STUDY, "questionnaire": []})
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        await consented(client, token)
+        await _spent(client, token)
+        me = as_participant(token)
+        view = (await client.get("/api/participant", headers=me)).json()
+        assert view["completion_code"] == "C0DE42"  # no questions: the code straight away
+        r = await client.post("/api/participant/answers", json={"answers": ["a"]}, headers=me)
+        assert r.status_code == 409 and "no questionnaire" in r.json()["detail"]
+        assert _answers(tmp_path / "api.db") == []
+
+
+def _status_stored(path: Path) -> list[str]:
+    with sqlite3.connect(path) as con:
+        return [s for (s,) in con.execute("SELECT status FROM participants ORDER BY id")]
+
+
+async def _stored_done(path: Path) -> None:
+    """Wait on storage alone (no route that settles is read) until everyone is done."""
+    async with asyncio.timeout(60):  # a hang guard
+        while set(_status_stored(path)) != {"done"}:
+            await asyncio.sleep(0.05)
+
+
+async def test_a_spent_time_budget_is_marked_and_stopped_with_no_one_reading(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # 1 s
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+
+        await _stored_done(tmp_path / "api.db")
+
+        async with asyncio.timeout(60):  # the service stopped it: no one would watch it
+            while (await client.get(f"/api/runs/{run}")).json()["status"] != "stopped":
+                await asyncio.sleep(0.05)
+
+
+async def test_a_run_that_ends_between_two_looks_is_heard(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        await client.post("/api/studies", json={**STUDY, "budget": {"episodes": 1}})
+        [person] = await invited(client, {"count": 1})
+        # Their run, fast: it starts and ends well within one look of the watch.
+        r = await client.post(
+            "/api/runs", json={"condition": "expert", "episodes": 1, "seed": 3, "mode": "fast"}
+        )
+        studies = app.state.srlab.studies
+        studies.consent(person["id"], "v2")
+        studies.set_run(person["id"], r.json()["id"])
+        assert (await client.post(f"/api/runs/{r.json()['id']}/start")).status_code == 200
+
+        await _stored_done(tmp_path / "api.db")
+
+
+async def test_a_budget_spent_just_before_a_stop_is_marked_on_the_way_out(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(studies_service, "SETTLE_EVERY_S", 3600.0)  # no look while it runs
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json=STUDY)  # 1 s
+        [token] = [p["token"] for p in await invited(client, {"count": 1})]
+        run = (await consented(client, token))["run_id"]
+        await _ticked(client, run, 10)
+        assert _status_stored(tmp_path / "api.db") == ["training"]
+    # Stopped with no one having read: the unfinished episode's ticks are not stored, but
+    # the watch's last look, after the runs' shutdown, saw them spent.
+    assert _status_stored(tmp_path / "api.db") == ["done"]

@@ -220,6 +220,39 @@ def test_status_counts_participants_per_status_and_condition(
     assert table["all"] == ["0", "1", "3"]
 
 
+def test_status_marks_done_a_participant_whose_stored_run_spent_the_budget(
+    db: tuple[str, Path], consent: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from server.cli.db import open_store
+    from server.services.runspec import run_spec
+
+    main(create_argv(db[0], consent))  # 3 episodes each
+    main(["study", "add", "pilot", "--count", "2", "--url", db[0]])
+    store, engine = open_store(db[0])
+    spec = run_spec(condition="trainer", seed=1, episodes=3, mode="realtime", hz=10.0)
+    runs = [store.create_run(spec, ()) for _ in range(2)]
+    engine.dispose()
+    with sqlite3.connect(db[1]) as con:  # both training, as the service records it; one spent
+        for pid, (run, episodes) in zip((1, 2), zip(runs, (3, 2), strict=True), strict=True):
+            con.execute(
+                "UPDATE participants SET status = 'training', condition = 'trainer', run_id = ? "
+                "WHERE id = ?",
+                (run, pid),
+            )
+            con.execute("UPDATE runs SET episodes_done = ? WHERE id = ?", (episodes, run))
+    capsys.readouterr()
+
+    assert main(["study", "status", "pilot", "--url", db[0]]) == 0
+
+    out = capsys.readouterr().out
+    table = {line.split()[0]: line.split()[1:] for line in out.splitlines()[1:] if line.strip()}
+    assert table["training"] == ["-", "1", "1"] and table["done"] == ["-", "1", "1"]
+    assert rows(db[1], "SELECT id, status FROM participants ORDER BY id") == [
+        (1, "done"),
+        (2, "training"),
+    ]
+
+
 def test_forget_asks_for_yes_then_deletes_the_mapping_only(
     db: tuple[str, Path], consent: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

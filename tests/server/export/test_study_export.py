@@ -26,6 +26,7 @@ from core.studies import UnknownStudyError
 from server.cli import main
 from server.config import Settings
 from server.export import EPISODE_COLUMNS, REWARD_COLUMNS, export_run, export_study
+from server.export.tables import ANSWER_COLUMNS
 from server.persistence import SqlAlchemyRunStore, make_engine, make_sessionmaker
 from server.persistence.studies import SqlAlchemyStudyRepository
 from server.schemas.studies import StudyCreate
@@ -34,7 +35,16 @@ from server.services.studies import invite, study_spec
 EXTERNAL_IDS = ["prolific-5f1cA9Z", "prolific-77abQ3X", "prolific-0c0dK8W"]
 """Recruiters' ids: distinctive, so that finding one in an exported byte means it leaked."""
 EPISODES = 2
-STUDY_FILES = {"rewards.jsonl", "rewards.csv", "episodes.jsonl", "episodes.csv", "study.json"}
+STUDY_FILES = {
+    "rewards.jsonl",
+    "rewards.csv",
+    "episodes.jsonl",
+    "episodes.csv",
+    "answers.jsonl",
+    "answers.csv",
+    "study.json",
+}
+QUESTIONS = ["How hard was it?", "Would you again?"]
 RUN_FILES = {
     "rewards.jsonl",
     "rewards.csv",
@@ -69,6 +79,7 @@ def stored(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stored]:
             "budget": {"episodes": EPISODES},
             "consent_text": "You will train a simulated robot.",
             "consent_version": "v3",
+            "questionnaire": QUESTIONS,
             "completion_code": "C0DE42",
         }
     )
@@ -83,6 +94,7 @@ def stored(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stored]:
         assert asyncio.run(run.run()) is RunStatus.FINISHED
         studies.set_run(p.id, run.run_id)
         runs.append(run.run_id)
+    studies.answer(invited[1].participant.id, ["Hard, then easy.", 'Yes, "gladly", again'])
     yield Stored(
         url,
         store,
@@ -139,7 +151,7 @@ def test_a_study_export_holds_each_run_under_its_pseudonym_and_the_study_tables(
     assert manifest["study"] == {
         "name": "pilot", "conditions": ["rp", "kp"], "assignment": "balanced",
         "budget": {"episodes": EPISODES, "seconds": None}, "consent_version": "v3",
-        "questionnaire": [], "created_at": manifest["study"]["created_at"],
+        "questionnaire": QUESTIONS, "created_at": manifest["study"]["created_at"],
     }  # fmt: skip
     assert manifest["srlab"]["version"] and "commit" in manifest["srlab"]
     people = manifest["participants"]
@@ -153,7 +165,18 @@ def test_a_study_export_holds_each_run_under_its_pseudonym_and_the_study_tables(
     assert people[2]["seed"] is None and people[0]["run_status"] == "finished"
     assert manifest["counts"] == {
         "participants": 3, "runs": 2, "rewards": done.rewards, "episodes": 2 * EPISODES,
+        "answers": 2,
     }  # fmt: skip
+    # the questionnaire's answers by pseudonym: the one participant who answered
+    answers = lines(out / "answers.jsonl")
+    assert [(a["participant"], a["question_no"], a["question"], a["answer"]) for a in answers] == [
+        (second, 1, QUESTIONS[0], "Hard, then easy."),
+        (second, 2, QUESTIONS[1], 'Yes, "gladly", again'),
+    ]
+    assert all(tuple(a) == ANSWER_COLUMNS and a["answered_at"] for a in answers)
+    with (out / "answers.csv").open(newline="") as f:
+        assert [r["answer"] for r in csv.DictReader(f)] == [a["answer"] for a in answers]
+    assert done.answers == 2
 
 
 def test_an_unknown_study_is_refused_before_anything_is_written(

@@ -2,6 +2,7 @@
 // rewards and associations as they happen; and what the store holds, read again when the
 // stream starts or the run ends.
 
+import { EventStream } from "../eventstream.js";
 import { key } from "../matrix.js";
 import { $, el, fmt, toast } from "../ui.js";
 import { backfillEpisodes, firstGap, keepEpisode, loadEpisodes, redrawCurve } from "./episodes.js";
@@ -22,7 +23,8 @@ export function closeStream() {
 export function follow() {
   closeStream();
   const run = state.run;
-  const source = new EventSource(`/api/runs/${run.id}/events?tick_hz=${TICK_HZ}`);
+  // Read with fetch, not EventSource: it carries the tab's token (`../eventstream.js`).
+  const source = new EventStream(`/api/runs/${run.id}/events?tick_hz=${TICK_HZ}`);
   state.source = source;
   const data = (e) => JSON.parse(e.data);
   source.addEventListener("tick", (e) => onTick(data(e)));

@@ -96,7 +96,7 @@ function drawMine() {
   const items = state.rewards.filter((r) => r.source === RewardSource.trainer).slice(-100).reverse();
   $("#my-rewards").replaceChildren(...items.map((r) => {
     const by = undone.get(r.id);
-    return el("li", { class: by ? "undone" : "", dataset: { id: r.id ?? "" } },
+    return el("li", { class: by ? "undone" : "", dataset: { id: r.id ?? "", uid: r.uid ?? "" } },
       el("span", { class: `v ${r.value >= 0 ? "pos" : "neg"}`, text: `${r.value > 0 ? "+" : r.value < 0 ? "−" : ""}${Math.abs(r.value)}` }),
       el("span", { class: "what" }, `${r.id !== undefined ? `#${r.id} · ` : ""}tick ${r.tick}`,
         r.note ? el("span", { class: "reward-note", text: ` · ${r.note}` }) : null,
