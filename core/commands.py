@@ -32,6 +32,11 @@ class InjectReward:
     uid: str = ""
     """The reward's own id from its arrival on: kept in the log, its event and the console
     ("": the engine gives it one)."""
+    tick_seen: int | None = None
+    """The tick the trainer was looking at when they pressed: the reward credits the
+    reaction window before it (`core.brain.memory.credit_seen`). None: the paper's rule,
+    every STM record before the boundary (the task's, the program's, and clients that send
+    none)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:
