@@ -37,6 +37,9 @@ class InjectReward:
     reaction window before it (`core.brain.memory.credit_seen`). None: the paper's rule,
     every STM record before the boundary (the task's, the program's, and clients that send
     none)."""
+    seen_episode: int | None = None
+    """The episode `tick_seen` belongs to (None: the one it lies in, the run's current or
+    the one that just ended)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

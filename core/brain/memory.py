@@ -83,6 +83,8 @@ class ReactionWindow:
 
 DEFAULT_REACTION_S = (0.2, 4.0)
 """TAMER's reaction window in seconds: the default of a run's."""
+MAX_REACTION_S = 60.0
+"""The longest reaction window a run may have, in seconds."""
 
 
 class ShortTermMemory:

@@ -201,10 +201,15 @@ class RunEngine:
         note: str = "",
         source: RewardSource = RewardSource.TRAINER,
         uid: str = "",
+        tick_seen: int | None = None,
+        seen_episode: int | None = None,
     ) -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 
-        It is stamped with the next tick boundary, so it credits every STM record so far.
+        It is stamped with the next tick boundary, so it credits every STM record so far;
+        with `tick_seen` (the tick its trainer saw, in `seen_episode`: by default the one
+        it lies in), the reaction window before that tick (`core.brain.memory.credit_seen`;
+        `SeenTickError` for a tick the run has not reached or no longer holds).
         A paused run takes it too and applies it at once, at the boundary it is paused at.
         `uid` is its id from its arrival on ("": one made of its source, episode, boundary
         and how many rewards this engine took).
@@ -218,17 +223,32 @@ class RunEngine:
             # would be applied in an order a later replay could not repeat.
             await self._ticks.replayed.wait()
             self._check_running(paused=True)
+        window = None
+        if tick_seen is not None:
+            seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
+            window = self.sim.brain.window.span(tick_seen)
+        else:
+            seen_episode = None
         next_boundary = self.sim.tick_count + 1
         stamp = self._boundary.stamp(next_boundary)
         self._arrivals += 1
         uid = uid or f"{source.value}-{self.sim.episode}-{stamp}-{self._arrivals}"
+        reward = InjectReward(
+            value,
+            note=note,
+            source=source,
+            uid=uid,
+            tick_seen=tick_seen,
+            seen_episode=seen_episode,
+        )
         job = RewardJob(
             stamp,
             self.sim.episode,
-            InjectReward(value, note=note, source=source, uid=uid),
+            reward,
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
+            window=window,
         )
         self._boundary.add(job, next_boundary)
         self._ticks.credit_paused()

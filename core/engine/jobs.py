@@ -28,6 +28,10 @@ class RewardAck:
     value: float
     uid: str = ""
     """The reward's id from its arrival (its log `id` is the database's)."""
+    tick_seen: int | None = None
+    seen_episode: int | None = None
+    window: tuple[int, int] | None = None
+    """The first and last tick it could credit (with a seen tick)."""
 
 
 @dataclass(eq=False)
@@ -50,6 +54,8 @@ class RewardJob:
     """Set once the reward is in the log (external rewards are logged by the ack task)."""
     committed_before: bool = False
     """Its learning is already in storage (a replayed reward applied before a crash)."""
+    window: tuple[int, int] | None = None
+    """The first and last tick a reward with a seen tick could credit, logged with it."""
 
 
 @dataclass(eq=False)

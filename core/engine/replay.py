@@ -57,10 +57,13 @@ class ReplayLog:
                         note=r.record.note,
                         source=RewardSource(r.record.source),
                         uid=r.record.uid,
+                        tick_seen=r.record.tick_seen,
+                        seen_episode=r.record.seen_episode,
                     ),
                     external=True,
                     logged_id=r.id,
                     committed_before=r.applied,
+                    window=r.record.window,
                 )
             )
         return jobs

@@ -12,8 +12,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from core.brain.memory import DEFAULT_REACTION_S
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.engine import RunView
+from core.engine.build import REACTION_WINDOW
 from core.engine.messages import Query, RunState
 from core.ports import NOT_ENDED, RunSpec, RunTotals
 from core.run.conditions import CONDITIONS
@@ -53,6 +55,12 @@ def live_state(state: RunState) -> LiveState:
     )
 
 
+def reaction_seconds(spec: RunSpec) -> tuple[float, float]:
+    """The run's reaction window in seconds (TAMER's for a run stored without one)."""
+    lo_s, hi_s = spec.params.get(REACTION_WINDOW, DEFAULT_REACTION_S)
+    return float(lo_s), float(hi_s)
+
+
 def run_public(
     run_id: int,
     spec: RunSpec,
@@ -74,6 +82,7 @@ def run_public(
         params=params,
         world=spec.world,
         sensors=spec.sensors,
+        reaction_window_s=reaction_seconds(spec),
         status=status_value,
         error=error,
         episodes_done=totals.episodes,

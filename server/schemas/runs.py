@@ -6,6 +6,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from core.brain.memory import MAX_REACTION_S
 from core.engine import HZ_MAX, HZ_MIN
 from core.run.conditions import CONDITIONS
 from server.schemas.catalog import SENSOR_DEFINITIONS, WORLD_NAMES
@@ -37,6 +38,18 @@ class LearningParams(Strict):
     eta: float | None = Field(None, ge=0.0, le=1.0, description="Eq. (1)'s learning rate")
     epsilon: float | None = Field(None, ge=0.0, le=1.0, description="exploration rate")
     synthesize: bool = Field(False, description="KP keeps new behaviours instead of snapping")
+    reaction_window_s: tuple[float, float] | None = Field(
+        None,
+        description="[lo, hi] seconds: a trainer's reward with the tick they saw credits the "
+        "ticks lo to hi seconds before it (default: the service's SRLAB_REACTION_WINDOW)",
+    )
+
+    @field_validator("reaction_window_s")
+    @classmethod
+    def _window(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not 0.0 <= v[0] <= v[1] <= MAX_REACTION_S:
+            raise ValueError(f"needs 0 <= lo <= hi <= {MAX_REACTION_S:g} seconds")
+        return v
 
 
 class RunCreate(Strict):
@@ -143,6 +156,10 @@ class RunPublic(BaseModel):
     params: dict[str, float | bool]
     world: str = Field(description="its world preset ('' if stored before runs kept it)")
     sensors: str = Field(description="its sensor definition ('' if stored before runs kept it)")
+    reaction_window_s: tuple[float, float] = Field(
+        description="[lo, hi] seconds: a trainer's reward with `tick_seen` credits the ticks "
+        "lo to hi seconds before it, at the run's rate (docs/studies.md)"
+    )
     status: RunStatusName
     error: str | None
     episodes_done: int

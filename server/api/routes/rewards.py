@@ -9,6 +9,7 @@ from fastapi import HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from core.commands import RewardSource
+from core.errors import SeenTickError
 from core.studies import ParticipantStatus
 from server.api.access import PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
@@ -73,10 +74,28 @@ async def inject_reward(
         raise HTTPException(
             status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
         )
-    ack = await engine.reward(body.value, note=body.note, source=RewardSource.TRAINER)
+    if body.episode is not None and body.tick_seen is None:
+        raise seen_error(SeenTickError("episode", "is the episode of `tick_seen`: send both"))
+    try:
+        ack = await engine.reward(
+            body.value,
+            note=body.note,
+            source=RewardSource.TRAINER,
+            tick_seen=body.tick_seen,
+            seen_episode=body.episode,
+        )
+    except SeenTickError as e:
+        raise seen_error(e) from e
     return RewardAccepted(
-        id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value, uid=ack.uid
-    )
+        id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value, uid=ack.uid,
+        tick_seen=ack.tick_seen, seen_episode=ack.seen_episode, window=ack.window,
+    )  # fmt: skip
+
+
+def seen_error(e: SeenTickError) -> HTTPException:
+    """A 422 naming the body's field at fault, as FastAPI's own validation errors do."""
+    detail = [{"loc": ["body", e.field], "msg": e.message, "type": "value_error"}]
+    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
 
 
 @router.get("")
@@ -96,7 +115,8 @@ def list_rewards(
         RewardPublic(
             id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
             source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
-            uid=r.record.uid, at=r.at,
+            uid=r.record.uid, at=r.at, tick_seen=r.record.tick_seen,
+            seen_episode=r.record.seen_episode, window=r.record.window,
         )
         for r in page
     ]  # fmt: skip

@@ -1,0 +1,99 @@
+"""A trainer's reward with the tick they saw, over HTTP: the window, the log, bad input."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+import pytest
+from apphelpers import client_for, create, settings_for, until
+
+from server.config import Settings
+
+pytestmark = [pytest.mark.anyio, pytest.mark.usefixtures("each_link")]  # over both links
+
+
+async def test_a_reward_with_a_seen_tick_is_answered_logged_and_credited_in_its_window(
+    tmp_path: Path,
+) -> None:
+    settings = settings_for(tmp_path, reaction_window="0.02-0.05")  # 2..5 ticks at 100 Hz
+    async with client_for(settings) as (client, _):
+        run = await create(client, condition="kp", mode="realtime", hz=100)
+        assert run["reaction_window_s"] == [0.02, 0.05]
+        run_id = run["id"]
+        await client.post(f"/api/runs/{run_id}/start")
+        await until(client, run_id, "running")
+        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 200
+        for _ in range(12):
+            assert (await client.post(f"/api/runs/{run_id}/step")).status_code == 200
+        ticks = (await client.get(f"/api/runs/{run_id}")).json()["live"]["tick"]
+        seen = ticks - 1
+        r = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1, "tick_seen": seen})
+        assert r.status_code == 202, r.text
+        ack = r.json()
+        assert (ack["tick_seen"], ack["seen_episode"]) == (seen, 0)
+        assert ack["window"] == [seen - 5, seen - 2]
+        log = await applied(client, run_id)
+        assert (log["tick_seen"], log["window"], log["seen_episode"]) == (seen, ack["window"], 0)
+        assert 1 <= log["credited"] <= 4
+        plain = await client.post(f"/api/runs/{run_id}/rewards", json={"value": 1})
+        assert plain.json()["tick_seen"] is None and plain.json()["window"] is None
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+@pytest.mark.parametrize(
+    ("body", "field", "says"),
+    [
+        ({"value": 1, "tick_seen": 10_000}, "tick_seen", "in the future"),
+        ({"value": 1, "tick_seen": 0, "episode": 4}, "episode", "episode 4"),
+        ({"value": 1, "episode": 0}, "episode", "send both"),
+        ({"value": 1, "tick_seen": -1}, "tick_seen", "greater than or equal"),
+    ],
+)
+async def test_a_bad_seen_tick_is_a_422_naming_the_field_and_stores_nothing(
+    tmp_path: Path, body: dict[str, Any], field: str, says: str
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run_id = (await create(client, condition="kp", mode="realtime", hz=100))["id"]
+        await client.post(f"/api/runs/{run_id}/start")
+        await until(client, run_id, "running")
+        await client.post(f"/api/runs/{run_id}/pause")
+        r = await client.post(f"/api/runs/{run_id}/rewards", json=body)
+        assert r.status_code == 422, r.text
+        (problem,) = r.json()["detail"]
+        assert problem["loc"] == ["body", field] and says in problem["msg"]
+        assert (await client.get(f"/api/runs/{run_id}/rewards")).json()["count"] == 0
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_a_run_keeps_the_window_it_was_created_with(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        default = await create(client, condition="kp")
+        own = await create(client, condition="kp", params={"reaction_window_s": [0.5, 2]})
+        bad = await client.post(
+            "/api/runs", json={"condition": "kp", "params": {"reaction_window_s": [2, 1]}}
+        )
+    assert default["reaction_window_s"] == [0.2, 4.0]
+    assert own["reaction_window_s"] == [0.5, 2.0]
+    assert bad.status_code == 422 and "reaction_window_s" in bad.text
+    async with client_for(settings_for(tmp_path, reaction_window="1-3")) as (client, _):
+        again = (await client.get(f"/api/runs/{default['id']}")).json()
+        new = await create(client, condition="kp")
+    assert again["reaction_window_s"] == [0.2, 4.0]  # a setting changed later: the run's own
+    assert new["reaction_window_s"] == [1.0, 3.0]
+
+
+@pytest.mark.parametrize("text", ["4", "4-1", "a-b", "0.2-100", "-1-2"])
+def test_a_bad_reaction_window_setting_says_what_it_needs(text: str) -> None:
+    with pytest.raises(ValueError, match="LO-HI"):
+        Settings(reaction_window=text)
+
+
+async def applied(client: Any, run_id: int) -> dict[str, Any]:
+    async with asyncio.timeout(30):  # a bound for a hang, not a speed test
+        while True:
+            log = (await client.get(f"/api/runs/{run_id}/rewards")).json()["data"]
+            if log and log[0]["applied"]:
+                return dict(log[0])
+            await asyncio.sleep(0.02)
