@@ -2,13 +2,28 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import AwareDatetime, BaseModel, Field
 
 from core.commands import RewardSource
 from server.schemas.common import Strict
 from server.schemas.runs import CauseName, HowName, OutcomeName, RunStatusName
+
+TickSeen = Annotated[
+    int | None,
+    Field(
+        description="the tick its trainer saw when they pressed (null: the reward credits "
+        "every STM record before its boundary, the paper's rule)"
+    ),
+]
+CreditWindow = Annotated[
+    tuple[int, int] | None,
+    Field(
+        description="[first, last]: the ticks a reward with `tick_seen` could credit, its "
+        "reaction window before the seen tick (null without `tick_seen`)"
+    ),
+]
 
 
 class RewardCreate(Strict):
@@ -46,14 +61,8 @@ class RewardAccepted(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
-    tick_seen: int | None = Field(
-        description="the tick its trainer saw when they pressed (null: the reward credits "
-        "every STM record before its boundary, the paper's rule)"
-    )
-    window: tuple[int, int] | None = Field(
-        description="[first, last]: the ticks a reward with `tick_seen` could credit, its "
-        "reaction window before the seen tick (null without `tick_seen`)"
-    )
+    tick_seen: TickSeen
+    window: CreditWindow
     seen_episode: int | None = Field(description="the episode of `tick_seen`")
 
 
@@ -68,14 +77,8 @@ class RewardPublic(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
-    tick_seen: int | None = Field(
-        description="the tick its trainer saw when they pressed (null: the reward credits "
-        "every STM record before its boundary, the paper's rule)"
-    )
-    window: tuple[int, int] | None = Field(
-        description="[first, last]: the ticks a reward with `tick_seen` could credit, its "
-        "reaction window before the seen tick (null without `tick_seen`)"
-    )
+    tick_seen: TickSeen
+    window: CreditWindow
     seen_episode: int | None = Field(description="the episode of `tick_seen`")
     applied: bool
     credited: int
@@ -152,14 +155,8 @@ class RewardEvent(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
-    tick_seen: int | None = Field(
-        description="the tick its trainer saw when they pressed (null: the reward credits "
-        "every STM record before its boundary, the paper's rule)"
-    )
-    window: tuple[int, int] | None = Field(
-        description="[first, last]: the ticks a reward with `tick_seen` could credit, its "
-        "reaction window before the seen tick (null without `tick_seen`)"
-    )
+    tick_seen: TickSeen
+    window: CreditWindow
 
 
 class EpisodeEvent(BaseModel):
