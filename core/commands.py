@@ -40,6 +40,9 @@ class InjectReward:
     seen_episode: int | None = None
     """The episode `tick_seen` belongs to (None: the one it lies in, the run's current or
     the one that just ended)."""
+    window: tuple[int, int] | None = None
+    """The first and last tick it credits, set as it arrives (None: the run's window
+    before `tick_seen`)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

@@ -154,9 +154,9 @@ class Brain:
             self.kp.reset_episode()
 
     def kept(self, last_tick: int) -> ShortTermMemory:
-        """STM's records a reward seen at `last_tick` could credit (its window's)."""
-        first, last = self.window.span(last_tick)
-        kept = ShortTermMemory(self.window.length)
+        """STM's records a reward seen at `last_tick` could credit (paused: to that tick)."""
+        first, last = last_tick - self.window.hi_ticks, last_tick
+        kept = ShortTermMemory(self.window.hi_ticks + 1)
         for r in self.stm:
             if first <= r[0] <= last:
                 kept.push(r)
@@ -243,33 +243,34 @@ class Brain:
         reward_tick: int,
         value: float,
         tick_seen: int | None = None,
-        stored: ShortTermMemory | None = None,
+        window: tuple[int, int] | None = None,
     ) -> RewardOutcome:
         """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network.
 
         The reward arrives at the boundary before tick `reward_tick`. Without `tick_seen`
         it credits the STM records of earlier ticks, each at
         ``d_k = reward_tick - record tick`` (the paper's rule). With it, a person's
-        reward credits the reaction window before the tick they saw (`credit_seen`): from
-        STM; from the ended episode's last records when the seen tick lies in that episode
-        and the reward comes at most the window's `hi_ticks` after its end (later, or
-        further back, from nothing); or from `stored`, a stored episode's records.
+        reward credits the reaction window before the tick they saw (`credit_seen`;
+        `window`, its first and last tick, as the reward arrived: by default the brain's
+        `window` before `tick_seen`): from STM, or from the ended episode's last records
+        when the seen tick lies in that episode and the reward comes at most the window's
+        `hi_ticks` after its end (later, from nothing).
         """
-        window: tuple[int, int] | None = None
+        memory = self.stm
         if tick_seen is None:
-            memory = self.stm
+            window = None
         else:
-            window = self.window.span(tick_seen)
-            memory = stored if stored is not None else self._seen_memory(tick_seen, reward_tick)
+            window = window or self.window.span(tick_seen)
+            memory = self._seen_memory(tick_seen, reward_tick)
         if not self.config.learning.enabled:
             memory.pop_before(reward_tick if window is None else window[1] + 1)
             if self.kp is not None:
                 self.kp.reset_episode()
             return RewardOutcome((), (), (), window)
-        if tick_seen is None:
+        if window is None:
             credits = self.ltm.apply(memory.pop_before(reward_tick), reward_tick, value)
         else:
-            credits = credit_seen(memory, self.ltm, value, tick_seen, self.window)
+            credits = credit_seen(memory, self.ltm, value, window)
         if value < 0.0 and credits and credits[0].d_k == 1 and memory is self.stm:
             self.selector.retry(credits[0].stimulus)
         threshold = self.config.learning.insert_threshold

@@ -61,14 +61,18 @@ class ReactionWindow:
     def of_seconds(cls, lo_s: float, hi_s: float, hz: float) -> ReactionWindow:
         """The window of `lo_s`..`hi_s` seconds at `hz` ticks a second.
 
-        Rounded inwards, ``ceil(lo_s * hz)`` to ``floor(hi_s * hz)`` ticks, so no tick
-        nearer than `lo_s` or further than `hi_s` is credited (products within 1e-9 of a
-        whole number count as it: 0.3 s at 10 Hz is 3 ticks). A window narrower than a
-        tick keeps its one tick, ``ceil(lo_s * hz)``.
+        The seen tick is on screen for a period, ``1 / hz``, and the press comes at some
+        time in it; a tick the person may have seen at least `lo_s` before the press is one
+        at least ``ceil(lo_s * hz) - 1`` ticks before the seen tick (never less than 0),
+        and one at most `hi_s` before it at most ``floor(hi_s * hz)`` ticks before. So
+        ``lo_ticks = max(0, ceil(lo_s * hz) - 1)`` and ``hi_ticks = floor(hi_s * hz)``
+        (products within 1e-9 of a whole number count as it: 0.3 s at 10 Hz is 3 ticks);
+        a window narrower than a tick keeps its one tick, ``lo_ticks``. At 10 Hz TAMER's
+        0.2-4 s is 1 to 40 ticks; at 0.5 Hz, 0 to 2.
         """
         if not 0.0 <= lo_s <= hi_s or hz <= 0.0:
             raise ValueError("a reaction window needs 0 <= lo_s <= hi_s and hz > 0")
-        lo = math.ceil(round(lo_s * hz, 9))
+        lo = max(0, math.ceil(round(lo_s * hz, 9)) - 1)
         return cls(lo, max(lo, math.floor(round(hi_s * hz, 9))))
 
     @property
@@ -189,14 +193,14 @@ def credit_seen(
     stm: ShortTermMemory,
     ltm: LongTermMemory,
     reward: float,
-    tick_seen: int,
-    window: ReactionWindow,
+    window: tuple[int, int],
 ) -> list[Credit]:
     """Credit a person's reward for the tick they saw, over the reaction window before it.
 
     The rule for a trainer's reward that says which tick the person was looking at when
-    they pressed (`tick_seen`). With the window's first and last tick
-    ``first = tick_seen - hi_ticks`` and ``last = tick_seen - lo_ticks``:
+    they pressed (`tick_seen`). With the window's first and last tick,
+    ``first = tick_seen - hi_ticks`` and ``last = tick_seen - lo_ticks``
+    (`ReactionWindow.span`; a paused run's ends at the seen tick itself):
 
     - the records of ticks ``first..last`` are credited by Eq. (1), each with
       ``d_k = last - tick + 1`` (the newest record in the window gets ``d_k = 1``);
@@ -213,12 +217,11 @@ def credit_seen(
             or a stored episode's); popped as above.
         ltm: the reliabilities updated.
         reward: the reward, in [-1, 1].
-        tick_seen: the tick the person saw.
-        window: the run's reaction window.
+        window: the first and last tick credited.
 
     Returns:
         The credits, newest record first.
     """
-    first, last = window.span(tick_seen)
+    first, last = window
     popped = stm.pop_through(last)
     return ltm.apply([r for r in popped if r[0] >= first], last + 1, reward)

@@ -44,10 +44,15 @@ REACTION_WINDOW = "reaction_window_s"
 so a replay credits with the window the run had."""
 
 
-def reaction_window(spec: RunSpec) -> ReactionWindow:
-    """The run's reaction window in ticks at its rate (TAMER's 0.2-4 s if it names none)."""
+def reaction_seconds(spec: RunSpec) -> tuple[float, float]:
+    """The run's reaction window in seconds (TAMER's 0.2-4 s if it names none)."""
     lo_s, hi_s = spec.params.get(REACTION_WINDOW, DEFAULT_REACTION_S)
-    return ReactionWindow.of_seconds(float(lo_s), float(hi_s), spec.hz)
+    return float(lo_s), float(hi_s)
+
+
+def reaction_window(spec: RunSpec) -> ReactionWindow:
+    """The run's reaction window in ticks at the rate it was created with."""
+    return ReactionWindow.of_seconds(*reaction_seconds(spec), spec.hz)
 
 
 def setup(spec: RunSpec, catalog: Catalog | None) -> tuple[Setup, Catalog]:

@@ -26,10 +26,11 @@ import asyncio
 import time
 
 from core.brain.catalog import Catalog
+from core.brain.memory import ReactionWindow
 from core.brain.network import Association
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.engine.boundary import Boundary
-from core.engine.build import create_run, restore_run
+from core.engine.build import create_run, reaction_seconds, restore_run
 from core.engine.bus import EventBus, StatusChanged, Subscription
 from core.engine.jobs import CommandJob, RewardAck, RewardJob
 from core.engine.pacing import HZ_MAX, HZ_MIN, Controls, MonotonicPacer, Pacer, check_hz
@@ -226,7 +227,7 @@ class RunEngine:
         window = None
         if tick_seen is not None:
             seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
-            window = self.sim.brain.window.span(tick_seen)
+            window = self._seen_window(tick_seen)
         else:
             seen_episode = None
         next_boundary = self.sim.tick_count + 1
@@ -240,6 +241,7 @@ class RunEngine:
             uid=uid,
             tick_seen=tick_seen,
             seen_episode=seen_episode,
+            window=window,
         )
         job = RewardJob(
             stamp,
@@ -248,13 +250,24 @@ class RunEngine:
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
-            window=window,
         )
         self._boundary.add(job, next_boundary)
         self._ticks.credit_paused()
         self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack
+
+    def _seen_window(self, tick_seen: int) -> tuple[int, int]:
+        """The ticks a reward seen at `tick_seen` credits, as it arrives (then logged).
+
+        The run's reaction window at the rate it ticks now (a realtime run's may have been
+        changed); a paused run's ends at the seen tick itself, which the person has looked
+        at as long as they liked.
+        """
+        lo_s, hi_s = reaction_seconds(self.spec)
+        hz = self.hz if self.spec.mode is Mode.REALTIME else self.spec.hz
+        first, last = ReactionWindow.of_seconds(lo_s, hi_s, hz).span(tick_seen)
+        return (first, tick_seen) if self.status is RunStatus.PAUSED else (first, last)
 
     async def edit(self, command: EditAssociation) -> int:
         """Change the running robot's network at the next tick boundary; returns the log id."""

@@ -54,8 +54,6 @@ class RewardJob:
     """Set once the reward is in the log (external rewards are logged by the ack task)."""
     committed_before: bool = False
     """Its learning is already in storage (a replayed reward applied before a crash)."""
-    window: tuple[int, int] | None = None
-    """The first and last tick a reward with a seen tick could credit, logged with it."""
 
 
 @dataclass(eq=False)

@@ -59,11 +59,11 @@ class ReplayLog:
                         uid=r.record.uid,
                         tick_seen=r.record.tick_seen,
                         seen_episode=r.record.seen_episode,
+                        window=r.record.window,
                     ),
                     external=True,
                     logged_id=r.id,
                     committed_before=r.applied,
-                    window=r.record.window,
                 )
             )
         return jobs

@@ -51,7 +51,7 @@ def reward_record(job: RewardJob) -> RewardRecord:
     r = job.reward
     return RewardRecord(
         job.stamp, job.episode, r.value, r.source, r.note, r.uid, r.tick_seen, r.seen_episode,
-        job.window,
+        r.window,
     )  # fmt: skip
 
 
@@ -241,6 +241,6 @@ class RunWriter:
                         job.reward.uid,
                         job.reward.tick_seen,
                         job.reward.seen_episode,
-                        job.window,
+                        job.reward.window,
                     )
                 )

@@ -12,10 +12,9 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from core.brain.memory import DEFAULT_REACTION_S
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.engine import RunView
-from core.engine.build import REACTION_WINDOW
+from core.engine.build import reaction_seconds
 from core.engine.messages import Query, RunState
 from core.ports import NOT_ENDED, RunSpec, RunTotals
 from core.run.conditions import CONDITIONS
@@ -53,12 +52,6 @@ def live_state(state: RunState) -> LiveState:
         reward_ack_p99_ms=_ms(figures.reward_ack_p99_s),
         ticks_by_origin=dict(state.ticks_by_origin),
     )
-
-
-def reaction_seconds(spec: RunSpec) -> tuple[float, float]:
-    """The run's reaction window in seconds (TAMER's for a run stored without one)."""
-    lo_s, hi_s = spec.params.get(REACTION_WINDOW, DEFAULT_REACTION_S)
-    return float(lo_s), float(hi_s)
 
 
 def run_public(

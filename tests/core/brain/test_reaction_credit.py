@@ -26,12 +26,13 @@ CORNER = {Channel.CORNER_PENDING: 1.0}
 @pytest.mark.parametrize(
     ("lo_s", "hi_s", "hz", "ticks"),
     [
-        (0.2, 4.0, 10.0, (2, 40)),  # TAMER's window at the default rate
-        (0.2, 4.0, 20.0, (4, 80)),
-        (0.3, 0.7, 10.0, (3, 7)),  # 0.3 * 10 is 3.0000000000000004: still 3
-        (0.25, 0.29, 10.0, (3, 3)),  # narrower than a tick: its one tick, ceil(lo)
+        (0.2, 4.0, 10.0, (1, 40)),  # TAMER's window at the default rate
+        (0.2, 4.0, 20.0, (3, 80)),
+        (0.2, 4.0, 0.5, (0, 2)),  # a tick on screen 2 s: the seen tick itself may count
+        (0.3, 0.7, 10.0, (2, 7)),  # 0.3 * 10 is 3.0000000000000004: still 3, less the tick
+        (0.25, 0.29, 10.0, (2, 2)),  # narrower than a tick: its one tick
         (0.0, 1.0, 10.0, (0, 10)),  # lo 0: the seen tick itself is credited
-        (0.15, 0.45, 10.0, (2, 4)),  # rounded inwards
+        (0.15, 0.45, 10.0, (1, 4)),
     ],
 )
 def test_window_in_ticks_rounds_inwards(
@@ -56,7 +57,7 @@ def stm_of(ticks: range) -> ShortTermMemory:
 
 def test_credit_seen_credits_the_window_newest_first_from_d_k_1() -> None:
     stm, ltm = stm_of(range(1, 21)), LongTermMemory(eta=0.1)
-    credits = credit_seen(stm, ltm, 1.0, 15, ReactionWindow(2, 5))
+    credits = credit_seen(stm, ltm, 1.0, ReactionWindow(2, 5).span(15))
     # The window of tick 15 is ticks 10..13: d_k = 13 - tick + 1.
     assert [(c.tick, c.d_k) for c in credits] == [(13, 1), (12, 2), (11, 3), (10, 4)]
     for c in credits:
@@ -68,8 +69,8 @@ def test_credit_seen_credits_the_window_newest_first_from_d_k_1() -> None:
 
 def test_credit_seen_then_the_next_reward_credits_what_stayed() -> None:
     stm, ltm = stm_of(range(1, 21)), LongTermMemory(eta=0.1)
-    credit_seen(stm, ltm, 1.0, 15, ReactionWindow(2, 5))
-    credits = credit_seen(stm, ltm, -1.0, 20, ReactionWindow(2, 5))
+    credit_seen(stm, ltm, 1.0, ReactionWindow(2, 5).span(15))
+    credits = credit_seen(stm, ltm, -1.0, ReactionWindow(2, 5).span(20))
     assert [(c.tick, c.d_k) for c in credits] == [(18, 1), (17, 2), (16, 3), (15, 4)]
     assert [t for t, _, _ in stm] == [19, 20]
     assert ltm.reliability(1, 14) == 0.0  # older than the second window: dropped
@@ -77,13 +78,13 @@ def test_credit_seen_then_the_next_reward_credits_what_stayed() -> None:
 
 def test_credit_seen_with_a_window_from_zero_credits_the_seen_tick() -> None:
     stm, ltm = stm_of(range(1, 6)), LongTermMemory(eta=0.1)
-    credits = credit_seen(stm, ltm, 1.0, 5, ReactionWindow(0, 1))
+    credits = credit_seen(stm, ltm, 1.0, ReactionWindow(0, 1).span(5))
     assert [(c.tick, c.d_k) for c in credits] == [(5, 1), (4, 2)]
 
 
 def test_credit_seen_before_any_record_credits_nothing_and_keeps_stm() -> None:
     stm, ltm = stm_of(range(10, 15)), LongTermMemory(eta=0.1)
-    assert credit_seen(stm, ltm, 1.0, 11, ReactionWindow(2, 5)) == []
+    assert credit_seen(stm, ltm, 1.0, ReactionWindow(2, 5).span(11)) == []
     assert len(stm) == 5
     assert len(ltm) == 0
 
@@ -127,6 +128,15 @@ def test_brain_reward_with_a_seen_tick_credits_its_window_from_stm(catalog: Cata
     assert [t for t, _, _ in b.stm] == [17, 18, 19, 20]
 
 
+def test_brain_reward_with_the_window_it_arrived_with_credits_that(catalog: Catalog) -> None:
+    """A paused run's window ends at the seen tick: the engine passes it as it arrived."""
+    b = brain(catalog)
+    run(b, 1, 20)
+    outcome = b.reward(21, 1.0, tick_seen=18, window=(13, 18))
+    assert [(c.tick, c.d_k) for c in outcome.credits][:2] == [(18, 1), (17, 2)]
+    assert [t for t, _, _ in b.stm] == [19, 20]
+
+
 def test_brain_reward_without_a_seen_tick_keeps_the_paper_rule(catalog: Catalog) -> None:
     b = brain(catalog)
     run(b, 1, 5)
@@ -158,7 +168,8 @@ def test_the_ended_episode_keeps_only_its_window(catalog: Catalog) -> None:
     b = brain(catalog)
     run(b, 1, 10)
     b.reset_episode(10)
-    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8]
+    # What a reward seen at its last tick could credit, paused or not: ticks 5..10.
+    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8, 9, 10]
     assert len(b.stm) == 0
 
 
@@ -187,7 +198,7 @@ def test_rewards_without_a_seen_tick_never_touch_the_ended_records(catalog: Cata
     b.reset_episode(10)
     outcome = b.reward(11, 1.0)
     assert outcome.credits == ()
-    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8]
+    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8, 9, 10]
 
 
 def test_a_seen_tick_in_the_current_episode_never_reaches_into_the_ended_one(
@@ -199,7 +210,7 @@ def test_a_seen_tick_in_the_current_episode_never_reaches_into_the_ended_one(
     run(b, 11, 13)
     outcome = b.reward(14, 1.0, tick_seen=13)  # window 8..11: only 11 is this episode's
     assert [c.tick for c in outcome.credits] == [11]
-    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8]
+    assert [t for t, _, _ in b.ended] == [5, 6, 7, 8, 9, 10]
 
 
 def test_without_clearing_stm_the_window_reads_stm_across_episodes(catalog: Catalog) -> None:

@@ -17,8 +17,8 @@ from core.ports import Mode, RunSpec, RunStatus
 
 HZ = 500.0
 WINDOW_S = (0.004, 0.02)
-"""2..10 ticks at `HZ`."""
-WINDOW = ReactionWindow(2, 10)
+"""1..10 ticks at `HZ`; a paused run's ends at the seen tick."""
+WINDOW = ReactionWindow(1, 10)
 
 
 def spec(seed: int = 3) -> RunSpec:
@@ -85,11 +85,12 @@ def test_a_reward_with_a_seen_tick_credits_the_window_before_it() -> None:
 
     run(engine, script)
     (ev,) = events
-    assert (ev.tick_seen, ev.window) == (25, (15, 23))
-    assert ev.credits and all(15 <= c.tick <= 23 for c in ev.credits)
-    assert all(c.d_k == 23 - c.tick + 1 for c in ev.credits)
+    # Paused: the window ends at the seen tick, which the person looked at at leisure.
+    assert (ev.tick_seen, ev.window) == (25, (15, 25))
+    assert ev.credits and all(15 <= c.tick <= 25 for c in ev.credits)
+    assert all(c.d_k == 25 - c.tick + 1 for c in ev.credits)
     # The records after the window's end stay in STM for the next reward.
-    assert [t for t, _, _ in engine.sim.brain.stm if t > 23] == list(range(24, 31))
+    assert [t for t, _, _ in engine.sim.brain.stm if t > 25] == list(range(26, 31))
 
 
 def test_a_seen_tick_the_run_has_not_reached_or_no_longer_holds_is_refused() -> None:
@@ -130,8 +131,8 @@ def test_a_reward_pressed_just_after_a_crash_credits_the_ended_episode(after: in
 
     run(engine, script)
     ((end, ev, before),) = out
-    assert ev.window == (end - 10, end - 2)
-    assert ev.credits and all(end - 10 <= c.tick <= end - 2 for c in ev.credits)
+    assert ev.window == (end - 10, end)
+    assert ev.credits and all(end - 10 <= c.tick <= end for c in ev.credits)
     assert engine.sim.brain.ltm.as_dict() != before
 
 
