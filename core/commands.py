@@ -43,6 +43,9 @@ class InjectReward:
     window: tuple[int, int] | None = None
     """The first and last tick it credits, set as it arrives (None: the run's window
     before `tick_seen`)."""
+    records: tuple[tuple[int, int, int], ...] | None = None
+    """A stored episode's records it credits, (tick, stimulus id, behaviour id) from the
+    episode's trace, carried so a replay credits the same (None: the run's memory)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

@@ -159,6 +159,8 @@ class RewardRecord:
     """The episode of `tick_seen`."""
     window: tuple[int, int] | None = None
     """The first and last tick the reward could credit (`core.brain.memory.credit_seen`)."""
+    records: tuple[tuple[int, int, int], ...] | None = None
+    """A stored episode's records it credits (`core.commands.InjectReward.records`)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -244,6 +245,7 @@ class Brain:
         value: float,
         tick_seen: int | None = None,
         window: tuple[int, int] | None = None,
+        records: Sequence[tuple[int, int, int]] | None = None,
     ) -> RewardOutcome:
         """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network.
 
@@ -254,14 +256,20 @@ class Brain:
         `window`, its first and last tick, as the reward arrived: by default the brain's
         `window` before `tick_seen`): from STM, or from the ended episode's last records
         when the seen tick lies in that episode and the reward comes at most the window's
-        `hi_ticks` after its end (later, from nothing).
+        `hi_ticks` after its end (later, from nothing), or from `records`, a stored
+        episode's (feedback on its replay).
         """
         memory = self.stm
         if tick_seen is None:
             window = None
         else:
             window = window or self.window.span(tick_seen)
-            memory = self._seen_memory(tick_seen, reward_tick)
+            if records is None:
+                memory = self._seen_memory(tick_seen, reward_tick)
+            else:
+                memory = ShortTermMemory(max(1, len(records)))
+                for r in records:
+                    memory.push(r)
         if not self.config.learning.enabled:
             memory.pop_before(reward_tick if window is None else window[1] + 1)
             if self.kp is not None:

@@ -30,7 +30,7 @@ from core.brain.memory import ReactionWindow
 from core.brain.network import Association
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.engine.boundary import Boundary
-from core.engine.build import create_run, reaction_seconds, restore_run
+from core.engine.build import create_run, reaction_seconds, reaction_window, restore_run
 from core.engine.bus import EventBus, StatusChanged, Subscription
 from core.engine.jobs import CommandJob, RewardAck, RewardJob
 from core.engine.pacing import HZ_MAX, HZ_MIN, Controls, MonotonicPacer, Pacer, check_hz
@@ -40,7 +40,7 @@ from core.engine.stats import EngineStats
 from core.engine.tick_task import TickTask
 from core.engine.view import RunView
 from core.engine.writer import RunWriter
-from core.errors import RunStateError, StorageError
+from core.errors import RunStateError, SeenTickError, StorageError
 from core.ports import ACTIVE, Mode, RunSpec, RunStatus, RunStore, RunTotals, StoredRun
 from core.run.simulation import Simulation
 from core.run.trace import TraceRecorder
@@ -204,6 +204,7 @@ class RunEngine:
         uid: str = "",
         tick_seen: int | None = None,
         seen_episode: int | None = None,
+        records: tuple[tuple[int, int, int], ...] | None = None,
     ) -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 
@@ -225,11 +226,17 @@ class RunEngine:
             await self._ticks.replayed.wait()
             self._check_running(paused=True)
         window = None
-        if tick_seen is not None:
+        if tick_seen is None:
+            seen_episode = None
+        elif records is not None:
+            # A stored episode's tick, looked at at leisure: its window ends there.
+            if seen_episode is None or seen_episode >= self.sim.episode:
+                raise SeenTickError("episode", "a stored episode's records need its number")
+            window = (tick_seen - reaction_window(self.spec).hi_ticks, tick_seen)
+            records = tuple(r for r in records if window[0] <= r[0] <= window[1])
+        else:
             seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
             window = self._seen_window(tick_seen)
-        else:
-            seen_episode = None
         next_boundary = self.sim.tick_count + 1
         stamp = self._boundary.stamp(next_boundary)
         self._arrivals += 1
@@ -242,6 +249,7 @@ class RunEngine:
             tick_seen=tick_seen,
             seen_episode=seen_episode,
             window=window,
+            records=records,
         )
         job = RewardJob(
             stamp,

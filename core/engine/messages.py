@@ -102,6 +102,7 @@ async def perform(
                 uid=r.uid,
                 tick_seen=r.tick_seen,
                 seen_episode=r.seen_episode,
+                records=r.records,
             )
         case EditAssociation():
             return await engine.edit(command)

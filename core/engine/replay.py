@@ -60,6 +60,7 @@ class ReplayLog:
                         tick_seen=r.record.tick_seen,
                         seen_episode=r.record.seen_episode,
                         window=r.record.window,
+                        records=r.record.records,
                     ),
                     external=True,
                     logged_id=r.id,

@@ -51,7 +51,7 @@ def reward_record(job: RewardJob) -> RewardRecord:
     r = job.reward
     return RewardRecord(
         job.stamp, job.episode, r.value, r.source, r.note, r.uid, r.tick_seen, r.seen_episode,
-        r.window,
+        r.window, r.records,
     )  # fmt: skip
 
 

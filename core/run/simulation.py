@@ -200,7 +200,7 @@ class Simulation:
         self, r: InjectReward, tick: int, episode: int | None = None
     ) -> tuple[RewardApplied, RewardOutcome]:
         """Apply a reward stamped with the boundary before `tick` (see `Brain.reward`)."""
-        outcome = self.brain.reward(tick, r.value, r.tick_seen, r.window)
+        outcome = self.brain.reward(tick, r.value, r.tick_seen, r.window, r.records)
         event = RewardApplied(
             tick,
             self.episode if episode is None else episode,

@@ -6,8 +6,9 @@ Create Date: 2026-12-05 23:30:00.000000
 
 A trainer's reward may say which tick the person was looking at when they pressed; it
 credits the reaction window before that tick (`core.brain.memory.credit_seen`). The log
-keeps the seen tick, its episode and the window's first and last tick; rewards logged
-before, and rewards without a seen tick, have none (NULL).
+keeps the seen tick, its episode and the window's first and last tick, and for a reward
+on a stored episode's tick the records it credited; rewards logged before, and rewards
+without a seen tick, have none (NULL).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ down_revision: str | Sequence[str] | None = "0005"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
-COLUMNS = ("tick_seen", "seen_episode", "window_first", "window_last")
+COLUMNS = ("tick_seen", "seen_episode", "window_first", "window_last", "records")
 
 
 def upgrade() -> None:
@@ -31,6 +32,7 @@ def upgrade() -> None:
         batch.add_column(sa.Column("seen_episode", sa.Integer(), nullable=True))
         batch.add_column(sa.Column("window_first", sa.BigInteger(), nullable=True))
         batch.add_column(sa.Column("window_last", sa.BigInteger(), nullable=True))
+        batch.add_column(sa.Column("records", sa.JSON(), nullable=True))
 
 
 def downgrade() -> None:

@@ -311,6 +311,9 @@ class RewardRow(Base):
     window_first: Mapped[int | None] = mapped_column(BigInteger)
     """The first tick the reward could credit (its reaction window's)."""
     window_last: Mapped[int | None] = mapped_column(BigInteger)
+    records: Mapped[list[list[int]] | None] = mapped_column(JSON)
+    """A stored episode's records it credited, [tick, stimulus id, behaviour id] each
+    (NULL: it credited the run's memory)."""
     applied: Mapped[bool] = mapped_column(server_default=false())
     credited: Mapped[int] = mapped_column(server_default=text("0"))
     created_at: Mapped[datetime] = _created()

@@ -51,6 +51,7 @@ def reward_values(run_id: int, r: RewardRecord, applied: bool, credited: int) ->
         "seen_episode": r.seen_episode,
         "window_first": None if r.window is None else r.window[0],
         "window_last": None if r.window is None else r.window[1],
+        "records": None if r.records is None else [list(x) for x in r.records],
         "applied": applied,
         "credited": credited,
     }
@@ -86,8 +87,9 @@ def _spec(run: RunRow) -> RunSpec:
 
 
 RewardColumns = tuple[
-    int, int, int, float, str, str, str, int | None, int | None, int | None, int | None, bool, int
-]
+    int, int, int, float, str, str, str, int | None, int | None, int | None, int | None,
+    list[list[int]] | None, bool, int,
+]  # fmt: skip
 """`select_rewards`'s columns."""
 
 
@@ -100,7 +102,7 @@ def select_rewards(*where: ColumnElement[bool]) -> Select[*RewardColumns]:
     r = RewardRow
     columns = (
         r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.tick_seen, r.seen_episode,
-        r.window_first, r.window_last, r.applied, r.credited,
+        r.window_first, r.window_last, r.records, r.applied, r.credited,
     )  # fmt: skip
     return select(*columns).where(*where).order_by(r.id)
 
@@ -109,8 +111,11 @@ def stored_reward(row: Row[*RewardColumns], at: datetime | None = None) -> Store
     """A reward log row of `select_rewards` as the ports' value."""
     id_, tick, episode, value, source, note, uid, seen, seen_episode, first, last = row[:11]
     window = None if first is None or last is None else (first, last)
-    record = RewardRecord(tick, episode, value, source, note, uid, seen, seen_episode, window)
-    return StoredReward(id_, record, row[11], row[12], at)
+    stored = None if row[11] is None else tuple((t, s, b) for t, s, b in row[11])
+    record = RewardRecord(
+        tick, episode, value, source, note, uid, seen, seen_episode, window, stored
+    )
+    return StoredReward(id_, record, row[12], row[13], at)
 
 
 def select_reward_log(*where: ColumnElement[bool]) -> Select[*RewardColumns, datetime]:
@@ -120,7 +125,7 @@ def select_reward_log(*where: ColumnElement[bool]) -> Select[*RewardColumns, dat
 
 def logged_reward(row: Row[*RewardColumns, datetime]) -> StoredReward:
     """A reward log row of `select_reward_log` as the ports' value, with its time."""
-    return stored_reward(row, utc(row[13]))  # type: ignore[arg-type]
+    return stored_reward(row, utc(row[14]))  # type: ignore[arg-type]
 
 
 def select_commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:

@@ -142,6 +142,7 @@ class LiveRun:
         source: RewardSource = RewardSource.TRAINER,
         tick_seen: int | None = None,
         seen_episode: int | None = None,
+        records: tuple[tuple[int, int, int], ...] | None = None,
     ) -> RewardAck:
         """A reward, answered once it is in the reward log.
 
@@ -156,6 +157,7 @@ class LiveRun:
             uid=uuid.uuid4().hex,
             tick_seen=tick_seen,
             seen_episode=seen_episode,
+            records=records,
         )
         ack: RewardAck = await self.send(reward)
         return ack

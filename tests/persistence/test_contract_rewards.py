@@ -346,7 +346,9 @@ def test_the_reward_log_pages_say_when_each_reward_was_logged(store: Inspectable
 def test_the_log_keeps_a_reward_s_seen_tick_and_window(store: InspectableRunStore) -> None:
     """Logged on arrival (a trainer's) or recorded applied in a batch, on every store."""
     run_id = new_run(store)
-    seen = replace(reward(30), tick_seen=25, seen_episode=1, window=(-15, 23))
+    seen = replace(
+        reward(30), tick_seen=25, seen_episode=1, window=(-15, 23), records=((20, 1, 2), (21, 1, 3))
+    )
     plain = reward(31)
     logged = store.log_reward(run_id, seen)
     (recorded,) = store.commit_rewards(

@@ -14,6 +14,7 @@ from core.engine import RunEngine
 from core.errors import SeenTickError
 from core.events import RewardApplied
 from core.ports import Mode, RunSpec, RunStatus
+from core.run.trace import unpack
 
 HZ = 500.0
 WINDOW_S = (0.004, 0.02)
@@ -180,5 +181,41 @@ def test_a_resumed_run_applies_seen_ticks_as_the_run_did() -> None:
     assert again.sim.brain.window == WINDOW
     # The last reward was applied paused, at the boundary after the last tick: the
     # resumed run reaches that boundary by running the tick after it.
+    assert asyncio.run(again.run(until_tick=ticks + 1)) is RunStatus.STOPPED
+    assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
+
+
+def test_a_reward_on_a_stored_episode_is_replayed_with_the_records_it_carried() -> None:
+    """Feedback on replay: records from episode 0's stored trace, carried by the reward
+    and logged, so a resumed run credits exactly them again."""
+    store = InMemoryRunStore(CATALOG)
+    engine = RunEngine.create(spec(7), store, catalog=CATALOG)
+    seen_at: list[int] = []
+
+    async def script(t: Trainer) -> None:
+        await t.to_a_crash()
+        await t.to_a_crash()
+        await t.e.step()  # into episode 2: episode 0 is stored, and no longer held
+        async with asyncio.timeout(30):
+            while (stored := store.episode(t.e.run_id, 0)) is None:
+                await asyncio.sleep(0.01)
+        rows = [r for r in unpack(stored.trace) if r.released_by >= 0]
+        seen = rows[len(rows) // 2].tick
+        records = tuple((r.tick, r.released_by, r.behaviour) for r in rows)
+        await t.e.reward(1.0, tick_seen=seen, seen_episode=0, records=records)
+        ev = await t.applied()
+        assert ev.window == (seen - WINDOW.hi_ticks, seen)
+        assert [c.tick for c in ev.credits] == sorted(
+            (r[0] for r in records if seen - WINDOW.hi_ticks <= r[0] <= seen), reverse=True
+        )
+        seen_at.append(seen)
+
+    run(engine, script)
+    assert seen_at
+    (logged,) = (r for r in store.rewards(engine.run_id) if r.record.tick_seen is not None)
+    assert logged.record.records and logged.record.seen_episode == 0
+    ticks = engine.sim.tick_count
+    store.set_status(engine.run_id, RunStatus.INTERRUPTED)
+    again = RunEngine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
     assert asyncio.run(again.run(until_tick=ticks + 1)) is RunStatus.STOPPED
     assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()

@@ -90,10 +90,45 @@ def test_a_bad_reaction_window_setting_says_what_it_needs(text: str) -> None:
         Settings(reaction_window=text)
 
 
-async def applied(client: Any, run_id: int) -> dict[str, Any]:
+async def applied(client: Any, run_id: int, reward_id: int | None = None) -> dict[str, Any]:
+    """The reward (the first logged, or `reward_id`) once applied."""
     async with asyncio.timeout(30):  # a bound for a hang, not a speed test
         while True:
             log = (await client.get(f"/api/runs/{run_id}/rewards")).json()["data"]
-            if log and log[0]["applied"]:
-                return dict(log[0])
+            mine = [r for r in log if reward_id is None or r["id"] == reward_id][:1]
+            if mine and mine[0]["applied"]:
+                return dict(mine[0])
             await asyncio.sleep(0.02)
+
+
+async def test_a_reward_on_a_stored_episode_s_tick_credits_its_stored_records(
+    tmp_path: Path,
+) -> None:
+    """Feedback on replay: the trainer scrubs episode 0, ended and stored, and presses +
+    at one of its ticks: the records of its trace in the window up to that tick."""
+    settings = settings_for(tmp_path, reaction_window="0.02-0.05")  # up to 50 ticks at 1 kHz
+    async with client_for(settings) as (client, _):
+        run_id = (await create(client, condition="kp", mode="realtime", hz=1000))["id"]
+        await client.post(f"/api/runs/{run_id}/start")
+        async with asyncio.timeout(60):  # a bound for a hang, not a speed test
+            while (await client.get(f"/api/runs/{run_id}")).json()["episodes_done"] < 2:
+                await asyncio.sleep(0.05)
+        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 200
+        trace = (await client.get(f"/api/runs/{run_id}/episodes/0")).json()["trace"]
+        answered = [row["tick"] for row in trace if row["released_by"] is not None]
+        seen = answered[len(answered) // 2]
+        expected = [t for t in answered if seen - 50 <= t <= seen]
+        body = {"value": 1, "tick_seen": seen, "episode": 0}
+        r = await client.post(f"/api/runs/{run_id}/rewards", json=body)
+        assert r.status_code == 202, r.text
+        assert (r.json()["seen_episode"], r.json()["window"]) == (0, [seen - 50, seen])
+        log = await applied(client, run_id, r.json()["id"])
+        assert log["credited"] == len(expected) > 0
+        outside = {"value": 1, "tick_seen": trace[-1]["tick"] + 1, "episode": 0}
+        bad = await client.post(f"/api/runs/{run_id}/rewards", json=outside)
+        assert bad.status_code == 422 and bad.json()["detail"][0]["loc"] == ["body", "tick_seen"]
+        unknown = await client.post(
+            f"/api/runs/{run_id}/rewards", json={"value": 1, "tick_seen": 0, "episode": 99}
+        )
+        assert unknown.status_code == 422, unknown.text
+        await client.post(f"/api/runs/{run_id}/stop")
