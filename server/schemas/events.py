@@ -38,7 +38,7 @@ class RewardCreate(Strict):
     tick_seen: int | None = Field(
         None,
         ge=0,
-        le=2**62,
+        le=2**53 - 1,  # exact in every JSON reader
         description="the tick the trainer was looking at when they pressed: the reward "
         "credits the run's reaction window before it (docs/studies.md); a tick the run has "
         "reached, in its current episode or the one that ended last (null: every STM "

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -32,24 +32,27 @@ assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
 }
 
 
+ReactionSeconds = Annotated[float, Field(ge=0.0, le=MAX_REACTION_S)]
+
+
 class LearningParams(Strict):
     EXAMPLES = ({"eta": 0.2, "epsilon": 0.05},)
 
     eta: float | None = Field(None, ge=0.0, le=1.0, description="Eq. (1)'s learning rate")
     epsilon: float | None = Field(None, ge=0.0, le=1.0, description="exploration rate")
     synthesize: bool = Field(False, description="KP keeps new behaviours instead of snapping")
-    reaction_window_s: tuple[float, float] | None = Field(
+    reaction_window_s: tuple[ReactionSeconds, ReactionSeconds] | None = Field(
         None,
-        description="[lo, hi] seconds: a trainer's reward with the tick they saw credits the "
-        "ticks lo to hi seconds before it (default: the service's SRLAB_REACTION_WINDOW)",
+        description="[lo, hi] seconds (the two bounds in either order): a trainer's reward "
+        "with the tick they saw credits the ticks lo to hi seconds before it (default: the "
+        "service's SRLAB_REACTION_WINDOW)",
     )
 
     @field_validator("reaction_window_s")
     @classmethod
     def _window(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
-        if v is not None and not 0.0 <= v[0] <= v[1] <= MAX_REACTION_S:
-            raise ValueError(f"needs 0 <= lo <= hi <= {MAX_REACTION_S:g} seconds")
-        return v
+        # A window is the interval between its bounds: no order a schema cannot say.
+        return None if v is None else (min(v), max(v))
 
 
 class RunCreate(Strict):

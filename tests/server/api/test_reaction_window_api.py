@@ -70,12 +70,12 @@ async def test_a_bad_seen_tick_is_a_422_naming_the_field_and_stores_nothing(
 async def test_a_run_keeps_the_window_it_was_created_with(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
         default = await create(client, condition="kp")
-        own = await create(client, condition="kp", params={"reaction_window_s": [0.5, 2]})
+        own = await create(client, condition="kp", params={"reaction_window_s": [2, 0.5]})
         bad = await client.post(
-            "/api/runs", json={"condition": "kp", "params": {"reaction_window_s": [2, 1]}}
+            "/api/runs", json={"condition": "kp", "params": {"reaction_window_s": [2, 61]}}
         )
     assert default["reaction_window_s"] == [0.2, 4.0]
-    assert own["reaction_window_s"] == [0.5, 2.0]
+    assert own["reaction_window_s"] == [0.5, 2.0]  # the bounds in either order
     assert bad.status_code == 422 and "reaction_window_s" in bad.text
     async with client_for(settings_for(tmp_path, reaction_window="1-3")) as (client, _):
         again = (await client.get(f"/api/runs/{default['id']}")).json()
