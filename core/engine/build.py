@@ -8,6 +8,7 @@ definition, rate) before anything is stored or ticks.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Catalog
@@ -30,8 +31,7 @@ def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
     found = get_condition(spec.condition)
     if found.agent != "brain":
         raise RunStateError(f"condition {found.name!r} is not run by the engine")
-    params = dict(spec.params)
-    params.pop(REACTION_WINDOW, None)  # the engine's (`reaction_window`), not the brain's
+    params = brain_params(spec)
     unknown = set(params) - {"eta", "epsilon", "synthesize"}
     if unknown:
         raise ValueError(f"unknown learning parameters: {', '.join(sorted(unknown))}")
@@ -42,6 +42,11 @@ def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
 REACTION_WINDOW = "reaction_window_s"
 """The parameter holding a run's reaction window, ``[lo_s, hi_s]``: stored with its spec,
 so a replay credits with the window the run had."""
+
+
+def brain_params(spec: RunSpec) -> dict[str, Any]:
+    """The spec's learning parameters the brain takes: all but the reaction window."""
+    return {k: v for k, v in spec.params.items() if k != REACTION_WINDOW}
 
 
 def reaction_seconds(spec: RunSpec) -> tuple[float, float]:
