@@ -32,6 +32,20 @@ class InjectReward:
     uid: str = ""
     """The reward's own id from its arrival on: kept in the log, its event and the console
     ("": the engine gives it one)."""
+    tick_seen: int | None = None
+    """The tick the trainer was looking at when they pressed: the reward credits the
+    reaction window before it (`core.brain.memory.credit_seen`). None: the paper's rule,
+    every STM record before the boundary (the task's, the program's, and clients that send
+    none)."""
+    seen_episode: int | None = None
+    """The episode `tick_seen` belongs to (None: the one it lies in, the run's current or
+    the one that just ended)."""
+    window: tuple[int, int] | None = None
+    """The first and last tick it credits, set as it arrives (None: the run's window
+    before `tick_seen`)."""
+    records: tuple[tuple[int, int, int], ...] | None = None
+    """A stored episode's records it credits, (tick, stimulus id, behaviour id) from the
+    episode's trace, carried so a replay credits the same (None: the run's memory)."""
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.value <= 1.0:

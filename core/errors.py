@@ -33,5 +33,22 @@ class RunStateError(CoreError):
     """A command that does not fit the run's state (a reward to a run that is not running)."""
 
 
+class SeenTickError(CoreError):
+    """A reward's seen tick (or its episode) the run has not reached or no longer holds.
+
+    Args:
+        field: the request's field at fault (``tick_seen`` or ``episode``).
+        message: what is wrong with it.
+    """
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(field, message)
+        self.field = field
+        self.message = message
+
+    def __str__(self) -> str:
+        return f"{self.field}: {self.message}"
+
+
 class ExtraMissingError(CoreError):
     """A condition needs an optional extra that is not installed (e.g. srlab[baselines])."""

@@ -56,6 +56,10 @@ class RewardApplied:
     credits: tuple[Credit, ...]
     uid: str = ""
     """The reward's id from its arrival (`core.commands.InjectReward.uid`)."""
+    tick_seen: int | None = None
+    """The tick the trainer saw when they pressed (None: the paper's rule)."""
+    window: tuple[int, int] | None = None
+    """The first and last tick it could credit (`core.brain.memory.credit_seen`)."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -153,6 +153,14 @@ class RewardRecord:
     note: str = ""
     uid: str = ""
     """The id the reward got on arrival (`core.commands.InjectReward.uid`)."""
+    tick_seen: int | None = None
+    """The tick the trainer saw when they pressed (None: the paper's rule)."""
+    seen_episode: int | None = None
+    """The episode of `tick_seen`."""
+    window: tuple[int, int] | None = None
+    """The first and last tick the reward could credit (`core.brain.memory.credit_seen`)."""
+    records: tuple[tuple[int, int, int], ...] | None = None
+    """A stored episode's records it credits (`core.commands.InjectReward.records`)."""
 
 
 @dataclass(frozen=True, slots=True)

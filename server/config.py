@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import math
 from typing import Annotated, Literal
 from urllib.parse import urlsplit
 
 from pydantic import Field, ValidationError, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from core.brain.memory import DEFAULT_REACTION_S, MAX_REACTION_S
 from server.persistence.db import DEFAULT_DATABASE_URL
 
 
@@ -66,6 +68,10 @@ class Settings(BaseSettings):
             the machine is busy: a nice increment, 0-19, applied once the engines' process
             runs (`server.runtime.tuning.step_back`). `srlab serve` makes it 10 unless the
             environment says; `create_app` alone leaves it 0 (it would renice the caller).
+        reaction_window: the reaction window of the runs created, ``LO-HI`` seconds
+            (``SRLAB_REACTION_WINDOW=0.2-4.0``, TAMER's): a trainer's reward with the tick
+            they saw credits the ticks LO to HI seconds before it. Each run keeps the
+            window it was created with.
     """
 
     model_config = SettingsConfigDict(env_prefix="SRLAB_", extra="ignore")
@@ -92,6 +98,29 @@ class Settings(BaseSettings):
     forwarded_allow_ips: Annotated[list[str], NoDecode] = Field(default_factory=list)
     engines: Literal["local", "process"] = "local"
     service_nice: int = Field(0, ge=0, le=19)
+    reaction_window: Annotated[tuple[float, float], NoDecode] = DEFAULT_REACTION_S
+
+    @field_validator("reaction_window", mode="before")
+    @classmethod
+    def _window_from_text(cls, v: object) -> object:
+        """``LO-HI`` seconds, 0 <= LO <= HI <= 60."""
+        if isinstance(v, str):
+            lo, sep, hi = v.strip().partition("-")
+            try:
+                if not sep:
+                    raise ValueError
+                v = (float(lo), float(hi))
+            except ValueError:
+                raise ValueError(f"{v!r} is not a window LO-HI in seconds (e.g. 0.2-4.0)") from None
+        if isinstance(v, tuple | list) and len(v) == 2:
+            lo_s, hi_s = (float(x) for x in v)
+            if not (0.0 <= lo_s <= hi_s <= MAX_REACTION_S and math.isfinite(hi_s)):
+                raise ValueError(
+                    f"a reaction window LO-HI needs 0 <= LO <= HI <= {MAX_REACTION_S:g} "
+                    f"seconds, not {lo_s:g}-{hi_s:g}"
+                )
+            return (lo_s, hi_s)
+        return v
 
     @field_validator("cors_origins", "allowed_hosts", "forwarded_allow_ips", mode="before")
     @classmethod

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from core.brain.catalog import Behaviour, Catalog
-from core.brain.memory import LongTermMemory, ShortTermMemory
+from core.brain.memory import (
+    DEFAULT_REACTION_S,
+    LongTermMemory,
+    ReactionWindow,
+    ShortTermMemory,
+    credit_seen,
+)
 from core.brain.motor import Motor, cruise_scale
 from core.brain.network import BehaviourNetwork
 from core.brain.perception import Perception
@@ -62,6 +69,9 @@ class RewardOutcome:
     credits: tuple[Credit, ...]
     changes: tuple[AssociationPromoted | AssociationDemoted, ...]
     propagated: tuple[Propagated, ...] = ()
+    window: tuple[int, int] | None = None
+    """The first and last tick a reward with a seen tick could credit (None: the paper's
+    rule, every record before the boundary)."""
 
 
 class Brain:
@@ -97,6 +107,14 @@ class Brain:
             cruise_scale(catalog, robot, config.selection.default_behaviour),
         )
         self.stm = ShortTermMemory(config.learning.stm_capacity)
+        self.window = ReactionWindow.of_seconds(*DEFAULT_REACTION_S, 1.0 / dt_s)
+        """The reaction window of rewards with a seen tick (a run sets its own)."""
+        self.ended = ShortTermMemory(1)
+        """The ended episode's last records, kept at a reset for the rewards pressed at
+        its end (`credit_seen`), until the window has passed."""
+        self.ended_tick = -1
+        """The ended episode's last tick (-1: none kept)."""
+        self._tick = 0
         self.ltm = LongTermMemory(config.learning.eta)
         self.kp = (
             KnowledgePropagation(catalog, network, config.kp, dt_s, self._add_behaviour)
@@ -118,16 +136,32 @@ class Brain:
         """The decision of the latest tick."""
         return self._last
 
-    def reset_episode(self) -> None:
-        """A new episode: nothing runs; STM is forgotten if so configured."""
+    def reset_episode(self, last_tick: int | None = None) -> None:
+        """A new episode: nothing runs; STM is forgotten if so configured.
+
+        Forgotten, the records a reward seen at the ended episode's last tick
+        (`last_tick`, default the last tick stepped) would credit are kept aside in
+        `ended` for the trainer's rewards pressed as the episode ended.
+        """
         self.motor.stop()
         self.selector.reset()
         self._last = Decision(-1, -1, 0.0, How.DEFAULT)
         self._running_priority = -1
         if self.config.learning.clear_stm_each_episode:
+            self.ended_tick = self._tick if last_tick is None else last_tick
+            self.ended = self.kept(self.ended_tick)
             self.stm.clear()
         if self.kp is not None:
             self.kp.reset_episode()
+
+    def kept(self, last_tick: int) -> ShortTermMemory:
+        """STM's records a reward seen at `last_tick` could credit (paused: to that tick)."""
+        first, last = last_tick - self.window.hi_ticks, last_tick
+        kept = ShortTermMemory(self.window.hi_ticks + 1)
+        for r in self.stm:
+            if first <= r[0] <= last:
+                kept.push(r)
+        return kept
 
     def answer(self, stimulus: int) -> int:
         """The behaviour the network releases for `stimulus` perceived alone (-1: none).
@@ -197,6 +231,7 @@ class Brain:
             self.kp.percept(tick, active, decision)
         if decision.stimulus >= 0:
             self.stm.push((tick, decision.stimulus, decision.behaviour))
+        self._tick = tick
         return active, wheels
 
     def _start(self, decision: Decision, channels: list[float]) -> None:
@@ -204,19 +239,47 @@ class Brain:
         s = decision.stimulus
         self._running_priority = self._priority[s] if s >= 0 else -1
 
-    def reward(self, reward_tick: int, value: float) -> RewardOutcome:
+    def reward(
+        self,
+        reward_tick: int,
+        value: float,
+        tick_seen: int | None = None,
+        window: tuple[int, int] | None = None,
+        records: Sequence[tuple[int, int, int]] | None = None,
+    ) -> RewardOutcome:
         """Fig. 3 part 2: pop STM, update LTM by Eq. (1), insert strong pairs in the network.
 
-        The reward arrives at the boundary before tick `reward_tick`: it credits the STM
-        records of earlier ticks, each at ``d_k = reward_tick - record tick``.
+        The reward arrives at the boundary before tick `reward_tick`. Without `tick_seen`
+        it credits the STM records of earlier ticks, each at
+        ``d_k = reward_tick - record tick`` (the paper's rule). With it, a person's
+        reward credits the reaction window before the tick they saw (`credit_seen`;
+        `window`, its first and last tick, as the reward arrived: by default the brain's
+        `window` before `tick_seen`): from STM, or from the ended episode's last records
+        when the seen tick lies in that episode and the reward comes at most the window's
+        `hi_ticks` after its end (later, from nothing), or from `records`, a stored
+        episode's (feedback on its replay).
         """
+        memory = self.stm
+        if tick_seen is None:
+            window = None
+        else:
+            window = window or self.window.span(tick_seen)
+            if records is None:
+                memory = self._seen_memory(tick_seen, reward_tick)
+            else:
+                memory = ShortTermMemory(max(1, len(records)))
+                for r in records:
+                    memory.push(r)
         if not self.config.learning.enabled:
-            self.stm.pop_before(reward_tick)
+            memory.pop_before(reward_tick if window is None else window[1] + 1)
             if self.kp is not None:
                 self.kp.reset_episode()
-            return RewardOutcome((), ())
-        credits = self.ltm.apply(self.stm.pop_before(reward_tick), reward_tick, value)
-        if value < 0.0 and credits and credits[0].d_k == 1:
+            return RewardOutcome((), (), (), window)
+        if window is None:
+            credits = self.ltm.apply(memory.pop_before(reward_tick), reward_tick, value)
+        else:
+            credits = credit_seen(memory, self.ltm, value, window)
+        if value < 0.0 and credits and credits[0].d_k == 1 and memory is self.stm:
             self.selector.retry(credits[0].stimulus)
         threshold = self.config.learning.insert_threshold
         learnable = self.learnable
@@ -236,7 +299,15 @@ class Brain:
         if self.kp is not None:
             propagated, promoted = self.kp.reward(value)
             changes.extend(promoted)
-        return RewardOutcome(tuple(credits), tuple(changes), tuple(propagated))
+        return RewardOutcome(tuple(credits), tuple(changes), tuple(propagated), window)
+
+    def _seen_memory(self, tick_seen: int, reward_tick: int) -> ShortTermMemory:
+        """The records a reward seen at `tick_seen`, arriving before `reward_tick`, credits."""
+        if tick_seen > self.ended_tick:
+            return self.stm
+        if reward_tick - 1 - self.ended_tick > self.window.hi_ticks:
+            self.ended = ShortTermMemory(1)  # the window has passed: the records go
+        return self.ended
 
     def episode_failed(self) -> RewardOutcome:
         """An episode failed: KP's RLTM is punished by `KpConfig.failure_penalty`.

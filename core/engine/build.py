@@ -8,9 +8,11 @@ definition, rate) before anything is stored or ticks.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 from core.brain.brain import BrainConfig
 from core.brain.catalog import Catalog
+from core.brain.memory import DEFAULT_REACTION_S, ReactionWindow
 from core.brain.network import Association, BehaviourNetwork
 from core.engine.learning import pair
 from core.engine.pacing import check_hz
@@ -29,12 +31,33 @@ def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
     found = get_condition(spec.condition)
     if found.agent != "brain":
         raise RunStateError(f"condition {found.name!r} is not run by the engine")
-    params = dict(spec.params)
+    params = brain_params(spec)
     unknown = set(params) - {"eta", "epsilon", "synthesize"}
     if unknown:
         raise ValueError(f"unknown learning parameters: {', '.join(sorted(unknown))}")
     # The API accepts these for every condition and ignores those a condition does not use.
     return configure(found, applicable(found, params))
+
+
+REACTION_WINDOW = "reaction_window_s"
+"""The parameter holding a run's reaction window, ``[lo_s, hi_s]``: stored with its spec,
+so a replay credits with the window the run had."""
+
+
+def brain_params(spec: RunSpec) -> dict[str, Any]:
+    """The spec's learning parameters the brain takes: all but the reaction window."""
+    return {k: v for k, v in spec.params.items() if k != REACTION_WINDOW}
+
+
+def reaction_seconds(spec: RunSpec) -> tuple[float, float]:
+    """The run's reaction window in seconds (TAMER's 0.2-4 s if it names none)."""
+    lo_s, hi_s = spec.params.get(REACTION_WINDOW, DEFAULT_REACTION_S)
+    return float(lo_s), float(hi_s)
+
+
+def reaction_window(spec: RunSpec) -> ReactionWindow:
+    """The run's reaction window in ticks at the rate it was created with."""
+    return ReactionWindow.of_seconds(*reaction_seconds(spec), spec.hz)
 
 
 def setup(spec: RunSpec, catalog: Catalog | None) -> tuple[Setup, Catalog]:
@@ -72,7 +95,7 @@ def new_simulation(
     else:
         base = cond if spec.network is None else replace(cond, network=spec.network)
         net = condition_network(catalog, base)
-    return Simulation(
+    sim = Simulation(
         cond,
         spec.seed,
         catalog=catalog,
@@ -81,6 +104,8 @@ def new_simulation(
         brain_config=config,
         defer_rewards=True,
     )
+    sim.brain.window = reaction_window(spec)
+    return sim
 
 
 def create_run(
@@ -158,5 +183,6 @@ def restore_run(
         defer_rewards=True,
         brain_config=config,
     )
+    sim.brain.window = reaction_window(spec)
     skip = int(state.get("last_external_reward_id", 0))
     return Restored(spec, sim, stored, stored.totals, skip)

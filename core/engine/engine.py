@@ -26,10 +26,11 @@ import asyncio
 import time
 
 from core.brain.catalog import Catalog
+from core.brain.memory import ReactionWindow
 from core.brain.network import Association
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.engine.boundary import Boundary
-from core.engine.build import create_run, restore_run
+from core.engine.build import create_run, reaction_seconds, reaction_window, restore_run
 from core.engine.bus import EventBus, StatusChanged, Subscription
 from core.engine.jobs import CommandJob, RewardAck, RewardJob
 from core.engine.pacing import HZ_MAX, HZ_MIN, Controls, MonotonicPacer, Pacer, check_hz
@@ -39,7 +40,7 @@ from core.engine.stats import EngineStats
 from core.engine.tick_task import TickTask
 from core.engine.view import RunView
 from core.engine.writer import RunWriter
-from core.errors import RunStateError, StorageError
+from core.errors import RunStateError, SeenTickError, StorageError
 from core.ports import ACTIVE, Mode, RunSpec, RunStatus, RunStore, RunTotals, StoredRun
 from core.run.simulation import Simulation
 from core.run.trace import TraceRecorder
@@ -201,10 +202,16 @@ class RunEngine:
         note: str = "",
         source: RewardSource = RewardSource.TRAINER,
         uid: str = "",
+        tick_seen: int | None = None,
+        seen_episode: int | None = None,
+        records: tuple[tuple[int, int, int], ...] | None = None,
     ) -> RewardAck:
         """Inject a reward; returns once it is in the reward log (durable).
 
-        It is stamped with the next tick boundary, so it credits every STM record so far.
+        It is stamped with the next tick boundary, so it credits every STM record so far;
+        with `tick_seen` (the tick its trainer saw, in `seen_episode`: by default the one
+        it lies in), the reaction window before that tick (`core.brain.memory.credit_seen`;
+        `SeenTickError` for a tick the run has not reached or no longer holds).
         A paused run takes it too and applies it at once, at the boundary it is paused at.
         `uid` is its id from its arrival on ("": one made of its source, episode, boundary
         and how many rewards this engine took).
@@ -218,14 +225,36 @@ class RunEngine:
             # would be applied in an order a later replay could not repeat.
             await self._ticks.replayed.wait()
             self._check_running(paused=True)
+        window = None
+        if tick_seen is None:
+            seen_episode = None
+        elif records is not None:
+            # A stored episode's tick, looked at at leisure: its window ends there.
+            if seen_episode is None or seen_episode >= self.sim.episode:
+                raise SeenTickError("episode", "a stored episode's records need its number")
+            window = (tick_seen - reaction_window(self.spec).hi_ticks, tick_seen)
+            records = tuple(r for r in records if window[0] <= r[0] <= window[1])
+        else:
+            seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
+            window = self._seen_window(tick_seen)
         next_boundary = self.sim.tick_count + 1
         stamp = self._boundary.stamp(next_boundary)
         self._arrivals += 1
         uid = uid or f"{source.value}-{self.sim.episode}-{stamp}-{self._arrivals}"
+        reward = InjectReward(
+            value,
+            note=note,
+            source=source,
+            uid=uid,
+            tick_seen=tick_seen,
+            seen_episode=seen_episode,
+            window=window,
+            records=records,
+        )
         job = RewardJob(
             stamp,
             self.sim.episode,
-            InjectReward(value, note=note, source=source, uid=uid),
+            reward,
             external=True,
             ack=asyncio.get_running_loop().create_future(),
             arrived=time.perf_counter(),
@@ -235,6 +264,18 @@ class RunEngine:
         self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack
+
+    def _seen_window(self, tick_seen: int) -> tuple[int, int]:
+        """The ticks a reward seen at `tick_seen` credits, as it arrives (then logged).
+
+        The run's reaction window at the rate it ticks now (a realtime run's may have been
+        changed); a paused run's ends at the seen tick itself, which the person has looked
+        at as long as they liked.
+        """
+        lo_s, hi_s = reaction_seconds(self.spec)
+        hz = self.hz if self.spec.mode is Mode.REALTIME else self.spec.hz
+        first, last = ReactionWindow.of_seconds(lo_s, hi_s, hz).span(tick_seen)
+        return (first, tick_seen) if self.status is RunStatus.PAUSED else (first, last)
 
     async def edit(self, command: EditAssociation) -> int:
         """Change the running robot's network at the next tick boundary; returns the log id."""

@@ -28,6 +28,10 @@ class RewardAck:
     value: float
     uid: str = ""
     """The reward's id from its arrival (its log `id` is the database's)."""
+    tick_seen: int | None = None
+    seen_episode: int | None = None
+    window: tuple[int, int] | None = None
+    """The first and last tick it could credit (with a seen tick)."""
 
 
 @dataclass(eq=False)

@@ -93,8 +93,17 @@ async def perform(
     if allowed is not None and engine.status not in allowed:
         raise RunStateError(f"run {engine.run_id} is {engine.status.value}")
     match command:
-        case InjectReward(value=value, note=note, source=source, uid=uid):
-            return await engine.reward(value, note=note, source=source, uid=uid)
+        case InjectReward():
+            r = command
+            return await engine.reward(
+                r.value,
+                note=r.note,
+                source=r.source,
+                uid=r.uid,
+                tick_seen=r.tick_seen,
+                seen_episode=r.seen_episode,
+                records=r.records,
+            )
         case EditAssociation():
             return await engine.edit(command)
         case EditBatch(edits=edits):

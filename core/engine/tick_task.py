@@ -26,7 +26,7 @@ from core.engine.reward_task import RewardTask
 from core.engine.stats import EngineStats
 from core.engine.view import released_by_kp
 from core.engine.writer import RunWriter
-from core.errors import RunStateError
+from core.errors import RunStateError, SeenTickError
 from core.events import EpisodeEnded, Event, Outcome, RewardDue
 from core.ports import EpisodeRecord, Mode, RunSpec, RunTotals
 from core.run.checkpoint import export_state
@@ -96,6 +96,8 @@ class TickTask:
         """No more rewards or edits: the run is stopping."""
         self.last_snap: Snapshot | None = None
         self.episode_start_tick = sim.tick_count
+        self.ended: tuple[int, int, int] | None = None
+        """The episode that ended last: (episode, start tick, last tick)."""
         self.need_reset = True
 
     @property
@@ -267,7 +269,38 @@ class TickTask:
                 self.bus.publish(e)
         return ended
 
+    def seen_episode(self, tick_seen: int, episode: int | None) -> int:
+        """The episode a trainer's seen tick lies in; `SeenTickError` if none the run holds.
+
+        The run's current episode (ticks from its start, the reset's tick, to the last
+        tick run) or the one that ended last, whose last records are kept for the rewards
+        pressed as it ended; `episode`, if given, must be the one the tick lies in.
+        """
+        sim = self.sim
+        if tick_seen > sim.tick_count:
+            raise SeenTickError(
+                "tick_seen", f"tick {tick_seen} is in the future: run {self.run_id} has "
+                f"reached tick {sim.tick_count}",
+            )  # fmt: skip
+        # The ended episode first: the reset's tick (the current episode's start) is its
+        # last tick, and the records before it are its own.
+        held = [(sim.episode, self.episode_start_tick, sim.tick_count)]
+        if self.ended is not None and self.ended[0] != sim.episode:
+            held.insert(0, self.ended)
+        if episode is not None and all(e != episode for e, _, _ in held):
+            known = " or ".join(str(e) for e, _, _ in held)
+            raise SeenTickError(
+                "episode", f"episode {episode} is not one a seen tick may lie in: {known}"
+            )
+        for e, first, last in held:
+            if (episode is None or e == episode) and first <= tick_seen <= last:
+                return e
+        where = ", ".join(f"episode {e}: ticks {first}-{last}" for e, first, last in held)
+        raise SeenTickError("tick_seen", f"tick {tick_seen} lies in no episode held ({where})")
+
     def _start_episode(self) -> None:
+        if self.sim.episode >= 0:
+            self.ended = (self.sim.episode, self.episode_start_tick, self.sim.tick_count)
         self.sim.reset()
         self.need_reset = False
         self.episode_start_tick = self.sim.tick_count

@@ -49,7 +49,10 @@ WRITE_BATCH_MAX = 256
 def reward_record(job: RewardJob) -> RewardRecord:
     """A reward as the log keeps it."""
     r = job.reward
-    return RewardRecord(job.stamp, job.episode, r.value, r.source, r.note, r.uid)
+    return RewardRecord(
+        job.stamp, job.episode, r.value, r.source, r.note, r.uid, r.tick_seen, r.seen_episode,
+        r.window, r.records,
+    )  # fmt: skip
 
 
 class RunWriter:
@@ -231,6 +234,13 @@ class RunWriter:
                 self.stats.reward_ack_s.add(time.perf_counter() - job.arrived)
                 job.ack.set_result(
                     RewardAck(
-                        job.logged_id, job.stamp, job.episode, job.reward.value, job.reward.uid
+                        job.logged_id,
+                        job.stamp,
+                        job.episode,
+                        job.reward.value,
+                        job.reward.uid,
+                        job.reward.tick_seen,
+                        job.reward.seen_episode,
+                        job.reward.window,
                     )
                 )

@@ -55,10 +55,14 @@ def export_state(sim: Simulation) -> dict[str, Any]:
             for x in cat.behaviours
             if x.synthesized
         ],
-        # Taken between episodes: an STM the next episode starts by clearing is dead.
+        # Taken between episodes: an STM the next episode starts by clearing is dead, but
+        # for the records kept aside for rewards pressed at the episode's end.
         "stm": []
         if brain.config.learning.clear_stm_each_episode
         else [[t, s[i], b[j]] for t, i, j in brain.stm],
+        "ended_stm": [[t, s[i], b[j]] for t, i, j in brain.kept(sim.tick_count)]
+        if brain.config.learning.clear_stm_each_episode
+        else [],
         "rng": brain.rng.bit_generator.state,
         "ticks_by_origin": dict(sim.ticks_by_origin),
         # A simulated teacher draws its imperfections from a generator of its own.
@@ -124,7 +128,9 @@ def restore_simulation(
         if brain.kp is not None:
             for st, be, v in state["rltm"]:
                 brain.kp.rltm[(sid[st], bid[be])] = v
-        for t, st, be in state["stm"]:
+        # The ended episode's kept records go into STM: the next episode's reset sets
+        # them aside again (absent from checkpoints written before they were kept).
+        for t, st, be in [*state.get("ended_stm", ()), *state["stm"]]:
             brain.stm.push((t, sid[st], bid[be]))
     except KeyError as e:
         raise CheckpointError(f"the checkpoint names {e} which the catalogue lacks") from e

@@ -155,7 +155,7 @@ class Simulation:
         """Start the next episode and return its first snapshot."""
         self.episode += 1
         frame = self.world.reset(self.seed, self.episode)
-        self.brain.reset_episode()
+        self.brain.reset_episode(self.tick_count)
         self._episode_tick = 0
         self._progress = 0.0
         self._last_p = float(frame.channels[_PROGRESS])
@@ -200,7 +200,7 @@ class Simulation:
         self, r: InjectReward, tick: int, episode: int | None = None
     ) -> tuple[RewardApplied, RewardOutcome]:
         """Apply a reward stamped with the boundary before `tick` (see `Brain.reward`)."""
-        outcome = self.brain.reward(tick, r.value)
+        outcome = self.brain.reward(tick, r.value, r.tick_seen, r.window, r.records)
         event = RewardApplied(
             tick,
             self.episode if episode is None else episode,
@@ -209,6 +209,8 @@ class Simulation:
             r.note,
             outcome.credits,
             r.uid,
+            r.tick_seen,
+            outcome.window,
         )
         return event, outcome
 

@@ -26,6 +26,10 @@ REWARD_COLUMNS = (
     "note",
     "applied",
     "credited",
+    "tick_seen",
+    "seen_episode",
+    "window_first",
+    "window_last",
 )
 """`rewards.jsonl`'s keys and `rewards.csv`'s columns, in order (docs/export.md)."""
 EPISODE_COLUMNS = (
@@ -65,7 +69,10 @@ def reward_rows(store: RunQueries, run_id: int, participant: str | None = None) 
             "episode": record.episode, "tick": record.tick,
             "at": r.at.isoformat() if r.at is not None else None, "value": record.value,
             "source": record.source, "note": record.note, "applied": r.applied,
-            "credited": r.credited,
+            "credited": r.credited, "tick_seen": record.tick_seen,
+            "seen_episode": record.seen_episode,
+            "window_first": record.window[0] if record.window else None,
+            "window_last": record.window[1] if record.window else None,
         }  # fmt: skip
 
 

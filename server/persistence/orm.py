@@ -305,6 +305,15 @@ class RewardRow(Base):
     note: Mapped[str] = mapped_column(Text, default="")
     uid: Mapped[str] = mapped_column(String(64), server_default=text("''"))
     """The reward's id from its arrival (`core.commands.InjectReward.uid`)."""
+    tick_seen: Mapped[int | None] = mapped_column(BigInteger)
+    """The tick the trainer saw when they pressed (NULL: the paper's rule)."""
+    seen_episode: Mapped[int | None]
+    window_first: Mapped[int | None] = mapped_column(BigInteger)
+    """The first tick the reward could credit (its reaction window's)."""
+    window_last: Mapped[int | None] = mapped_column(BigInteger)
+    records: Mapped[list[list[int]] | None] = mapped_column(JSON)
+    """A stored episode's records it credited, [tick, stimulus id, behaviour id] each
+    (NULL: it credited the run's memory)."""
     applied: Mapped[bool] = mapped_column(server_default=false())
     credited: Mapped[int] = mapped_column(server_default=text("0"))
     created_at: Mapped[datetime] = _created()

@@ -47,6 +47,11 @@ def reward_values(run_id: int, r: RewardRecord, applied: bool, credited: int) ->
         "source": r.source,
         "note": r.note,
         "uid": r.uid,
+        "tick_seen": r.tick_seen,
+        "seen_episode": r.seen_episode,
+        "window_first": None if r.window is None else r.window[0],
+        "window_last": None if r.window is None else r.window[1],
+        "records": None if r.records is None else [list(x) for x in r.records],
         "applied": applied,
         "credited": credited,
     }
@@ -81,40 +86,46 @@ def _spec(run: RunRow) -> RunSpec:
     )
 
 
-def select_rewards(
-    *where: ColumnElement[bool],
-) -> Select[int, int, int, float, str, str, str, bool, int]:
+RewardColumns = tuple[
+    int, int, int, float, str, str, str, int | None, int | None, int | None, int | None,
+    list[list[int]] | None, bool, int,
+]  # fmt: skip
+"""`select_rewards`'s columns."""
+
+
+def select_rewards(*where: ColumnElement[bool]) -> Select[*RewardColumns]:
     """Reward log rows in log order, as plain columns.
 
     Not ORM objects: their identity map, change tracking and the unused `created_at`
     (parsed from SQLite's text) cost more than the rows' values.
     """
     r = RewardRow
-    columns = (r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.applied, r.credited)
+    columns = (
+        r.id, r.tick, r.episode, r.value, r.source, r.note, r.uid, r.tick_seen, r.seen_episode,
+        r.window_first, r.window_last, r.records, r.applied, r.credited,
+    )  # fmt: skip
     return select(*columns).where(*where).order_by(r.id)
 
 
-def stored_reward(row: Row[int, int, int, float, str, str, str, bool, int]) -> StoredReward:
+def stored_reward(row: Row[*RewardColumns], at: datetime | None = None) -> StoredReward:
     """A reward log row of `select_rewards` as the ports' value."""
-    id_, tick, episode, value, source, note, uid, applied, credited = row
-    record = RewardRecord(tick, episode, value, source, note, uid)
-    return StoredReward(id_, record, applied, credited)
+    id_, tick, episode, value, source, note, uid, seen, seen_episode, first, last = row[:11]
+    window = None if first is None or last is None else (first, last)
+    stored = None if row[11] is None else tuple((t, s, b) for t, s, b in row[11])
+    record = RewardRecord(
+        tick, episode, value, source, note, uid, seen, seen_episode, window, stored
+    )
+    return StoredReward(id_, record, row[12], row[13], at)
 
 
-def select_reward_log(
-    *where: ColumnElement[bool],
-) -> Select[int, int, int, float, str, str, str, bool, int, datetime]:
+def select_reward_log(*where: ColumnElement[bool]) -> Select[*RewardColumns, datetime]:
     """`select_rewards` with each reward's time (`created_at`): the reward log's reads."""
     return select_rewards(*where).add_columns(RewardRow.created_at)
 
 
-def logged_reward(
-    row: Row[int, int, int, float, str, str, str, bool, int, datetime],
-) -> StoredReward:
+def logged_reward(row: Row[*RewardColumns, datetime]) -> StoredReward:
     """A reward log row of `select_reward_log` as the ports' value, with its time."""
-    id_, tick, episode, value, source, note, uid, applied, credited, at = row
-    record = RewardRecord(tick, episode, value, source, note, uid)
-    return StoredReward(id_, record, applied, credited, utc(at))
+    return stored_reward(row, utc(row[14]))  # type: ignore[arg-type]
 
 
 def select_commands(*where: ColumnElement[bool]) -> Select[int, int, str, dict[str, Any]]:

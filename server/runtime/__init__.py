@@ -32,6 +32,7 @@ async def open_runs(settings: Settings, store: RunStore, stack: contextlib.Async
         store,
         max_streams=settings.max_streams,
         max_streams_per_run=settings.max_streams_per_run,
+        reaction_window_s=settings.reaction_window,
     )
     if settings.engines == "process":
         link = ProcessLink(runs)

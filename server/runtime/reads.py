@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from core.brain.propagation import KnowledgePropagation, KpLog, KpProvenance, steer_angle
 from core.engine import RunView
+from core.engine.build import reaction_seconds
 from core.engine.messages import Query, RunState
 from core.ports import NOT_ENDED, RunSpec, RunTotals
 from core.run.conditions import CONDITIONS
@@ -74,6 +75,7 @@ def run_public(
         params=params,
         world=spec.world,
         sensors=spec.sensors,
+        reaction_window_s=reaction_seconds(spec),
         status=status_value,
         error=error,
         episodes_done=totals.episodes,

@@ -18,9 +18,11 @@ from dataclasses import replace
 from typing import Any, Protocol, TypeVar
 
 from core.brain.catalog import Catalog
+from core.brain.memory import DEFAULT_REACTION_S
 from core.brain.network import Association
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.engine import RewardAck, RunEngine, Subscription
+from core.engine.build import REACTION_WINDOW
 from core.engine.messages import Command, EditBatch, Query, RunState, Step
 from core.errors import RunStateError, StorageError
 from core.ports import ACTIVE, NetworkPair, RunSpec, RunStatus, RunStore
@@ -133,14 +135,30 @@ class LiveRun:
         return await self._runs.link.request(self.run_id, query)
 
     async def reward(
-        self, value: float, *, note: str = "", source: RewardSource = RewardSource.TRAINER
+        self,
+        value: float,
+        *,
+        note: str = "",
+        source: RewardSource = RewardSource.TRAINER,
+        tick_seen: int | None = None,
+        seen_episode: int | None = None,
+        records: tuple[tuple[int, int, int], ...] | None = None,
     ) -> RewardAck:
         """A reward, answered once it is in the reward log.
 
         It gets its id (`uid`) here, as it arrives: the answer, the log, its event on the
-        stream and the console all name it by that.
+        stream and the console all name it by that. With `tick_seen` it credits the
+        reaction window before the tick its trainer saw (`core.engine.RunEngine.reward`).
         """
-        reward = InjectReward(value, note=note, source=source, uid=uuid.uuid4().hex)
+        reward = InjectReward(
+            value,
+            note=note,
+            source=source,
+            uid=uuid.uuid4().hex,
+            tick_seen=tick_seen,
+            seen_episode=seen_episode,
+            records=records,
+        )
         ack: RewardAck = await self.send(reward)
         return ack
 
@@ -225,9 +243,16 @@ class Runs:
     """
 
     def __init__(
-        self, store: RunStore, *, max_streams: int = 64, max_streams_per_run: int = 16
+        self,
+        store: RunStore,
+        *,
+        max_streams: int = 64,
+        max_streams_per_run: int = 16,
+        reaction_window_s: tuple[float, float] = DEFAULT_REACTION_S,
     ) -> None:
         self.store = store
+        self.reaction_window_s = reaction_window_s
+        """The reaction window a run created here gets unless its spec names one."""
         """The service's storage: runs are created here, and failures stored when the host
         is gone (the host has its own for everything else)."""
         self.link: Link
@@ -312,7 +337,14 @@ class Runs:
         return self.link.outage()
 
     def create(self, spec: RunSpec, network: tuple[NetworkPair, ...] | None) -> int:
-        """Store a new run (`create_run`; blocking: call in a thread)."""
+        """Store a new run (`create_run`; blocking: call in a thread).
+
+        Its spec keeps its reaction window (the service's unless it names one), so a
+        replay credits as the run did whatever the setting is by then.
+        """
+        if REACTION_WINDOW not in spec.params:
+            params = {**spec.params, REACTION_WINDOW: list(self.reaction_window_s)}
+            spec = replace(spec, params=params)
         return create_run(self.store, spec, network)
 
     async def start(self, run_id: int) -> LiveRun:

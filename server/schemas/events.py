@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import AwareDatetime, BaseModel, Field
 
@@ -10,12 +10,46 @@ from core.commands import RewardSource
 from server.schemas.common import Strict
 from server.schemas.runs import CauseName, HowName, OutcomeName, RunStatusName
 
+TickSeen = Annotated[
+    int | None,
+    Field(
+        description="the tick its trainer saw when they pressed (null: the reward credits "
+        "every STM record before its boundary, the paper's rule)"
+    ),
+]
+CreditWindow = Annotated[
+    tuple[int, int] | None,
+    Field(
+        description="[first, last]: the ticks a reward with `tick_seen` could credit, its "
+        "reaction window before the seen tick (null without `tick_seen`)"
+    ),
+]
+
 
 class RewardCreate(Strict):
-    EXAMPLES = ({"value": 1.0, "note": "a clean pass of the obstacle"}, {"value": -0.5})
+    EXAMPLES = (
+        {"value": 1.0, "note": "a clean pass of the obstacle"},
+        {"value": -0.5},
+        {"value": -1.0, "tick_seen": 484, "note": "that turn into the wall"},
+    )
 
     value: float = Field(ge=-1.0, le=1.0, description="the reward, -1 (bad) to 1 (good)")
     note: str = Field("", max_length=500)
+    tick_seen: int | None = Field(
+        None,
+        ge=0,
+        le=2**53 - 1,  # exact in every JSON reader
+        description="the tick the trainer was looking at when they pressed: the reward "
+        "credits the run's reaction window before it (docs/studies.md); a tick the run has "
+        "reached, in its current episode or the one that ended last (null: every STM "
+        "record before the next boundary)",
+    )
+    episode: int | None = Field(
+        None,
+        ge=0,
+        le=2**31 - 1,
+        description="the episode `tick_seen` belongs to (default: the one it lies in)",
+    )
 
 
 class RewardAccepted(BaseModel):
@@ -27,6 +61,9 @@ class RewardAccepted(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
+    tick_seen: TickSeen
+    window: CreditWindow
+    seen_episode: int | None = Field(description="the episode of `tick_seen`")
 
 
 class RewardPublic(BaseModel):
@@ -40,6 +77,9 @@ class RewardPublic(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
+    tick_seen: TickSeen
+    window: CreditWindow
+    seen_episode: int | None = Field(description="the episode of `tick_seen`")
     applied: bool
     credited: int
     at: AwareDatetime | None = Field(
@@ -115,6 +155,8 @@ class RewardEvent(BaseModel):
         description="the reward's id from its arrival: its 202, its log entry and its event "
         "on the run's stream carry it (the log's `id` is the database's)"
     )
+    tick_seen: TickSeen
+    window: CreditWindow
 
 
 class EpisodeEvent(BaseModel):

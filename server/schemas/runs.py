@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from core.brain.memory import MAX_REACTION_S
 from core.engine import HZ_MAX, HZ_MIN
 from core.run.conditions import CONDITIONS
 from server.schemas.catalog import SENSOR_DEFINITIONS, WORLD_NAMES
@@ -31,12 +32,27 @@ assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
 }
 
 
+ReactionSeconds = Annotated[float, Field(ge=0.0, le=MAX_REACTION_S)]
+
+
 class LearningParams(Strict):
     EXAMPLES = ({"eta": 0.2, "epsilon": 0.05},)
 
     eta: float | None = Field(None, ge=0.0, le=1.0, description="Eq. (1)'s learning rate")
     epsilon: float | None = Field(None, ge=0.0, le=1.0, description="exploration rate")
     synthesize: bool = Field(False, description="KP keeps new behaviours instead of snapping")
+    reaction_window_s: tuple[ReactionSeconds, ReactionSeconds] | None = Field(
+        None,
+        description="[lo, hi] seconds (the two bounds in either order): a trainer's reward "
+        "with the tick they saw credits the ticks lo to hi seconds before it (default: the "
+        "service's SRLAB_REACTION_WINDOW)",
+    )
+
+    @field_validator("reaction_window_s")
+    @classmethod
+    def _window(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        # A window is the interval between its bounds: no order a schema cannot say.
+        return None if v is None else (min(v), max(v))
 
 
 class RunCreate(Strict):
@@ -143,6 +159,10 @@ class RunPublic(BaseModel):
     params: dict[str, float | bool]
     world: str = Field(description="its world preset ('' if stored before runs kept it)")
     sensors: str = Field(description="its sensor definition ('' if stored before runs kept it)")
+    reaction_window_s: tuple[float, float] = Field(
+        description="[lo, hi] seconds: a trainer's reward with `tick_seen` credits the ticks "
+        "lo to hi seconds before it, at the run's rate (docs/studies.md)"
+    )
     status: RunStatusName
     error: str | None
     episodes_done: int

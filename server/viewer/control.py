@@ -22,7 +22,7 @@ from core.engine import StatusChanged, SubscriptionClosed, TickPublished, check_
 from core.engine.messages import Latest, LatestTick, SetRate
 from core.errors import CoreError
 from core.events import EpisodeEnded
-from core.ports import ACTIVE, Mode, RunQueries, RunStatus, RunTotals
+from core.ports import ACTIVE, Mode, RunQueries, RunTotals
 from core.run.simulation import Snapshot
 from core.sim.world import WorldConfig
 from server.api.ratelimit import RateLimiter
@@ -441,8 +441,9 @@ class Controller:
             if not st.writable:
                 raise ValueError("the panel rewards on loopback only: use the API's token")
             engine = self.manager.get(st.run_id) if st.run_id is not None else None
-            if engine is None or engine.status is not RunStatus.RUNNING:
-                raise ValueError("the selected run is not running")
+            if engine is None or engine.status not in ACTIVE:
+                # A paused run takes rewards as the API does: at the boundary it waits at.
+                raise ValueError("the selected run is not running or paused")
             wait = self.limiter.allow(f"{LIMITER_KEY}:{client}", run=engine.run_id)
             if wait > 0:
                 raise ValueError(f"too many rewards: wait {wait:.1f} s")

@@ -25,6 +25,7 @@ from server.persistence import (
     upgrade,
 )
 from server.persistence.migrate import ROOT
+from core.engine.build import reaction_seconds
 from server.persistence.studies import SqlAlchemyStudyRepository
 
 TABLES = {
@@ -272,3 +273,45 @@ def test_participants_stored_before_0006_have_no_answers_and_may_answer(sqlite_u
     command.downgrade(alembic_config(sqlite_url), "0005")  # the answers go, the rest stays
     assert "questionnaire_answers" not in tables(sqlite_url)
     assert "participants" in tables(sqlite_url)
+
+
+def test_rewards_logged_before_0007_read_with_no_seen_tick(sqlite_url: str) -> None:
+    command.upgrade(alembic_config(sqlite_url), "0006_questionnaire_answers")
+    engine = make_engine(sqlite_url)
+    try:
+        with engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO runs (id, condition, seed, mode, hz, params, status, created_at) "
+                    "VALUES (1, 'kp', 1, 'fast', 10.0, '{}', 'stopped', '2026-02-01 00:00:00')"
+                )
+            )
+            connection.execute(
+                text(
+                    "INSERT INTO rewards (run_id, tick, episode, value, source, note, uid, "
+                    "applied, credited, created_at) VALUES "
+                    "(1, 5, 0, 1.0, 'trainer', 'old', 'u', 1, 3, '2026-02-01 00:00:01')"
+                )
+            )
+    finally:
+        engine.dispose()
+
+    upgrade(sqlite_url, seed=False)
+
+    engine = make_engine(sqlite_url)
+    try:
+        store = SqlAlchemyRunStore(make_sessionmaker(engine))
+        (old,) = store.rewards(1)
+        assert (old.record.tick_seen, old.record.seen_episode, old.record.window) == (
+            None,
+            None,
+            None,
+        )
+        seen = RewardRecord(9, 0, -1.0, "trainer", "new", "v", 7, 0, (-33, 5))
+        store.log_reward(1, seen)
+        assert [r.record for r in store.rewards(1)][1] == seen
+        # The run stored without a window reads with TAMER's.
+        assert reaction_seconds(store.load_run(1).spec) == (0.2, 4.0)
+    finally:
+        engine.dispose()
+    assert drift(sqlite_url) == []

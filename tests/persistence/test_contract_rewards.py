@@ -5,6 +5,7 @@ Every implementation passes it (`store` in tests/conftest.py): memory, SQLite, P
 
 from __future__ import annotations
 
+from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 
 import pytest
@@ -340,3 +341,29 @@ def test_the_reward_log_pages_say_when_each_reward_was_logged(store: Inspectable
     for r in page:
         assert r.at is not None and r.at.tzinfo is not None
         assert before <= r.at <= after + timedelta(seconds=1)
+
+
+def test_the_log_keeps_a_reward_s_seen_tick_and_window(store: InspectableRunStore) -> None:
+    """Logged on arrival (a trainer's) or recorded applied in a batch, on every store."""
+    run_id = new_run(store)
+    seen = replace(
+        reward(30), tick_seen=25, seen_episode=1, window=(-15, 23), records=((20, 1, 2), (21, 1, 3))
+    )
+    plain = reward(31)
+    logged = store.log_reward(run_id, seen)
+    (recorded,) = store.commit_rewards(
+        run_id, (RewardCommit(replace(seen, tick=32, uid="b"), LearningUpdate(), 4),)
+    )
+    store.log_reward(run_id, plain)
+
+    assert [r.record for r in store.rewards(run_id)] == [
+        seen,
+        replace(seen, tick=32, uid="b"),
+        plain,
+    ]
+    page, _ = store.rewards_page(run_id)
+    assert [(r.id, r.record.tick_seen, r.record.window) for r in page] == [
+        (logged, 25, (-15, 23)),
+        (recorded, 25, (-15, 23)),
+        (page[2].id, None, None),
+    ]

@@ -9,6 +9,7 @@ behind a dialog or per key repeat, and messages that do not pile up while offlin
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -388,3 +389,36 @@ def test_offline_messages_do_not_pile_up_and_go_when_the_service_is_back(
     finally:
         if first.process.poll() is None:
             stop_server(first)
+
+
+def test_a_keypress_reward_carries_the_tick_shown_and_the_list_shows_its_credit(
+    page: Page, server: LiveServer
+) -> None:
+    """Paused and stepped past an innate response, the person presses + while the console
+    shows tick T: the reward says it saw T, and credits the reaction window before it."""
+    run_id = started(server, condition="trainer", mode="realtime", hz=20, seed=3)
+    try:
+        assert server.client.post(f"/api/runs/{run_id}/pause").status_code == 200
+        open_view(page, server, f"console/{run_id}")
+        expect(page.locator("#run-status")).to_have_text("paused")
+        run = step_to_an_innate_response(server, run_id)
+        for _ in range(6):  # the response falls inside the window (4 to 80 ticks at 20 Hz)
+            run = server.client.post(f"/api/runs/{run_id}/step").json()
+        shown = run["live"]["tick"]
+        expect(page.locator("#st-tick")).to_have_text(str(shown))
+        page.keyboard.press("+")
+        applied = eventually(
+            lambda: (r := trainer_rewards(server, run_id)) and r[0]["applied"] and r[0],
+            what="the reward applied",
+        )
+        assert applied["tick_seen"] == shown
+        assert applied["window"] == [shown - 80, shown]  # paused: up to the tick shown
+        assert applied["credited"] > 0, applied
+        item = page.locator(f'#my-rewards li[data-id="{applied["id"]}"]')
+        expect(item).to_contain_text(
+            re.compile(rf"credited {applied['credited']} records?, ticks \d+–\d+")  # noqa: RUF001
+        )
+        expect(page.locator("#reward-effect .head")).to_contain_text(f"seen at tick {shown}")
+    finally:
+        server.client.post(f"/api/runs/{run_id}/stop")
+    wait_status(server.client, run_id, "stopped")

@@ -90,7 +90,8 @@ def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None
                  "d_k": c.d_k, "before": c.before, "after": c.after}
                 for c in event.credits[:200]
             ],
-            "credited": len(event.credits), "uid": event.uid,
+            "credited": len(event.credits), "uid": event.uid, "tick_seen": event.tick_seen,
+            "window": None if event.window is None else list(event.window),
         }  # fmt: skip
     if isinstance(event, EpisodeEnded):
         return "episode", {

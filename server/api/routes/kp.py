@@ -5,6 +5,7 @@ from __future__ import annotations
 from starlette.concurrency import run_in_threadpool as io
 
 from core.brain.catalog import Catalog
+from core.engine.build import brain_params
 from core.params import applicable, configure
 from core.ports import RunQueries
 from core.run.conditions import CONDITIONS
@@ -72,7 +73,7 @@ async def get_run_kp(
     condition = CONDITIONS.get(run.spec.condition)
     if condition is None or not condition.kp:
         return not_kp(run_id, run.spec.condition, live=False)
-    _, config = configure(condition, applicable(condition, run.spec.params))
+    _, config = configure(condition, applicable(condition, brain_params(run.spec)))
     rltm = await io(store.rltm, run_id)
     network = {
         (p.stimulus, p.behaviour): p for p in await io(store.network, run_id) if p.source == "kp"

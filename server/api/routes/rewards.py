@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Annotated
 
@@ -9,6 +10,9 @@ from fastapi import HTTPException, Query, Request, Response, status
 from starlette.concurrency import run_in_threadpool
 
 from core.commands import RewardSource
+from core.errors import SeenTickError
+from core.ports import RunQueries
+from core.run.trace import unpack
 from core.studies import ParticipantStatus
 from server.api.access import PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep, WriteGuard, bearer
@@ -73,10 +77,64 @@ async def inject_reward(
         raise HTTPException(
             status.HTTP_409_CONFLICT, f"run {run_id} is {run.status.value}, not running"
         )
-    ack = await engine.reward(body.value, note=body.note, source=RewardSource.TRAINER)
-    return RewardAccepted(
-        id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value, uid=ack.uid
+    if body.episode is not None and body.tick_seen is None:
+        raise seen_error(SeenTickError("episode", "is the episode of `tick_seen`: send both"))
+    give = functools.partial(
+        engine.reward,
+        body.value,
+        note=body.note,
+        source=RewardSource.TRAINER,
+        tick_seen=body.tick_seen,
+        seen_episode=body.episode,
     )
+    try:
+        try:
+            ack = await give()
+        except SeenTickError as e:
+            if e.field != "episode" or body.episode is None or body.tick_seen is None:
+                raise
+            # An episode the run no longer holds: a stored one, scrubbed on its replay.
+            records = await run_in_threadpool(
+                stored_records, store, run_id, body.episode, body.tick_seen
+            )
+            ack = await give(records=records)
+    except SeenTickError as e:
+        raise seen_error(e) from e
+    return RewardAccepted(
+        id=ack.id, tick=ack.tick, episode=ack.episode, value=ack.value, uid=ack.uid,
+        tick_seen=ack.tick_seen, seen_episode=ack.seen_episode, window=ack.window,
+    )  # fmt: skip
+
+
+def stored_records(
+    store: RunQueries, run_id: int, episode: int, tick_seen: int
+) -> tuple[tuple[int, int, int], ...]:
+    """A stored episode's STM records up to `tick_seen`, from its trace (blocking).
+
+    A tick's record is what STM held for it: the behaviour and the stimulus it answered
+    (`released_by`; none for the default behaviour's ticks). `SeenTickError` for an
+    episode not stored or a tick outside it.
+    """
+    found = store.episode(run_id, episode)
+    if found is None:
+        raise SeenTickError("episode", f"run {run_id} has no stored episode {episode}")
+    first, last = found.start_tick + 1, found.start_tick + found.ticks
+    if not first <= tick_seen <= last:
+        raise SeenTickError(
+            "tick_seen", f"tick {tick_seen} is not in episode {episode} (ticks {first}-{last})"
+        )
+    rows = unpack(found.trace) if found.trace else []
+    return tuple(
+        (r.tick, r.released_by, r.behaviour)
+        for r in rows
+        if r.released_by >= 0 and r.tick <= tick_seen
+    )
+
+
+def seen_error(e: SeenTickError) -> HTTPException:
+    """A 422 naming the body's field at fault, as FastAPI's own validation errors do."""
+    detail = [{"loc": ["body", e.field], "msg": e.message, "type": "value_error"}]
+    return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, detail)
 
 
 @router.get("")
@@ -96,7 +154,8 @@ def list_rewards(
         RewardPublic(
             id=r.id, tick=r.record.tick, episode=r.record.episode, value=r.record.value,
             source=r.record.source, note=r.record.note, applied=r.applied, credited=r.credited,
-            uid=r.record.uid, at=r.at,
+            uid=r.record.uid, at=r.at, tick_seen=r.record.tick_seen,
+            seen_episode=r.record.seen_episode, window=r.record.window,
         )
         for r in page
     ]  # fmt: skip

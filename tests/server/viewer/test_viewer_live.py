@@ -290,3 +290,19 @@ async def test_each_run_is_drawn_in_its_own_world_live_and_replayed(tmp_path: Pa
         await until(lambda: r.drawn is not None and r.drawn.run_id == stored, what="a replay")
         assert r.drawn is not None and r.drawn.origin in ORIGINS
         await client.post(f"/api/runs/{live}/stop")
+
+
+async def test_the_panel_rewards_a_paused_run_as_the_api_does(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path, viser=True, viser_port=free_port())
+    async with client_for(settings) as (client, app):
+        viewer = viewer_of(app)
+        run_id = await start_run(client, condition="kp", mode="realtime", hz=50, seed=1)
+        viewer.controller.post(ClientsChanged(1))
+        viewer.controller.post(SelectRun(run_id))
+        await until(lambda: viewer.controller.state.live is not None, what="the run selected")
+        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 200
+        viewer.controller.post(GiveReward(1.0))
+        await until(lambda: "stored as #" in viewer.controller.state.notice, what="stored")
+        log = (await client.get(f"/api/runs/{run_id}/rewards")).json()["data"]
+        assert [(r["source"], r["value"]) for r in log] == [("trainer", 1.0)]
+        await client.post(f"/api/runs/{run_id}/stop")

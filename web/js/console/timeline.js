@@ -90,6 +90,14 @@ export function drawTimeline() {
 }
 
 /** The trainers' rewards, newest first, with their notes; this browser's marked "you". */
+/** What a reward credited: "credited 6 records, ticks 480–486" (the ticks when known). */
+function credit(r) {
+  const records = `credited ${r.credited} record${r.credited === 1 ? "" : "s"}`;
+  if (r.span && r.credited) return `${records}, ticks ${r.span[0]}–${r.span[1]}`;
+  if (r.window) return `${records} in ticks ${r.window[0]}–${r.window[1]} (seen at ${r.tick_seen})`;
+  return records;
+}
+
 function drawMine() {
   const ids = mine();
   const undone = new Map(state.rewards.filter((r) => undoOf(r) !== null).map((r) => [undoOf(r), r]));
@@ -100,7 +108,7 @@ function drawMine() {
       el("span", { class: `v ${r.value >= 0 ? "pos" : "neg"}`, text: `${r.value > 0 ? "+" : r.value < 0 ? "−" : ""}${Math.abs(r.value)}` }),
       el("span", { class: "what" }, `${r.id !== undefined ? `#${r.id} · ` : ""}tick ${r.tick}`,
         r.note ? el("span", { class: "reward-note", text: ` · ${r.note}` }) : null,
-        r.credited !== undefined ? el("span", { class: "muted", text: ` · credited ${r.credited}` }) : null),
+        r.credited !== undefined ? el("span", { class: "muted credit", text: ` · ${credit(r)}` }) : null),
       by ? el("span", { class: "muted small", text: `undone by #${by.id}` }) : null,
       r.id !== undefined && ids.has(r.id) ? el("span", { class: "muted small", text: "you" }) : null);
   }));

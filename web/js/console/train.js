@@ -13,7 +13,9 @@ export function onReward(r) {
   refreshMemory();
   const previous = [...state.rewards].reverse().find((x) => x.tick < r.tick || (x.tick === r.tick && rewardKey(x) !== rewardKey(r)));
   const seen = state.rewardIndex.has(rewardKey(r));
-  const kept = addReward({ uid: r.uid, tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited });
+  const ticks = r.credits.map((c) => c.tick);
+  const span = ticks.length ? [Math.min(...ticks), Math.max(...ticks)] : null;
+  const kept = addReward({ uid: r.uid, tick: r.tick, episode: r.episode, value: r.value, source: r.source, note: r.note, credited: r.credited, tick_seen: r.tick_seen, window: r.window, span });
   if (!seen) state.logTotal += 1; // in the log too, not read from it yet
   redrawRewards();
   if (r.source !== RewardSource.trainer) return;
@@ -26,8 +28,10 @@ export function onReward(r) {
 function showEffect(r, kept, previous) {
   const sign = r.value > 0 ? "+" : "−";
   const id = kept && kept.id !== undefined ? `#${kept.id} ` : "";
+  const seen = r.tick_seen !== null && r.tick_seen !== undefined
+    ? `, seen at tick ${r.tick_seen}, window ticks ${r.window[0]}–${r.window[1]},` : "";
   const head = el("div", { class: "head" },
-    `${id}${sign}${Math.abs(r.value)} at tick ${r.tick} (episode ${r.episode}) credited ${r.credited} STM record${r.credited === 1 ? "" : "s"}`);
+    `${id}${sign}${Math.abs(r.value)} at tick ${r.tick} (episode ${r.episode})${seen} credited ${r.credited} STM record${r.credited === 1 ? "" : "s"}`);
   if (!r.credits.length) {
     $("#reward-effect").replaceChildren(head, el("p", { class: "muted why", text: whyNothing(r, previous) }));
     return;
@@ -101,12 +105,16 @@ export async function reward(value, note) {
   const input = $("#reward-note");
   const text = note ?? input.value.trim();
   const body = text ? { value, note: text } : { value };
+  // The tick on screen when the key or button was pressed: the reward credits the reaction
+  // window before it (docs/studies.md). A realtime run's only: a fast run outruns the eye.
+  const shown = state.tick;
+  if (shown && run.mode === "realtime") body.tick_seen = shown.tick;
   const ack = await attempt(() => post(`/runs/${run.id}/rewards`, body), "Reward");
   if (!ack) return;
   if (note === undefined) input.value = "";
   rememberMine(ack.id);
   // The log's id joins the stream's copy of the same reward, found by the reward's uid.
-  const logged = { uid: ack.uid, id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: RewardSource.trainer, note: text };
+  const logged = { uid: ack.uid, id: ack.id, tick: ack.tick, episode: ack.episode, value: ack.value, source: RewardSource.trainer, note: text, tick_seen: ack.tick_seen, window: ack.window };
   if (!state.rewardIndex.has(rewardKey(logged))) state.logTotal += 1;
   addReward(logged);
   drawRewards();
