@@ -14,6 +14,7 @@ from alembic.script import ScriptDirectory
 from conftest import fresh_postgres_database
 from sqlalchemy import inspect, text
 
+from core.engine.build import reaction_seconds
 from core.ports import RewardRecord
 from server.persistence import (
     Base,
@@ -25,7 +26,6 @@ from server.persistence import (
     upgrade,
 )
 from server.persistence.migrate import ROOT
-from core.engine.build import reaction_seconds
 from server.persistence.studies import SqlAlchemyStudyRepository
 
 TABLES = {
