@@ -6,6 +6,7 @@ or the API's refusal; leaving the replay gives the keys back to the live robot."
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 from browser import artifact
@@ -14,6 +15,9 @@ from playwright.sync_api import Page, expect
 from webpage import eventually, open_view
 
 from bench.liveserver import LiveServer
+
+REPLAYING = re.compile(r"\breplaying\b")
+"""The page's class while a replay is open (the reward buttons are outlined then)."""
 
 REACTION_TICKS = range(2, 41)
 """Ticks before the tick seen that a reaction window of 0.2-4 s spans at 10 Hz: the scrubbed
@@ -130,7 +134,7 @@ def test_a_reward_on_replay_names_the_tick_and_episode_and_a_refusal_is_shown(
     # Leaving gives the keys back: the replay is closed, and so is its hold on the buttons.
     page.keyboard.press("Escape")
     expect(page.locator("#replay-body")).to_be_hidden()
-    expect(page.locator("body")).not_to_have_class("replaying")
+    expect(page.locator("body")).not_to_have_class(REPLAYING)
 
 
 def best_tick(rows: list[dict[str, Any]]) -> int:
@@ -235,6 +239,17 @@ def test_a_participant_replays_an_episode_of_their_own_run(page: Page, server: L
         shows(page, rows[len(rows) // 2])
         body = posted_reward(page, "-")
         assert body == {"value": -1, "tick_seen": rows[len(rows) // 2]["tick"], "episode": 0}
+        # The Train card's buttons reward the replay of the paused run, outlined as such.
+        expect(page.locator("body")).to_have_class(REPLAYING)
+        expect(page.locator("#reward-plus")).to_be_enabled()
+        # Leaving gives the keys back to the live robot: a reward of the run as it stands.
+        page.locator("#replay-tick").focus()
+        page.keyboard.press("Escape")
+        expect(page.locator("#replay-body")).to_be_hidden()
+        expect(page.locator("body")).not_to_have_class(REPLAYING)
+        page.locator("#replay-card").focus()
+        live = posted_reward(page, "+")
+        assert live["value"] == 1 and live.get("episode") != 0, live
     finally:
         server.client.post(f"/api/runs/{run_id}/stop")
     wait_status(server.client, run_id, "stopped")
