@@ -19,9 +19,13 @@ from bench.liveserver import LiveServer
 REPLAYING = re.compile(r"\breplaying\b")
 """The page's class while a replay is open (the reward buttons are outlined then)."""
 
+HZ = 1000
+REACTION_WINDOW_S = (0.002, 0.04)
+"""The credit test's run's reaction window (the run's `reaction_window_s`): a person's
+0.2-4 s at a person's 10 Hz, as ticks of a run hurried to 1000 Hz to store episodes."""
 REACTION_TICKS = range(2, 41)
-"""Ticks before the tick seen that a reaction window of 0.2-4 s spans at 10 Hz: the scrubbed
-tick is chosen with responses there, so the reward has records to credit."""
+"""The ticks before the tick seen that the window spans at `HZ`: the scrubbed tick is
+chosen with responses there, so the reward has records to credit."""
 
 
 def started(server: LiveServer, **body: Any) -> int:
@@ -150,14 +154,13 @@ def best_tick(rows: list[dict[str, Any]]) -> int:
 def test_a_reward_on_replay_credits_that_episodes_records_and_says_how_many(
     page: Page, server: LiveServer
 ) -> None:
-    """Needs the reward API's `tick_seen` and `episode` (a body without them is refused)."""
-    run_id = started(server, condition="trainer", mode="realtime", hz=1000, seed=7)
+    """Needs the reward API's `tick_seen` and `episode` and the run's `reaction_window_s`
+    (before them, the reward's body and the run's parameters are refused)."""
+    window = {"reaction_window_s": list(REACTION_WINDOW_S)}
+    run_id = started(server, condition="trainer", mode="realtime", hz=HZ, seed=7, params=window)
     try:
         wait_episodes(server.client, run_id, 2)
         assert server.client.post(f"/api/runs/{run_id}/pause").status_code == 200
-        # A person's pace: the reaction window counts ticks at the run's rate.
-        r = server.client.post(f"/api/runs/{run_id}/rate", json={"hz": 10})
-        assert r.status_code == 200, r.text
         rows = trace(server, run_id, 1)
         index = best_tick(rows)
         assert any(rows[index - k]["released_by"] for k in REACTION_TICKS if index >= k)
