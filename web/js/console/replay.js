@@ -18,7 +18,6 @@ const LISTED = 500; // the newest episodes the picker lists
 const FRAME_HZ = 30; // playing faster than this shows every few ticks, not every one
 
 const replay = {
-  card: null,
   canvas: null,
   world: null,
   worldOf: null,
@@ -35,7 +34,6 @@ export function replaying() {
 
 export function initReplay() {
   const card = $("#replay-card");
-  replay.card = card;
   replay.canvas = el("canvas", { id: "replay-canvas", role: "img", "aria-label": "The robot at the replayed tick", width: 480, height: 320 });
   const pick = el("select", { id: "replay-episode", "aria-label": "Episode to replay" });
   pick.addEventListener("pointerdown", listEpisodes);
@@ -78,7 +76,7 @@ function onRun(run) {
     return;
   }
   replay.runId = id;
-  leave();
+  close(); // another run: its buttons are being set for it
   replay.world = null;
   replay.worldOf = null;
   listEpisodes();
@@ -134,15 +132,18 @@ async function open() {
 
 /** Back to live rewards: the keys and buttons reward what the live robot does. */
 function leave() {
+  close();
+  if (state.run) showRun(state.run); // the reward buttons as live rewards want them
+}
+
+function close() {
   stopPlaying();
   state.replay = null;
   replay.trace = [];
   replay.episode = null;
   document.body.classList.remove("replaying");
-  if (!replay.card) return;
   $("#replay-body").hidden = true;
   $("#replay-leave").hidden = true;
-  if (state.run) showRun(state.run); // the reward buttons as live rewards want them
 }
 
 function show(i) {
@@ -188,7 +189,7 @@ function togglePlay() {
 function stopPlaying() {
   clearInterval(replay.timer);
   replay.timer = null;
-  if (replay.card) $("#replay-play").textContent = "▶ Play";
+  $("#replay-play").textContent = "▶ Play";
 }
 
 /** The card's keys: ← → step a tick, Esc leaves; + and - from its slider or picker too. */
@@ -229,7 +230,8 @@ export async function replayReward(value) {
   const sign = value > 0 ? "+" : "−";
   const head = `${sign}${Math.abs(value)} at tick ${seen.tick} of episode ${seen.episode} (reward #${ack.id})`;
   answer.replaceChildren(el("p", { class: "head", text: `${head}: crediting…` }));
-  const credited = typeof ack.credited === "number" ? ack.credited : await creditOf(run.id, ack.id);
+  // The log says what it credited once it is applied (the answer may come before that).
+  const credited = ack.applied === true ? ack.credited : await creditOf(run.id, ack.id);
   answer.replaceChildren(el("p", { class: "head", text: credited === null
     ? `${head}: logged, not applied yet (the reward log will say what it credited)`
     : `${head}: credited ${credited} record${credited === 1 ? "" : "s"}` }));
