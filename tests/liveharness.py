@@ -91,15 +91,33 @@ def servers() -> Iterator[Callable[..., LiveServer]]:
             kill_server(server)
 
 
-def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60) -> dict[str, Any]:
-    """Poll a run until it has `status`."""
+def wait_run(
+    api: httpx.Client,
+    run_id: int,
+    ready: Callable[[dict[str, Any]], bool],
+    what: str,
+    timeout: float = 60,
+) -> dict[str, Any]:
+    """Poll a run (GET /api/runs/{id}) until `ready(run)`; `what` names it in the failure."""
     deadline = time.monotonic() + timeout
     run: dict[str, Any] = {}
     while time.monotonic() < deadline:
         r = api.get(f"/api/runs/{run_id}")
         assert r.status_code == 200, f"GET run {run_id}: {r.status_code} {r.text}"
         run = r.json()
-        if run["status"] == status:
+        if ready(run):
             return run
         time.sleep(0.05)
-    raise AssertionError(f"run {run_id} never became {status}: {run}")
+    raise AssertionError(f"run {run_id} never {what}: {run}")
+
+
+def wait_status(api: httpx.Client, run_id: int, status: str, timeout: float = 60) -> dict[str, Any]:
+    """Poll a run until it has `status`."""
+    return wait_run(api, run_id, lambda run: run["status"] == status, f"became {status}", timeout)
+
+
+def wait_episodes(api: httpx.Client, run_id: int, n: int, timeout: float = 90) -> dict[str, Any]:
+    """Poll a run until it has finished `n` episodes (their rows may still be on their way)."""
+    return wait_run(
+        api, run_id, lambda run: run["episodes_done"] >= n, f"finished {n} episodes", timeout
+    )

@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 from browser import artifact
 from conftest import sized_page
-from liveharness import wait_status
+from liveharness import wait_episodes, wait_status
 from playwright.sync_api import Browser, Page, Route, expect
 from webpage import eventually, open_view
 
@@ -320,10 +320,7 @@ def test_episodes_the_first_load_missed_are_fetched_while_the_run_goes_on(
 ) -> None:
     run_id = started(server, condition="expert", mode="realtime", hz=1000, seed=2)
     try:
-        eventually(
-            lambda: server.client.get(f"/api/runs/{run_id}").json()["episodes_done"] >= 2,
-            what="two episodes stored",
-        )
+        wait_episodes(server.client, run_id, 2)
         hidden = {"done": False}
 
         def first_load_sees_none(route: Route) -> None:

@@ -185,8 +185,18 @@ function fit(world, width) {
 }
 
 function draw() {
-  const canvas = view.canvas;
-  const world = view.world;
+  drawTrack(view.canvas, view.world, view.tick);
+}
+
+/**
+ * Draw `world` (GET /api/runs/{id}/world) on `canvas`, and the robot at `pose` if one is
+ * given: `x`, `y`, `heading_rad` and `tick`, with the lamp's colour (`lamp`, a Lamp name),
+ * the sonars' readings (`sonar_m`) and the obstacle (`obstacle`: its centre) where known.
+ * A tick event is such a pose, and so is a stored trace's row once its lamp is named (the
+ * console's replay draws those). The canvas keeps what it drew in its data attributes
+ * (tick, pose, pixels): tests read them back.
+ */
+export function drawTrack(canvas, world, pose) {
   const width = Math.max(200, Math.round(canvas.clientWidth || canvas.width));
   const ctx = canvas.getContext("2d");
   if (!world) {
@@ -228,7 +238,7 @@ function draw() {
   ctx.moveTo(f.px(sx0), f.py(sy0));
   ctx.lineTo(f.px(sx1), f.py(sy1));
   ctx.stroke();
-  const t = view.tick;
+  const t = pose;
   const [lx, ly] = world.lamp;
   ctx.fillStyle = LAMP[t ? t.lamp : Lamp.none] || LAMP[Lamp.none];
   ctx.strokeStyle = "#111827";

@@ -1,7 +1,8 @@
 // The trainer console: a run's live state, its reliabilities as a live Table III, rewards
 // by button or key with the credit they gave (summed per S-R pair), every reward of every
 // source on a timeline, the person's own rewards with an undo, run control and the
-// learning curve. This module picks the run and controls it; the parts beside it draw.
+// learning curve, and a stored episode replayed to reward its ticks. This module picks the
+// run and controls it; the parts beside it draw.
 
 import { get, post } from "../api.js";
 import { watchFields } from "../forms.js";
@@ -11,6 +12,7 @@ import { drawCurve } from "./episodes.js";
 import { loadMemory } from "./memory.js";
 import * as setup from "./setup.js";
 import { LIVE, state } from "./state.js";
+import { initReplay, replayReward, replaying } from "./replay.js";
 import { loadRuns, showRun } from "./status.js";
 import { closeStream, follow, loadStored, resetLive } from "./stream.js";
 import { drawRewards, drawTimeline } from "./timeline.js";
@@ -32,9 +34,10 @@ export function init(catalog) {
   $("#run-resume").addEventListener("click", () => control("resume"));
   $("#run-stop").addEventListener("click", () => control("stop"));
   for (const button of $$(".reward-buttons button.reward")) {
-    button.addEventListener("click", () => reward(Number(button.dataset.value)));
+    button.addEventListener("click", () => give(Number(button.dataset.value)));
   }
   $("#reward-undo").addEventListener("click", undoLast);
+  initReplay();
   $("#view3d").addEventListener("click", openView);
   const form = $("#new-run-form");
   form.addEventListener("submit", setup.onCreate);
@@ -187,6 +190,11 @@ async function control(action) {
   await loadRuns();
 }
 
+/** A reward by key or button: to the replayed tick while the replay is open, else live. */
+function give(value) {
+  return replaying() ? replayReward(value) : reward(value);
+}
+
 function onKey(event) {
   if (!state.active || typing(event) || event.ctrlKey || event.metaKey || event.altKey) return;
   // A dialog (the keyboard help, the token) has the keyboard: nothing reaches the robot.
@@ -197,8 +205,8 @@ function onKey(event) {
   if (!(plus || minus || pause)) return;
   event.preventDefault();
   if (event.repeat) return; // a held key is one reward, not one per repeat
-  if (plus) reward(1);
-  else if (minus) reward(-1);
+  if (plus) give(1);
+  else if (minus) give(-1);
   else if (state.run) {
     if (state.run.status === RunStatus.running) control("pause");
     else if (state.run.status === RunStatus.paused) control("resume");

@@ -30,4 +30,5 @@ export const state = {
   lastReward: null,
   credited: new Set(),
   tick: null,
+  replay: null, // the replayed tick + and - reward ({episode, tick}), or null: the live robot's
 };

@@ -66,7 +66,8 @@ export function showRun(run) {
   $("#run-pause").disabled = !run || status !== RunStatus.running;
   $("#run-resume").disabled = !run || !paused;
   $("#run-stop").disabled = !run || !LIVE.has(status);
-  const canReward = Boolean(run) && status === RunStatus.running;
+  // A replay's rewards go to a paused run too: the person scrubs while the robot waits.
+  const canReward = Boolean(run) && (status === RunStatus.running || (state.replay !== null && paused));
   for (const button of $$(".reward-buttons button.reward")) button.disabled = !canReward;
   $("#reward-undo").disabled = !canReward || !undoable();
   const condition = run ? state.conditions.get(run.condition) : null;
