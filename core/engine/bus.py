@@ -51,6 +51,11 @@ class Competition:
             tuple((b, v, s) for b, (v, s) in ranked),
         )
 
+    def __reduce__(self) -> tuple[type[Competition], tuple[object, ...]]:
+        # Pickled as its fields in a tuple: a frozen slots class's own state methods cost
+        # a lookup of its fields each time, and ticks go to the service many times a second.
+        return Competition, (self.threshold, self.strategy, self.values)
+
 
 @dataclass(frozen=True, slots=True)
 class StatusChanged:
@@ -80,6 +85,11 @@ class TickPublished:
     competition: Competition | None = None
     totals: RunTotals | None = None
     kp: bool = False
+
+    def __reduce__(self) -> tuple[type[TickPublished], tuple[object, ...]]:
+        # As `Competition.__reduce__`: pickled as a tuple of its fields.
+        fields = (self.run_id, self.snapshot, self.sonar_m, self.obstacle, self.competition)
+        return TickPublished, (*fields, self.totals, self.kp)
 
 
 class SubscriptionClosed(Exception):
