@@ -241,6 +241,10 @@ class RunTotals:
     successes: int
     ticks: int
 
+    def __reduce__(self) -> tuple[type[RunTotals], tuple[int, int, int]]:
+        # Pickled as a tuple of its fields (each tick sent to the service carries one).
+        return RunTotals, (self.episodes, self.successes, self.ticks)
+
 
 @dataclass(frozen=True, slots=True)
 class StoredRun:

@@ -51,6 +51,11 @@ class Competition:
             tuple((b, v, s) for b, (v, s) in ranked),
         )
 
+    def __reduce__(self) -> tuple[type[Competition], tuple[object, ...]]:
+        # Pickled as its fields in a tuple: a frozen slots class's own state methods cost
+        # a lookup of its fields each time, and ticks go to the service many times a second.
+        return Competition, (self.threshold, self.strategy, self.values)
+
 
 @dataclass(frozen=True, slots=True)
 class StatusChanged:
@@ -80,6 +85,11 @@ class TickPublished:
     competition: Competition | None = None
     totals: RunTotals | None = None
     kp: bool = False
+
+    def __reduce__(self) -> tuple[type[TickPublished], tuple[object, ...]]:
+        # As `Competition.__reduce__`: pickled as a tuple of its fields.
+        fields = (self.run_id, self.snapshot, self.sonar_m, self.obstacle, self.competition)
+        return TickPublished, (*fields, self.totals, self.kp)
 
 
 class SubscriptionClosed(Exception):
@@ -119,6 +129,26 @@ class Subscription:
     def wants_ticks(self) -> bool:
         """Whether it asked for tick snapshots."""
         return self.tick_period < math.inf
+
+    def due(self, now: float, run_period: float) -> bool:
+        """Whether a tick published at `now` by a run ticking every `run_period` s is due.
+
+        Due times keep to a grid one period apart, and the tick nearest to its due time is
+        sent: up to half the run's period early (or half the subscription's, when it is the
+        shorter). A subscription at its run's own rate is sent every tick, a little early or
+        late as each comes; a slower one, evenly spaced ticks.
+        """
+        return now >= self.next_tick_at - min(run_period, self.tick_period) / 2
+
+    def sent_tick_at(self, now: float) -> None:
+        """A tick was sent at `now`: the next is due one period after this one was due.
+
+        More than half a period late (the first tick, the ticks after a pause or a stall),
+        the grid starts again from `now`: no burst to catch up.
+        """
+        period = self.tick_period
+        late = now - self.next_tick_at > period / 2
+        self.next_tick_at = (now if late else self.next_tick_at) + period
 
     @property
     def pending(self) -> int:
@@ -237,21 +267,30 @@ class EventBus:
             sub.offer(event)
 
     def publish_tick(
-        self, snap: Snapshot, event_for: Callable[[Snapshot], TickPublished], force: bool = False
+        self,
+        snap: Snapshot,
+        event_for: Callable[[Snapshot], TickPublished],
+        force: bool = False,
+        *,
+        run_period: float = 0.0,
+        now: float | None = None,
     ) -> None:
         """Offer a tick to the subscriptions due one (all tick subscriptions when forced).
 
         `event_for` builds the event once, and only for a tick someone is sent.
+        `run_period` is how far apart the run's ticks are due (0: as fast as they go), `now`
+        the monotonic clock's reading (None: read it here).
         """
-        now = time.monotonic()
+        if now is None:
+            now = time.monotonic()
         event: TickPublished | None = None
         for sub in self._subscribers:
             if (
                 sub.wants_ticks
                 and sub.tick_sent != snap.tick
-                and (force or now >= sub.next_tick_at)
+                and (force or sub.due(now, run_period))
             ):
-                sub.next_tick_at = now + sub.tick_period
+                sub.sent_tick_at(now)
                 sub.tick_sent = snap.tick
                 if event is None:
                     event = event_for(snap)

@@ -313,7 +313,9 @@ class TickTask:
 
     def _publish_tick(self, snap: Snapshot, force: bool = False) -> None:
         """Offer a tick to the subscribers due one (all tick subscribers when forced)."""
-        self.bus.publish_tick(snap, self._tick_event, force)
+        realtime = self.spec.mode is Mode.REALTIME
+        period = 1.0 / self.controls.hz if realtime and self.controls.hz > 0 else 0.0
+        self.bus.publish_tick(snap, self._tick_event, force, run_period=period)
 
     def _tick_event(self, snap: Snapshot) -> TickPublished:
         sim = self.sim

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
+from functools import partial
 from typing import Any, TypeVar
 
 from sqlalchemy import Engine, bindparam, delete, func, insert, select
@@ -29,6 +30,7 @@ from core.ports import (
     RunTotals,
 )
 from server.persistence.driver import DriverStatement, Sql, driver_transaction, drives
+from server.persistence.grouping import GroupedWrites
 from server.persistence.orm import (
     BehaviourRow,
     EpisodeRow,
@@ -145,6 +147,10 @@ class _Names:
             self._synth[name] = behaviour_id
 
 
+GroupedWrite = tuple[str, Callable[[Sql], Any]]
+"""A write `GroupedWrites` may run with others': what it is (for errors), and the write."""
+
+
 class SqlAlchemyRunStore(SqlAlchemyRunReads):
     """Runs, their learning, episodes and reward log in a SQL database.
 
@@ -167,6 +173,7 @@ class SqlAlchemyRunStore(SqlAlchemyRunReads):
         bind = kw.get("bind")
         self._driver = bind if driver and isinstance(bind, Engine) and drives(bind) else None
         self._compiled: dict[tuple[int, tuple[str, ...]], tuple[Executable, DriverStatement]] = {}
+        self._together: GroupedWrites[GroupedWrite, Any] = GroupedWrites(self._write_together)
 
     @contextmanager
     def _writing(self, what: str) -> Iterator[Sql]:
@@ -335,9 +342,45 @@ class SqlAlchemyRunStore(SqlAlchemyRunReads):
 
     def log_reward(self, run_id: int, reward: RewardRecord) -> int:
         """Append a reward to the log, committed before returning its id."""
-        with self._writing(f"logging a reward for run {run_id}") as sql:
-            self._require_run(sql, run_id)
-            return self._insert_reward(sql, run_id, reward, False, 0)
+        what = f"logging a reward for run {run_id}"
+        return int(self._together.write((what, partial(self._log_reward, run_id, reward))))
+
+    def _log_reward(self, run_id: int, reward: RewardRecord, sql: Sql) -> int:
+        self._require_run(sql, run_id)
+        return self._insert_reward(sql, run_id, reward, False, 0)
+
+    def _write_together(self, writes: Sequence[GroupedWrite]) -> list[Any]:
+        """Run writes other threads asked for at once (`GroupedWrites`) in one transaction.
+
+        A write that raises is answered its error alone: the transaction is rolled back
+        and the others run again without it. An error of the transaction itself (storage
+        failing) is every write's.
+        """
+        results: list[Any] = [None] * len(writes)
+        pending = list(range(len(writes)))
+        while pending:
+            done: dict[int, Any] = {}
+            failing: int | None = None
+            try:
+                what = writes[pending[0]][0]
+                if len(pending) > 1:
+                    what += f" with {len(pending) - 1} other write(s)"
+                with self._writing(what) as sql:
+                    for failing in pending:
+                        done[failing] = writes[failing][1](sql)
+                    failing = None
+            except Exception as e:
+                if failing is None:  # BEGIN or COMMIT: every write's
+                    for i in pending:
+                        results[i] = e
+                    return results
+                results[failing] = e
+                pending.remove(failing)
+                continue
+            for i, value in done.items():
+                results[i] = value
+            break
+        return results
 
     def apply_reward(
         self, run_id: int, reward_id: int, update: LearningUpdate, credited: int
@@ -366,19 +409,23 @@ class SqlAlchemyRunStore(SqlAlchemyRunReads):
         if not rewards:
             return ()
         what = f"committing {len(rewards)} reward(s) of run {run_id}"
-        with self._writing(what) as sql:
-            new = [r.record for r in rewards if r.logged_id is None]
-            if new:
-                # A logged reward's UPDATE finds its run or says which is missing: only new
-                # rewards need the run looked up (a trainer's commit saves a statement).
-                self._require_run(sql, run_id)
-            credited = [r.credited for r in rewards if r.logged_id is None]
-            new_ids = iter(self._insert_rewards(sql, run_id, new, credited))
-            logged = [(r.logged_id, r.credited) for r in rewards if r.logged_id is not None]
-            self._mark_all_applied(sql, run_id, logged)
-            ids = tuple(next(new_ids) if r.logged_id is None else r.logged_id for r in rewards)
-            self._apply(sql, run_id, LearningUpdate.merged([r.update for r in rewards]))
-            return ids
+        return tuple(self._together.write((what, partial(self._commit_rewards, run_id, rewards))))
+
+    def _commit_rewards(
+        self, run_id: int, rewards: Sequence[RewardCommit], sql: Sql
+    ) -> tuple[int, ...]:
+        new = [r.record for r in rewards if r.logged_id is None]
+        if new:
+            # A logged reward's UPDATE finds its run or says which is missing: only new
+            # rewards need the run looked up (a trainer's commit saves a statement).
+            self._require_run(sql, run_id)
+        credited = [r.credited for r in rewards if r.logged_id is None]
+        new_ids = iter(self._insert_rewards(sql, run_id, new, credited))
+        logged = [(r.logged_id, r.credited) for r in rewards if r.logged_id is not None]
+        self._mark_all_applied(sql, run_id, logged)
+        ids = tuple(next(new_ids) if r.logged_id is None else r.logged_id for r in rewards)
+        self._apply(sql, run_id, LearningUpdate.merged([r.update for r in rewards]))
+        return ids
 
     @staticmethod
     def _insert_rewards(

@@ -219,6 +219,9 @@ class ProcessLink:
             case ("closed", sub_id):
                 if (sub := self._subs.get(sub_id)) is not None:
                     sub.close()
+            case ("batch", messages):
+                for each in messages:
+                    self._handle(each)
 
     async def _lost(self) -> None:
         """The child is gone: fail what waits on it, end every run and stream here."""
@@ -336,11 +339,26 @@ class _Serve:
     def __init__(self, writer: asyncio.StreamWriter) -> None:
         self.writer = writer
         self.host: RunHost
+        self._outbox: list[object] = []
+        """What was sent during this turn of the loop: one frame at its end."""
         self._mirrors: dict[int, asyncio.Task[None]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
 
     def send(self, message: object) -> None:
-        self.writer.write(_frame(message))
+        """Send `message` at the end of this turn of the loop, with what else was sent in it.
+
+        Many runs publish events and states in one turn: one frame (one pickling, one write
+        to the pipe) carries them all, in the order they were sent.
+        """
+        if not self._outbox:
+            asyncio.get_running_loop().call_soon(self.flush)
+        self._outbox.append(message)
+
+    def flush(self) -> None:
+        """Write what waits to be sent now."""
+        messages, self._outbox = self._outbox, []
+        if messages:
+            self.writer.write(_frame(messages[0] if len(messages) == 1 else ("batch", messages)))
 
     # --- the host's outlet ----------------------------------------------------------
 
@@ -396,6 +414,7 @@ class _Serve:
                 pickle.loads(frame[_HEADER.size :])  # an error the service can rebuild
         except Exception as e:  # say what it was instead
             frame = _frame(("result", call_id, False, RuntimeError(f"{op}: {e!r} ({value!r})")))
+        self.flush()  # what was sent before the result goes before it
         self.writer.write(frame)
 
     async def _deliver(self, sub_id: int, events: list[object]) -> None:
@@ -451,12 +470,13 @@ async def _child(read_fd: int, write_fd: int) -> None:
         serve = _Serve(writer)
         serve.host = RunHost(storage.runs, settings.max_runs, serve, QUERIES)
         await warm_up()
-        serve.send("ready")
+        writer.write(_frame("ready"))
         try:
             await serve.serve(reader)
         finally:
             await serve.host.shutdown()
             with contextlib.suppress(Exception):
+                serve.flush()
                 await writer.drain()
     finally:
         await asyncio.to_thread(storage.close)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
+from functools import partial
 
 import pytest
 from contracthelpers import NETWORK, SLOWER, edit, new_run, reward
@@ -18,7 +19,10 @@ from core.ports import (
     LearningUpdate,
     NetworkPair,
     RewardCommit,
+    RewardRecord,
 )
+from server.persistence import SqlAlchemyRunStore
+from server.persistence.sqlalchemy_repo import GroupedWrite
 
 
 def test_log_reward_returns_increasing_ids_in_log_order(store: InspectableRunStore) -> None:
@@ -36,6 +40,28 @@ def test_log_reward_returns_increasing_ids_in_log_order(store: InspectableRunSto
         (ids[2], reward(5, -1.0), False, 0),
     ]
     assert [r.id for r in store.rewards(b)] == [ids[1]]
+
+
+def test_rewards_logged_together_are_each_answered_their_own(
+    store: InspectableRunStore,
+) -> None:
+    """Rewards several runs' threads log at once share a transaction (SQL stores): a
+    reward of a missing run or with text no database stores is refused alone."""
+    if not isinstance(store, SqlAlchemyRunStore):
+        pytest.skip("the memory store writes no transactions")
+    a, b = new_run(store), new_run(store)
+    unstorable = replace(reward(12), note="a\x00b")
+
+    def logs(*rewards: tuple[int, RewardRecord]) -> list[GroupedWrite]:
+        return [("logging", partial(store._log_reward, *r)) for r in rewards]
+
+    answers = store._write_together(logs((a, reward(10)), (999_999, reward(11)), (b, unstorable)))
+    again = store._write_together(logs((b, reward(13)), (a, reward(14))))
+
+    assert isinstance(answers[1], UnknownRunError) and isinstance(answers[2], ValueError)
+    assert [r.id for r in store.rewards(a)] == [answers[0], again[1]]
+    assert [(r.id, r.record) for r in store.rewards(b)] == [(again[0], reward(13))]
+    assert store.log_reward(b, reward(15)) > max(i for i in again if isinstance(i, int))
 
 
 def test_apply_reward_marks_it_applied_and_stores_ltm_and_rltm(

@@ -6,6 +6,8 @@ import asyncio
 import gc
 import weakref
 from dataclasses import replace
+from functools import partial
+from itertools import pairwise
 
 import pytest
 from enginehelpers import CATALOG, drive, fast, headless_ltm, realtime, wait_ticks
@@ -13,6 +15,7 @@ from fakes import InMemoryRunStore, ManualPacer
 
 from core.commands import EditAssociation
 from core.engine import (
+    EventBus,
     RewardAck,
     RunEngine,
     StatusChanged,
@@ -334,6 +337,42 @@ def test_tick_snapshots_are_throttled_per_subscriber() -> None:
     ticks = [ev for ev in few.drain() if isinstance(ev, TickPublished)]
     assert 1 <= len(ticks) < engine.stats.ticks / 2
     assert not any(isinstance(ev, TickPublished) for ev in none.drain())
+
+
+def _ticks_sent(tick_hz: float, run_hz: float, jitter_s: list[float]) -> list[int]:
+    """The ticks a `tick_hz` subscription is sent of a `run_hz` run whose tick k is
+    published `jitter_s[k]` after its due time, the clock injected."""
+    bus = EventBus()
+    sub = bus.attach(Subscription(maxsize=10_000, tick_hz=tick_hz))
+    sim = RunEngine.create(realtime("delayed", 8), InMemoryRunStore(CATALOG)).sim
+    sim.reset()
+    snap = sim.snapshot
+    for tick, jitter in enumerate(jitter_s):
+        at = 1000.0 + tick / run_hz + jitter
+        event = partial(TickPublished, 1)
+        bus.publish_tick(snap._replace(tick=tick), event, run_period=1 / run_hz, now=at)
+    return [ev.snapshot.tick for ev in sub.drain() if isinstance(ev, TickPublished)]
+
+
+# A run's ticks arrive up to 15 ms early or late at 10 Hz, alternating (a loaded machine).
+JITTER = [(-1) ** k * 0.015 * ((k * 7) % 5) / 4 for k in range(100)]
+
+
+def test_a_stream_at_the_runs_own_rate_gets_every_tick_early_or_late() -> None:
+    assert _ticks_sent(10.0, 10.0, [0.0] * 100) == list(range(100))
+    assert _ticks_sent(10.0, 10.0, JITTER) == list(range(100))
+    assert _ticks_sent(10.0, 10.0, [-0.001] * 100) == list(range(100))  # always a bit early
+
+
+def test_a_slower_stream_gets_evenly_spaced_ticks() -> None:
+    for run_hz, tick_hz, every in [(10.0, 5.0, 2), (10.0, 2.0, 5), (500.0, 20.0, 25)]:
+        for jitter in ([0.0] * 200, [j * 10.0 / run_hz for j in JITTER * 2]):
+            sent = _ticks_sent(tick_hz, run_hz, jitter)
+            gaps = {b - a for a, b in pairwise(sent)}
+            assert gaps == {every}, (run_hz, tick_hz, gaps)
+    # After a stall the stream picks up at the next tick, and does not burst to catch up.
+    stalled = [0.0] * 10 + [0.55] * 10
+    assert _ticks_sent(5.0, 10.0, stalled) == [0, 2, 4, 6, 8, 10, 12, 14, 16, 18]
 
 
 def test_a_throttled_subscriber_sees_the_paused_tick_and_every_step() -> None:
