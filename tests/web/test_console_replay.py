@@ -162,10 +162,12 @@ def test_a_reward_on_replay_credits_that_episodes_records_and_says_how_many(
     """Needs the reward API's `tick_seen` and `episode` (a body without them is refused)."""
     run_id = started(server, condition="trainer", mode="fast", hz=10, seed=7)
     try:
-        wait_episodes(server.client, run_id, 2)
+        wait_episodes(server.client, run_id, 3)
         paused = server.client.post(f"/api/runs/{run_id}/pause")
         assert paused.status_code == 200, paused.text
-        n = paused.json()["episodes_done"] - 1  # the newest stored: the picker lists it
+        # A stored episode before the one that ended last (whose last ticks the run itself
+        # keeps for the reaction window): credited from its stored trace.
+        n = paused.json()["episodes_done"] - 2
         rows = trace(server, run_id, n)
         index = best_tick(rows)
         assert any(rows[index - k]["released_by"] for k in REACTION_TICKS if index >= k)
@@ -187,8 +189,8 @@ def test_a_reward_on_replay_credits_that_episodes_records_and_says_how_many(
             lambda: (x := logged_reward(server, run_id, ack["id"])) and x["applied"] and x,
             what="the replay's reward applied",
         )
-        assert logged["episode"] == n and logged["tick_seen"] == rows[index]["tick"]
-        assert logged["credited"] > 0, logged
+        assert logged["seen_episode"] == n and logged["tick_seen"] == rows[index]["tick"]
+        assert logged["credited"] > 0, (logged, [(r["tick"], r["released_by"]) for r in rows[max(0, index - 45) : index + 1]])
         expect(page.locator("#replay-answer")).to_contain_text(
             f"credited {logged['credited']} record"
         )
