@@ -190,7 +190,7 @@ def test_a_reward_on_replay_credits_that_episodes_records_and_says_how_many(
             what="the replay's reward applied",
         )
         assert logged["seen_episode"] == n and logged["tick_seen"] == rows[index]["tick"]
-        assert logged["credited"] > 0, (logged, [(r["tick"], r["released_by"]) for r in rows[max(0, index - 45) : index + 1]])
+        assert logged["credited"] > 0, logged
         expect(page.locator("#replay-answer")).to_contain_text(
             f"credited {logged['credited']} record"
         )
