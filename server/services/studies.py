@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from core.engine.messages import RunState, Stop
-from core.errors import RunStateError
+from core.errors import RunStateError, StorageError
 from core.ports import ACTIVE, RunQueries
 from core.studies import (
     Assignment,
@@ -152,6 +152,8 @@ class StudyWatch:
         """Settle once now (a failure is logged: the next look, or a read, retries it)."""
         try:
             await self.settle()
+        except StorageError as e:  # the store says why in a line; the run's failure has it
+            log.error("participants whose budget is spent could not be marked done: %s", e)
         except Exception:
             log.exception("participants whose budget is spent could not be marked done")
 
