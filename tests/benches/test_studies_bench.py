@@ -11,7 +11,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from bench.studies import MARKER, figures
+from bench.studies import figures
+from bench.study_trainers import MARKER
 
 ROOT = Path(__file__).resolve().parents[2]
 
