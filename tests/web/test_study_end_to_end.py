@@ -131,6 +131,27 @@ def test_the_organisers_pages_read_with_the_saved_token(closed: LiveServer, page
     expect(page.locator('#studies-list tr[data-study="watched"]')).to_be_visible()
 
 
+def test_the_organisers_3d_link_opens_the_view_with_a_writable_panel(
+    closed: LiveServer, page: Page
+) -> None:
+    api = closed.client
+    body = {"condition": "trainer", "mode": "realtime", "hz": 10, "seed": 4}
+    run_id = api.post("/api/runs", json=body).json()["id"]
+    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    try:
+        page.add_init_script(f"localStorage.setItem('srlab.token', {TOKEN!r})")
+        page.goto(f"{closed.url}/#/console/{run_id}")
+        page.wait_for_selector("body[data-ready=true]")
+        with page.context.expect_page() as opened:
+            page.click("#view3d")  # POST .../view with the saved token: a ticket for it
+        viewer = opened.value
+        viewer.set_default_timeout(BROWSER_WAIT_MS)
+        viewer.get_by_text(f"Run {run_id}:").first.wait_for()
+        expect(viewer.get_by_role("button", name="+ reward")).to_be_enabled()
+    finally:
+        api.post(f"/api/runs/{run_id}/stop")
+
+
 QUESTIONS = ("How hard was it?", "What did you reward?")
 RECRUITER_IDS = ["prolific-e2eA7Q", "prolific-e2eB3Z", "prolific-e2eC9K"]
 """Distinctive: finding one in an exported byte means it leaked."""
