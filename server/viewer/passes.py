@@ -29,6 +29,9 @@ SESSION_S = 12 * 3600.0
 """How long the cookie a ticket was exchanged for stays good."""
 MAX_PASSES = 10_000
 """Tickets or cookies held at once, at most: the oldest go first past it."""
+PER_RUN = 8
+"""Tickets, and cookies, for one run alone held at once, at most: the oldest of that run's
+go first past it, so a participant asking again and again pushes out only their own."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,14 +62,14 @@ class Passes:
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self.clock = clock
         self._lock = threading.Lock()
-        self._tickets: dict[str, tuple[Pass, float]] = {}
-        self._sessions: dict[str, tuple[Pass, float]] = {}
+        self._tickets = _Table()
+        self._sessions = _Table()
 
     def issue(self, granted: Pass) -> str:
         """A new ticket for `granted`, good once within `TICKET_S`."""
         ticket = secrets.token_urlsafe(24)
         with self._lock:
-            _put(self._tickets, ticket, granted, self.clock() + TICKET_S)
+            self._tickets.put(ticket, granted, self.clock() + TICKET_S)
         return ticket
 
     def redeem(self, ticket: str, run: int | None) -> tuple[str, Pass]:
@@ -81,7 +84,7 @@ class Passes:
         with self._lock:
             held = self._tickets.get(ticket)
             if held is None or held[1] <= now:
-                self._tickets.pop(ticket, None)
+                self._tickets.pop(ticket)
                 raise PassRefused(
                     HTTPStatus.UNAUTHORIZED,
                     "this 3D view ticket is not good (used already, expired after "
@@ -94,9 +97,9 @@ class Passes:
                     HTTPStatus.FORBIDDEN,
                     f"this 3D view ticket is for run {granted.run} only, not {where}",
                 )
-            del self._tickets[ticket]
+            self._tickets.pop(ticket)
             cookie = secrets.token_urlsafe(32)
-            _put(self._sessions, cookie, granted, now + SESSION_S)
+            self._sessions.put(cookie, granted, now + SESSION_S)
         return cookie, granted
 
     def session(self, cookie: str | None) -> Pass | None:
@@ -108,15 +111,33 @@ class Passes:
             if held is None:
                 return None
             if held[1] <= self.clock():
-                del self._sessions[cookie]
+                self._sessions.pop(cookie)
                 return None
             return held[0]
 
 
-def _put(table: dict[str, tuple[Pass, float]], key: str, granted: Pass, until: float) -> None:
-    while len(table) >= MAX_PASSES:
-        del table[next(iter(table))]  # the oldest (dicts keep their order)
-    table[key] = (granted, until)
+class _Table:
+    """Passes by key, each with its end, bounded: `MAX_PASSES` in all, `PER_RUN` a run."""
+
+    def __init__(self) -> None:
+        self._held: dict[str, tuple[Pass, float]] = {}
+        self._by_run: dict[int, list[str]] = {}
+
+    def get(self, key: str) -> tuple[Pass, float] | None:
+        return self._held.get(key)
+
+    def pop(self, key: str) -> None:
+        self._held.pop(key, None)  # its run's list keeps the key until it is next looked at
+
+    def put(self, key: str, granted: Pass, until: float) -> None:
+        if granted.run is not None:
+            keys = [k for k in self._by_run.get(granted.run, ()) if k in self._held]
+            while len(keys) >= PER_RUN:
+                self._held.pop(keys.pop(0))
+            self._by_run[granted.run] = [*keys, key]
+        while len(self._held) >= MAX_PASSES:
+            del self._held[next(iter(self._held))]  # the oldest (dicts keep their order)
+        self._held[key] = (granted, until)
 
 
-__all__ = ["SESSION_S", "TICKET_S", "Pass", "PassRefused", "Passes"]
+__all__ = ["PER_RUN", "SESSION_S", "TICKET_S", "Pass", "PassRefused", "Passes"]

@@ -7,7 +7,15 @@ from http import HTTPStatus
 import pytest
 
 from server.viewer.gate import cookie_values, target
-from server.viewer.passes import MAX_PASSES, SESSION_S, TICKET_S, Pass, Passes, PassRefused
+from server.viewer.passes import (
+    MAX_PASSES,
+    PER_RUN,
+    SESSION_S,
+    TICKET_S,
+    Pass,
+    Passes,
+    PassRefused,
+)
 
 
 class Clock:
@@ -62,11 +70,28 @@ def test_tickets_and_cookies_expire() -> None:
 
 def test_past_max_passes_the_oldest_go() -> None:
     passes = Passes(Clock())
-    first = passes.issue(Pass(run=1, organiser=False))
-    for _ in range(MAX_PASSES):
-        passes.issue(Pass(run=1, organiser=False))
+    organiser = Pass(run=None, organiser=True)
+    first, second = passes.issue(organiser), passes.issue(organiser)
+    for _ in range(MAX_PASSES - 1):
+        passes.issue(organiser)
     with pytest.raises(PassRefused):
-        passes.redeem(first, 1)
+        passes.redeem(first, None)
+    passes.redeem(second, None)
+
+
+def test_one_runs_passes_past_per_run_push_out_that_runs_oldest_alone() -> None:
+    passes = Passes(Clock())
+    other = passes.issue(Pass(run=2, organiser=False))
+    cookies = [passes.redeem(passes.issue(Pass(run=1, organiser=False)), 1)[0] for _ in range(3)]
+    tickets = [passes.issue(Pass(run=1, organiser=False)) for _ in range(PER_RUN + 1)]
+    with pytest.raises(PassRefused):
+        passes.redeem(tickets[0], 1)  # the run's oldest ticket went
+    for ticket in tickets[1:6]:  # (redeemed: 3 cookies before, 5 now, PER_RUN = 8)
+        passes.redeem(ticket, 1)
+    assert all(passes.session(c) is not None for c in cookies)
+    passes.redeem(tickets[6], 1)  # the 9th cookie of run 1: its oldest goes
+    assert passes.session(cookies[0]) is None and passes.session(cookies[1]) is not None
+    passes.redeem(other, 2)  # another run's are untouched
 
 
 def test_the_gate_reads_a_heads_query_and_its_view_cookies() -> None:
