@@ -96,6 +96,7 @@ async def service(
                 writable=not settings.writes_need_token,
                 policy=SitePolicy.of(settings.host_names(), settings.editor_origins()),
                 max_viewers=settings.viser_max_viewers,
+                require_pass=settings.reads == "token",
             )
             stack.push_async_callback(viewer.stop)
         yield AppState(

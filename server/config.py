@@ -221,19 +221,12 @@ class Settings(BaseSettings):
     def check(self) -> None:
         """Refuse what cannot be served safely.
 
-        Beyond this machine without a token, two servers on one port, or reads kept to
-        tokens beside a 3D view that asks for none.
+        Beyond this machine without a token, or two servers on one port.
         """
         if self.viser and self.viser_port == self.port:
             raise ValueError(
                 f"SRLAB_VISER_PORT and SRLAB_PORT are both {self.port}: the 3D view needs a "
                 "port of its own"
-            )
-        if self.reads == "token" and self.viser:
-            raise ValueError(
-                "SRLAB_READS=token keeps the API's reads to a token's holders, but the 3D view "
-                "(SRLAB_VISER) asks for no token: whoever reaches its port would watch every "
-                "run. Set SRLAB_VISER=false with it"
             )
         why = self.reachable_through()
         if why and not self.token:

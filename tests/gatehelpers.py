@@ -44,11 +44,17 @@ async def start_run(client: httpx.AsyncClient, start: bool = True, **body: objec
 
 
 @asynccontextmanager
-async def page_socket(viewer: Viewer, path: str) -> AsyncIterator[ClientConnection]:
-    """A websocket on the view's `path`, as viser's page opens it (no viewer yet)."""
+async def page_socket(
+    viewer: Viewer, path: str, cookie: str | None = None
+) -> AsyncIterator[ClientConnection]:
+    """A websocket on the view's `path`, as viser's page opens it (no viewer yet).
+
+    `cookie`: the `Cookie` header the browser would send with it (a view cookie).
+    """
     url = f"ws://127.0.0.1:{viewer.port}{path}"
     protocol = Subprotocol(f"viser-v{viser.__version__}")  # viser refuses other versions
-    async with connect(url, subprotocols=[protocol]) as socket:
+    headers = {} if cookie is None else {"Cookie": cookie}
+    async with connect(url, subprotocols=[protocol], additional_headers=headers) as socket:
         drain = asyncio.create_task(_drain(socket))
         try:
             yield socket

@@ -23,8 +23,9 @@ from server.api.guard import SitePolicy
 from server.api.ratelimit import RateLimiter
 from server.runtime import Runs as Engines
 from server.viewer.control import Controller
-from server.viewer.gate import MAX_VIEWERS, Gate, Peer
+from server.viewer.gate import MAX_VIEWERS, TICKET, Gate, Peer
 from server.viewer.inbound import quiet_malformed
+from server.viewer.passes import Pass, Passes
 from server.viewer.render import Renderer
 from server.viewer.scene import static_scene
 from server.viewer.state import ClientsChanged, Inbox, SelectRun, SetMode
@@ -64,7 +65,7 @@ class Viewer:
         server: viser.ViserServer,
         gate: Gate,
         loop: asyncio.AbstractEventLoop,
-        make: Callable[[viser.ViserServer | viser.ClientHandle], Session],
+        make: Callable[[viser.ViserServer | viser.ClientHandle, Pass | None], Session],
     ) -> None:
         self.server = server
         self.gate = gate
@@ -89,7 +90,7 @@ class Viewer:
         asked for, never by the service.
         """
         if self._shared is None:
-            self._shared = self._make(self.server)
+            self._shared = self._make(self.server, None)
         return self._shared
 
     @property
@@ -101,6 +102,20 @@ class Viewer:
     def renderer(self) -> Renderer:
         """The shared session's renderer (tests)."""
         return self.shared.renderer
+
+    @property
+    def passes(self) -> Passes:
+        """The view's tickets and cookies (its gate's)."""
+        return self.gate.passes
+
+    def ticket_path(self, run_id: int, *, organiser: bool) -> str:
+        """The view's path on `run_id` with a one-time ticket (`server/viewer/passes.py`).
+
+        The organiser's opens every run, its panel writable; a participant's that run
+        alone, read-only.
+        """
+        ticket = self.passes.issue(Pass(None if organiser else run_id, organiser))
+        return f"/run/{run_id}?{TICKET}={ticket}"
 
     def choose(self, run_id: int) -> None:
         """Show `run_id` to the next browser that connects (within `CHOICE_TTL_S`).
@@ -128,15 +143,22 @@ class Viewer:
         return choice[0]
 
     def open(
-        self, target: viser.ViserServer | viser.ClientHandle, named: int | None = None
+        self,
+        target: viser.ViserServer | viser.ClientHandle,
+        named: int | None = None,
+        granted: Pass | None = None,
     ) -> Session:
         """A new watching session drawing on `target`, on the run chosen for it if any.
 
-        `named` is the run its URL names (`/run/<id>`), which wins over `choose`'s.
+        `named` is the run its URL names (`/run/<id>`), which wins over `choose`'s; a
+        `granted` view cookie for one run shows that run alone.
         Blocking (it builds the scene): call it from a thread, not the event loop.
         """
-        session = self._make(target)
-        run_id = self._take_choice(named)
+        session = self._make(target, granted)
+        if granted is not None and granted.run is not None:
+            run_id: int | None = granted.run  # the console's choice is not for it
+        else:
+            run_id = self._take_choice(named)
         if run_id is not None:
             session.controller.post(SetMode("live"))
             session.controller.post(SelectRun(run_id))
@@ -169,7 +191,7 @@ class Viewer:
             )
             _drop(self.server, client.client_id)
             return
-        session = self.open(client, relay.run)
+        session = self.open(client, relay.run, relay.granted)
         with self._lock:
             self.sessions[client.client_id] = session
 
@@ -194,6 +216,7 @@ class Viewer:
         policy: SitePolicy | None = None,
         world: WorldConfig | None = None,
         max_viewers: int = MAX_VIEWERS,
+        require_pass: bool = False,
     ) -> Viewer:
         """Listen on `host`:`port` and show the runs of `manager` and `store`.
 
@@ -201,7 +224,8 @@ class Viewer:
         A busy port is an error here (viser itself would silently take the next one, and
         the editor's link would point at someone else's server). `policy` says which Host
         names and origins the view accepts (default: loopback names, no other origin);
-        `max_viewers` how many may watch at once.
+        `max_viewers` how many may watch at once; `require_pass`, that a viewer needs a
+        ticket's cookie (the service keeps reads to tokens).
 
         Raises:
             OSError: the port is taken.
@@ -212,10 +236,18 @@ class Viewer:
         first = world or load_world().config  # until a run is shown
         scene = static_scene(first)
 
-        def make(target: viser.ViserServer | viser.ClientHandle) -> Session:
+        def make(target: viser.ViserServer | viser.ClientHandle, granted: Pass | None) -> Session:
             inbox = Inbox()
             controller = Controller(
-                inbox, manager, store, catalog, limiter, writable=writable, world=world, loop=loop
+                inbox,
+                manager,
+                store,
+                catalog,
+                limiter,
+                writable=writable if granted is None else granted.organiser,
+                world=world,
+                loop=loop,
+                only=None if granted is None else granted.run,
             )
             renderer = Renderer(target, scene, first, controller.post, fixed=world)
             task = asyncio.run_coroutine_threadsafe(controller.run(), loop)
@@ -226,7 +258,14 @@ class Viewer:
         try:
             quiet_malformed(server)
             server.scene.world_axes.visible = False  # for every client
-            gate = Gate(host, port, server.get_port(), policy, max_viewers=max_viewers)
+            gate = Gate(
+                host,
+                port,
+                server.get_port(),
+                policy,
+                max_viewers=max_viewers,
+                require_pass=require_pass,
+            )
             # Before the gate opens: from then on viser answers the gate's relays alone.
             await guard(server, gate.relay, policy)
             # Wired before the gate opens: a browser reconnecting after a restart may be

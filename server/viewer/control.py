@@ -55,6 +55,7 @@ log = logging.getLogger("srlab.viewer")
 
 WATCH_S = 1.0
 """How often, while someone watches, the controller looks for runs started or ended."""
+READ_ONLY = "this view of one run is read-only: reward from the page it was opened from"
 LIMITER_KEY = "3d-view"
 """The rate limiter's client name for rewards given from the panel, with the viewer's id."""
 
@@ -103,6 +104,7 @@ class Controller:
         limiter: the service's reward rate limiter (the panel is one more client).
         writable: the panel may reward and change rates (the service is on loopback).
         world: the world every replay is drawn in (None: each run's own preset).
+        only: the one run this view may show, read-only (a participant's); None: any.
         loop: the service's event loop, when built on another thread (a viewer's connect).
     """
 
@@ -117,6 +119,7 @@ class Controller:
         writable: bool,
         world: WorldConfig | None = None,
         loop: asyncio.AbstractEventLoop | None = None,
+        only: int | None = None,
     ) -> None:
         self.inbox = inbox
         self.manager = manager
@@ -124,7 +127,8 @@ class Controller:
         self.catalog = catalog
         self.limiter = limiter
         self.world = world
-        self.state = ViewState(writable=writable)
+        self.only = only
+        self.state = ViewState(writable=writable and only is None, only=only)
         self._commands: asyncio.Queue[ViewerCommand] = asyncio.Queue()
         self._loop: asyncio.AbstractEventLoop | None = loop
         if loop is None:
@@ -237,6 +241,8 @@ class Controller:
             return
         self._signature = signature
         stored = await asyncio.to_thread(self.store.list_runs)
+        if self.only is not None:  # the others' runs are not listed, not even their ids
+            stored = [r for r in stored if r.id == self.only]
         self._stored = {
             r.id: (
                 r.spec.condition,
@@ -294,6 +300,8 @@ class Controller:
         st = self.state
         if run_id == st.run_id and st.live is not None:
             return
+        if self.only is not None and run_id != self.only:
+            raise LookupError(f"this view shows run {self.only} only")
         if run_id not in self._stored and self.manager.get(run_id) is None:
             await self._refresh_runs(force=True)
             if run_id not in self._stored:
@@ -423,6 +431,8 @@ class Controller:
 
     async def _change_rate(self, hz: float) -> None:
         st = self.state
+        if st.only is not None:
+            raise ValueError(READ_ONLY)
         if not st.writable:
             raise ValueError("the panel changes rates on loopback only: use the API's token")
         live = self.manager.get(st.run_id) if st.run_id is not None else None
@@ -438,6 +448,8 @@ class Controller:
         st = self.state
         sign = f"{value:+g}"
         try:
+            if st.only is not None:
+                raise ValueError(READ_ONLY)
             if not st.writable:
                 raise ValueError("the panel rewards on loopback only: use the API's token")
             engine = self.manager.get(st.run_id) if st.run_id is not None else None

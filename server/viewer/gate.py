@@ -27,6 +27,15 @@ viewer starts that socket's session on the run, and no other's, even when severa
 reconnect at once) and rewrites the path to `/`, which is all viser serves (its page, one
 self-contained index.html, and its socket).
 
+Who may watch: a request whose URL carries `?ticket=` (the API's, `server/viewer/passes.py`)
+is a page being opened; the gate exchanges the ticket once for a cookie (`VIEW_COOKIE`
+and the view's port, HttpOnly, SameSite=Strict, its path the run's URL or `/` for the
+organiser's) and sends the browser on to the URL without it (303). From then on the page's
+request and its sockets bring that cookie: one for a run (a participant's) is taken on
+that run's URL alone (403 elsewhere), and its viewer shows that run read-only. A
+request without a good cookie gets the view as it was (anyone who reaches the port
+watches), unless the service keeps reads to tokens (`require_pass`): then 401.
+
 At most `max_viewers` websockets are relayed at once: each is a viewer with a renderer
 thread of its own, on the service's process (100 of them slowed `/api/health` from 8 to
 616 ms). Past it a handshake gets 503 with `Retry-After`, and a page request a short
@@ -54,6 +63,7 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from http import HTTPStatus
+from urllib.parse import parse_qsl, urlencode
 
 from websockets.exceptions import SecurityError
 from websockets.http11 import Request
@@ -61,6 +71,7 @@ from websockets.streams import StreamReader
 from websockets.utils import accept_key
 
 from server.api.guard import SitePolicy
+from server.viewer.passes import SESSION_S, Pass, Passes, PassRefused
 
 log = logging.getLogger("srlab.viewer")
 
@@ -85,6 +96,10 @@ Peer = tuple[str, int]
 RUN_PATH = re.compile(r"/run/([0-9]{1,18})/?")
 """A view URL's path that names a run. At most 18 digits: run ids stay below 2**62 (the
 API's bound), and a longer or non-digit id is no run but a plain path (viser's 404)."""
+VIEW_COOKIE = "srlab_view_"
+"""The view cookie's name, before the view's port (cookies are kept by host, not port)."""
+TICKET = "ticket"
+"""The query parameter a page is opened with to exchange its ticket."""
 
 
 @dataclass(frozen=True)
@@ -94,10 +109,12 @@ class Relay:
     Attributes:
         run: the run its URL names (`/run/<id>`), for a websocket; else None.
         socket: a websocket (a viewer to be), not a page's request.
+        granted: what its view cookie allows; None without one (the view as it was).
     """
 
     run: int | None
     socket: bool
+    granted: Pass | None = None
 
 
 def run_path(head: bytes) -> tuple[bytes, int | None]:
@@ -252,11 +269,44 @@ def full_page(limit: int) -> bytes:
     ).encode()
 
 
+def target(head: bytes) -> tuple[str, list[tuple[str, str]]]:
+    """A request head's path and its query's parameters ("" and none for no request line)."""
+    parts = head.split(b"\r\n", 1)[0].split(b" ")
+    if len(parts) != 3:
+        return "", []
+    path, _, query = parts[1].decode("latin-1").partition("?")
+    return path, parse_qsl(query, keep_blank_values=True)
+
+
+def cookie_values(headers: dict[str, str], name: str) -> list[str]:
+    """Every value the request's `Cookie` header gives `name` (the most specific path first)."""
+    pairs = (c.strip().partition("=") for c in headers.get("cookie", "").split(";"))
+    return [value.strip() for key, _, value in pairs if key.strip() == name]
+
+
+def exchanged(location: str, cookie: str) -> bytes:
+    """The answer to a page opened with a good ticket: its cookie, and on to `location`."""
+    return response(
+        HTTPStatus.SEE_OTHER,
+        b"",
+        "text/plain",
+        (
+            f"Location: {location}",
+            f"Set-Cookie: {cookie}; Max-Age={int(SESSION_S)}; HttpOnly; SameSite=Strict",
+            "Cache-Control: no-store",
+            "Referrer-Policy: no-referrer",
+        ),
+    )
+
+
 class Gate:
     """Listens on `host`:`port` on a thread of its own and relays accepted connections.
 
     `relay` tells, from any thread, which of its connections to viser an address is (and
-    the run its URL names). At most `max_viewers` websockets are relayed at once. `start`
+    the run its URL names, and what its view cookie allows: `passes` keeps the tickets and
+    cookies; with `require_pass` a request without a good cookie gets 401.
+
+    At most `max_viewers` websockets are relayed at once. `start`
     raises OSError when the port is taken; `stop` closes it and every relay.
     """
 
@@ -267,8 +317,12 @@ class Gate:
         upstream_port: int,
         policy: SitePolicy,
         max_viewers: int = MAX_VIEWERS,
+        passes: Passes | None = None,
+        require_pass: bool = False,
     ) -> None:
         self.host = host
+        self.passes = passes or Passes()
+        self.require_pass = require_pass
         self.port = port
         self.upstream_port = upstream_port
         self.policy = policy
@@ -385,6 +439,13 @@ class Gate:
         if problem is None and upgrade and answer is None:
             problem = HTTPStatus.BAD_REQUEST, BAD_HANDSHAKE
         head_only = head.startswith(b"HEAD ")
+        upstream_head, run_id = run_path(head)
+        granted: Pass | bytes | None = None
+        if problem is None:
+            try:
+                granted = self._granted(head, headers, run_id, upgrade)
+            except PassRefused as e:
+                problem = e.status, e.detail
         if problem is not None:
             self.refused += 1
             status, detail = problem
@@ -392,20 +453,69 @@ class Gate:
             writer.write(refused(status, detail, head_only=head_only))
             await writer.drain()
             return
+        if isinstance(granted, bytes):  # a ticket exchanged: on to the URL without it
+            writer.write(granted)
+            await writer.drain()
+            return
         if self._sockets >= self.max_viewers:
             await self._turn_away(writer, upgrade, head_only)
             return
-        head, run_id = run_path(head)
         if answer is None:
-            await self._page(reader, writer, head)
+            await self._page(reader, writer, upstream_head, granted)
             return
         self._sockets += 1  # no await since the check: the count holds
         try:
-            await self._socket(reader, writer, head, answer, run_id)
+            await self._socket(reader, writer, upstream_head, answer, run_id, granted)
         finally:
             self._sockets -= 1
             if self._sockets < self.max_viewers:
                 self._full_said = False
+
+    @property
+    def cookie(self) -> str:
+        """The view cookie's name (the view's port in it)."""
+        return f"{VIEW_COOKIE}{self.port}"
+
+    def _granted(
+        self, head: bytes, headers: dict[str, str], run_id: int | None, upgrade: bool
+    ) -> Pass | bytes | None:
+        """What the request's view cookie allows (None: no good one), or an answer.
+
+        A page opened with a ticket is answered here: a 303 on to its URL without it,
+        setting the cookie.
+
+        Raises:
+            PassRefused: a ticket not taken; a cookie for another run; none where one is
+                needed.
+        """
+        path, params = target(head)
+        ticket = next((v for k, v in params if k == TICKET), None)
+        if ticket is not None:
+            if upgrade:
+                raise PassRefused(
+                    HTTPStatus.BAD_REQUEST,
+                    "a 3D view ticket is exchanged by opening the page, not by a websocket",
+                )
+            value, redeemed = self.passes.redeem(ticket, run_id)
+            rest = urlencode([(k, v) for k, v in params if k != TICKET])
+            location = path + (f"?{rest}" if rest else "")
+            scope = "/" if redeemed.run is None else f"/run/{redeemed.run}"
+            return exchanged(location, f"{self.cookie}={value}; Path={scope}")
+        found = [self.passes.session(v) for v in cookie_values(headers, self.cookie)]
+        granted = next((g for g in found if g is not None), None)
+        if granted is not None and granted.run is not None and granted.run != run_id:
+            where = "/" if run_id is None else f"run {run_id}"
+            raise PassRefused(
+                HTTPStatus.FORBIDDEN,
+                f"this browser may watch run {granted.run} only in the 3D view, not {where}",
+            )
+        if granted is None and self.require_pass:
+            raise PassRefused(
+                HTTPStatus.UNAUTHORIZED,
+                "the 3D view here needs a ticket (SRLAB_READS=token): open it from the "
+                "console's 3D view link, or a participant's page",
+            )
+        return granted
 
     async def _turn_away(
         self, writer: asyncio.StreamWriter, upgrade: bool, head_only: bool
@@ -436,12 +546,16 @@ class Gate:
         return up_reader, up_writer, (str(host), int(port))
 
     async def _page(
-        self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, head: bytes
+        self,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        head: bytes,
+        granted: Pass | None,
     ) -> None:
         """Relay one page request and viser's answer; then close (once the client has)."""
         up_reader, up_writer, peer = await self._open_upstream()
         try:
-            with self._upstream(peer, Relay(run=None, socket=False)):
+            with self._upstream(peer, Relay(run=None, socket=False, granted=granted)):
                 up_writer.write(head)
                 async with asyncio.timeout(VISER_ANSWER_S):
                     reply = await up_reader.readuntil(b"\r\n\r\n")
@@ -468,6 +582,7 @@ class Gate:
         head: bytes,
         answer: bytes,
         run_id: int | None,
+        granted: Pass | None,
     ) -> None:
         # The page's socket opens now, not when viser (on the service's process, which
         # steps back for the runs) gets to it: viser's client retries every second and
@@ -478,7 +593,7 @@ class Gate:
         try:
             # Known before viser sees a byte of it: viser's server answers only the gate's
             # own connections, and the viewer starts this one on the run its URL names.
-            with self._upstream(peer, Relay(run=run_id, socket=True)):
+            with self._upstream(peer, Relay(run=run_id, socket=True, granted=granted)):
                 up_writer.write(head)
                 # viser's own 101 (the same one) was answered already; anything else ends
                 # the socket, as viser would have. What the page sends meanwhile waits:

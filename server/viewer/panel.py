@@ -191,9 +191,12 @@ class Panel:
         if changed("runs.value", selected):
             _assign(self._runs, selected)
         replaying = state.mode == "replay"
-        if changed("mode", replaying):
-            self._live_folder.visible = not replaying
+        any_run = state.only is None  # else one run, read-only: no run list, no controls
+        if changed("mode", (replaying, any_run)):
+            self._live_folder.visible = not replaying and any_run
             self._replay_folder.visible = replaying
+        if changed("only", any_run):
+            self._runs.visible = any_run
         live = state.live
         if live is not None and changed("rate", (live.run_id, live.hz)):
             _assign(self._rate, float(min(max(round(live.hz), 1), 100)))

@@ -57,6 +57,9 @@ class ViewState:
     clock: ReplayClock | None = None
     writable: bool = True
     """Panel rewards and rate changes are allowed (the service listens on loopback only)."""
+    only: int | None = None
+    """The one run this view may show, read-only (a participant's): no run list, no
+    rewards or rate from its panel."""
     notice: str = ""
     version: int = 0
     """Bumped when the selected run or replay changes: the renderer starts afresh."""

@@ -23,6 +23,7 @@ from typing import Any
 import httpx
 import pytest
 from browser import artifact
+from conftest import BROWSER_WAIT_MS
 from playwright.sync_api import Browser, BrowserContext, Page, Request, expect
 from studypage import CODE, consent, create_study, invite, reward
 
@@ -41,8 +42,9 @@ STUDY: dict[str, Any] = {
 
 @pytest.fixture(scope="module")
 def closed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """`srlab serve` whose reads need a token; its client holds the organiser's."""
-    env = {"SRLAB_READS": "token", "SRLAB_TOKEN": TOKEN, "SRLAB_VISER": "false"}
+    """`srlab serve` whose reads need a token, with its 3D view; its client holds the
+    organiser's token."""
+    env = {"SRLAB_READS": "token", "SRLAB_TOKEN": TOKEN}
     with live_server(tmp_path_factory.mktemp("closed") / "web.db", env) as server:
         server.client.headers["Authorization"] = f"Bearer {TOKEN}"
         yield server
@@ -77,6 +79,49 @@ def test_a_participants_console_goes_live_with_their_token(
     assert httpx.get(f"{closed.url}/api/health", timeout=10).status_code == 200
 
 
+def test_a_participant_opens_the_3d_view_of_their_own_run_alone(
+    closed: LiveServer, browser: Browser
+) -> None:
+    api = closed.client
+    assert api.post("/api/studies", json={**STUDY, "name": "viewed"}).status_code == 201
+    invited = api.post("/api/studies/viewed/participants", json={"count": 2}).json()["data"]
+    viser_port = api.get("/api/health").json()["viser_port"]
+    view = f"http://127.0.0.1:{viser_port}"
+    # Without a ticket's cookie the view answers nobody here (reads need a token).
+    assert httpx.get(f"{view}/", timeout=10).status_code == 401
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    context.set_default_timeout(BROWSER_WAIT_MS)
+    sent: list[Request] = []
+    try:
+        page = context.new_page()
+        other = consent(context.new_page(), invited[1]["link"])
+        run_id = consent(page, invited[0]["link"])
+        context.on("request", lambda r: sent.append(r))
+        with context.expect_page() as opened:
+            page.click("#study-view3d")
+        viewer = opened.value
+        viewer.get_by_text(f"Run {run_id}:").first.wait_for()
+        # The ticket is traded for a cookie and gone from the URL; the token never in one.
+        # (viser's page adds its socket's URL as `?websocket=`.)
+        assert viewer.url.split("?")[0] == f"{view}/run/{run_id}"
+        assert "ticket" not in viewer.url
+        token = invited[0]["token"]
+        assert not [r.url for r in sent if token in r.url]
+        # Read-only, this run alone: no run list, no rewards, no tick rate.
+        expect(viewer.get_by_text("srlab 3D view")).to_be_visible()
+        for control in ("+ reward", "- reward"):
+            expect(viewer.get_by_role("button", name=control)).to_be_hidden()
+        expect(viewer.get_by_text("Tick rate (Hz)")).to_be_hidden()
+        expect(viewer.get_by_text(re.compile(r"^Run$"))).to_be_hidden()
+        viewer.screenshot(path=str(artifact("study-participant-3d.png")))
+        # Another's run, or the view of every run, in the same browser: refused.
+        for path in (f"/run/{other}", "/"):
+            refused = context.request.get(f"{view}{path}")
+            assert refused.status in (401, 403), (path, refused.status)
+    finally:
+        context.close()
+
+
 def test_the_organisers_pages_read_with_the_saved_token(closed: LiveServer, page: Page) -> None:
     made = closed.client.post("/api/studies", json={**STUDY, "name": "watched"})
     assert made.status_code == 201, made.text
@@ -84,6 +129,27 @@ def test_the_organisers_pages_read_with_the_saved_token(closed: LiveServer, page
     page.goto(f"{closed.url}/#/studies")
     page.wait_for_selector("body[data-ready=true]")
     expect(page.locator('#studies-list tr[data-study="watched"]')).to_be_visible()
+
+
+def test_the_organisers_3d_link_opens_the_view_with_a_writable_panel(
+    closed: LiveServer, page: Page
+) -> None:
+    api = closed.client
+    body = {"condition": "trainer", "mode": "realtime", "hz": 10, "seed": 4}
+    run_id = api.post("/api/runs", json=body).json()["id"]
+    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    try:
+        page.add_init_script(f"localStorage.setItem('srlab.token', {TOKEN!r})")
+        page.goto(f"{closed.url}/#/console/{run_id}")
+        page.wait_for_selector("body[data-ready=true]")
+        with page.context.expect_page() as opened:
+            page.click("#view3d")  # POST .../view with the saved token: a ticket for it
+        viewer = opened.value
+        viewer.set_default_timeout(BROWSER_WAIT_MS)
+        viewer.get_by_text(f"Run {run_id}:").first.wait_for()
+        expect(viewer.get_by_role("button", name="+ reward")).to_be_enabled()
+    finally:
+        api.post(f"/api/runs/{run_id}/stop")
 
 
 QUESTIONS = ("How hard was it?", "What did you reward?")

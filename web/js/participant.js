@@ -5,7 +5,7 @@
 
 import { participantToken, post, get } from "./api.js";
 import * as console_ from "./console/console.js";
-import { $, el, toast } from "./ui.js";
+import { $, attempt, el, toast } from "./ui.js";
 
 const POLL_MS = 2000;
 let poll = null;
@@ -70,7 +70,8 @@ async function render(asked = null) {
     el("kbd", { text: "-" }), " (or − bad) when it does badly. ",
     el("span", { class: "muted", text: me.budget_episodes !== null
       ? `The study ends after ${me.budget_episodes} episode${me.budget_episodes === 1 ? "" : "s"}.`
-      : `The study ends after ${Math.round(me.budget_s)} s of training.` })));
+      : `The study ends after ${Math.round(me.budget_s)} s of training.` })),
+    ...(health && health.viser_port ? [viewLink()] : []));
   $("#view-console").hidden = false;
   const failed = await console_.show(asked ?? me.run_id, health, { participant: true });
   if (failed) {
@@ -79,6 +80,22 @@ async function render(asked = null) {
   }
   clearInterval(poll);
   poll = setInterval(check, POLL_MS);
+}
+
+/**
+ * "3D view": their run's view, read-only, in a new tab. The token never goes into a URL:
+ * the service answers the view's URL with a one-time ticket (good for a minute), which
+ * the view trades for a cookie for this run alone.
+ */
+function viewLink() {
+  const link = el("a", { id: "study-view3d", class: "button", href: "#", text: "3D view ↗",
+    title: "Watch your robot in 3D (in a new tab)" });
+  link.addEventListener("click", async (event) => {
+    event.preventDefault();
+    const view = await attempt(() => post("/participant/view-ticket"), "Opening the 3D view");
+    if (view) window.open(view.url, "_blank", "noopener");
+  });
+  return el("p", {}, link);
 }
 
 /** Whether the budget is spent: the service says so on this read (and stops the run). */

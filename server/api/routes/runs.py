@@ -16,7 +16,7 @@ from core.run.trace import unpack
 from core.sim.track import TrackGeometry
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
-from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
+from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
 from server.api.errors import ErrorPublic
 from server.api.routing import resource_router
 from server.runtime import LiveRun
@@ -358,20 +358,35 @@ def get_episode(
 async def view_run(run_id: RunId, request: Request, state: StateDep, store: StoreDep) -> ViewChosen:
     """Show the run in the 3D view (live, or where it stopped); answers the view's URL.
 
-    The console's "3D view" button: the next viewer that connects (within a minute)
-    starts on this run, live, and stays on it rather than following the newest run. Each
-    viewer has its own run, so the viewers already open keep theirs. It chooses what a
-    viewer sees, so it is a write (a POST, with the token when one is configured), not a
-    link an `<img>` on any page could follow.
+    The console's "3D view" button: the view opened at the answer's URL starts on this
+    run, live, and stays on it rather than following the newest run (so does the next
+    viewer that connects on `/` within a minute). Each viewer has its own run, so the
+    viewers already open keep theirs. The URL carries a one-time ticket, good for a
+    minute, that the view exchanges for a cookie of the organiser's (what lets the view
+    open when reads need a token, and its panel reward beyond loopback). It chooses what
+    a viewer sees, so it is a write (a POST, with the token when one is configured), not
+    a link an `<img>` on any page could follow.
     """
     await io(store.run_summary, run_id)
+    chosen = view_link(request, state, run_id, organiser=True)
+    assert state.viewer is not None
+    state.viewer.choose(run_id)  # for the viewer opened next; open ones keep theirs
+    return chosen
+
+
+def view_link(request: Request, state: AppState, run_id: int, *, organiser: bool) -> ViewChosen:
+    """The 3D view's URL for `run_id`, with a one-time ticket (`server/viewer/passes.py`).
+
+    The organiser's ticket opens a view of every run; a participant's, of that run alone.
+    409 when the service has no 3D view.
+    """
     viewer = state.viewer
     if viewer is None:
         raise HTTPException(
             status.HTTP_409_CONFLICT, "the 3D view is off on this service (SRLAB_VISER=false)"
         )
-    viewer.choose(run_id)  # for the viewer the console opens next; open ones keep theirs
+    path = viewer.ticket_path(run_id, organiser=organiser)
     host = request.url.hostname or "127.0.0.1"
     if ":" in host:  # an IPv6 address
         host = f"[{host}]"
-    return ViewChosen(run=run_id, url=f"{request.url.scheme}://{host}:{viewer.port}/")
+    return ViewChosen(run=run_id, url=f"{request.url.scheme}://{host}:{viewer.port}{path}")

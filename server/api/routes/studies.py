@@ -21,9 +21,10 @@ from core.studies import (
 )
 from server.api.access import Organiser, Principal, PrincipalDep
 from server.api.deps import EnginesDep, StateDep, StoreDep
-from server.api.routes.runs import run_now
+from server.api.routes.runs import run_now, view_link
 from server.api.routing import resource_router
 from server.schemas.common import Text
+from server.schemas.runs import ViewChosen
 from server.schemas.studies import (
     AnswersCreate,
     ConsentCreate,
@@ -256,6 +257,30 @@ async def consent(
         await engines.start(p.run_id)  # 429 at the cap: consenting again starts it
         await engines.started(p.run_id)
     return _view(who, p, await _answered(studies, p))
+
+
+@participant_router.post(
+    "/view-ticket",
+    responses={409: {"description": "no run yet (consent first), or the 3D view is off"}},
+)
+async def view_ticket(
+    request: Request,
+    who: ParticipantDep,
+    state: StateDep,
+    studies: StudiesDep,
+    store: StoreDep,
+    engines: EnginesDep,
+) -> ViewChosen:
+    """The 3D view of the caller's own run, read-only: its URL with a one-time ticket.
+
+    The ticket is good once, for a minute, on that run's view alone; the view exchanges
+    it for a cookie that lets this browser watch that run (no other run, no run list, no
+    controls). 409 before they consent (no run yet) or when the service has no 3D view.
+    """
+    p = await current(who, studies, store, engines)
+    if p.run_id is None:
+        raise HTTPException(status.HTTP_409_CONFLICT, "no run yet: consent first")
+    return view_link(request, state, p.run_id, organiser=False)
 
 
 @participant_router.post("/answers", status_code=status.HTTP_201_CREATED)

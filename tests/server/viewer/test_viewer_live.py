@@ -119,7 +119,8 @@ async def test_the_view_link_chooses_the_run_and_it_stays_chosen(tmp_path: Path)
         assert (await client.get(f"/api/runs/{chosen}/view")).status_code == 405
         r = await client.post(f"/api/runs/{chosen}/view")
         assert r.status_code == 200, r.text
-        assert r.json() == {"run": chosen, "url": f"http://127.0.0.1:{port}/"}
+        assert r.json()["run"] == chosen
+        assert r.json()["url"].startswith(f"http://127.0.0.1:{port}/run/{chosen}?ticket=")
         # The next viewer to connect starts on it, live; the one open keeps its own.
         fresh = await asyncio.to_thread(viewer.open, viewer.server)
         try:

@@ -154,15 +154,16 @@ async function select(id) {
   return null;
 }
 
-/** Choose the run in the 3D view (a write: a POST), then open the link's /run/<id> URL. */
+/** Choose the run in the 3D view (a write: a POST), then open the answer's URL. */
 async function openView(event) {
   event.preventDefault();
   const link = event.currentTarget;
   if (link.getAttribute("aria-disabled") === "true" || !link.dataset.run) return;
   const chosen = await attempt(() => post(`/runs/${link.dataset.run}/view`), "Opening the 3D view");
-  // The link's URL, not the answer's: a view opened on /run/<id> keeps its run when its
-  // socket reconnects (after a restart of the service, say); one on / would not.
-  if (chosen) window.open(link.href, "_blank", "noopener");
+  // The answer's URL is the link's /run/<id> with a one-time ticket, which the view trades
+  // for a cookie (what opens it when reads need a token) and then drops from the URL: a
+  // view on /run/<id> keeps its run when its socket reconnects (after a restart, say).
+  if (chosen) window.open(chosen.url, "_blank", "noopener");
 }
 
 async function poll() {
