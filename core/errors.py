@@ -9,6 +9,10 @@ class CatalogError(CoreError):
     """A data file (stimuli, behaviours, logical sensors, networks) is malformed."""
 
 
+class ConditionFileError(CatalogError):
+    """A condition file that cannot be read: names the file, the entry, its line, the reason."""
+
+
 class UnknownNameError(CatalogError):
     """A stimulus, behaviour, sensor, network or condition name that does not exist."""
 

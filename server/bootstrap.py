@@ -26,6 +26,7 @@ from server.config import Settings
 from server.persistence.storage import StorageFactory, open_storage
 from server.runtime import open_runs
 from server.runtime.tuning import step_back, warm_up
+from server.services.datafiles import DataWatch
 from server.services.studies import StudyWatch
 
 
@@ -33,6 +34,16 @@ async def _cancelled(task: asyncio.Task[None]) -> None:
     """Cancel `task` and wait until it has ended (its cancellation is not ours to raise)."""
     task.cancel()
     await asyncio.wait([task])
+
+
+DATA_LOOK_EVERY_S = 5.0
+"""How often the service looks whether its data files changed (a warning in the log)."""
+
+
+async def _watch_data(data: DataWatch) -> None:
+    while True:
+        await asyncio.sleep(DATA_LOOK_EVERY_S)
+        await asyncio.to_thread(data.changed)
 
 
 REQUEST_THREADS = min(32, (os.cpu_count() or 1) + 4)
@@ -56,6 +67,9 @@ async def service(
         # Undone in reverse: the 3D view, the runs, the engines' process, then storage.
         stack.push_async_callback(asyncio.to_thread, opened.close)
         catalog = Setup().catalog()  # the default definition's, shared with its runs
+        data = await asyncio.to_thread(DataWatch)  # the data files as read now
+        looking = asyncio.create_task(_watch_data(data), name="data files")
+        stack.push_async_callback(_cancelled, looking)
         watch = None if opened.studies is None else StudyWatch(opened.studies)
         if watch is not None:  # its last look comes after the runs' shutdown
             stack.push_async_callback(watch.flush)
@@ -109,4 +123,5 @@ async def service(
             rewards_limiter=limiter,
             viewer=viewer,
             studies=opened.studies,
+            data=data,
         )

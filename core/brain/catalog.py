@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -212,9 +213,18 @@ class Catalog:
         )
 
 
+DATA_DIR_VARIABLE = "SRLAB_DATA_DIR"
+"""The environment variable naming a data folder to use instead of the shipped one."""
+
+
 def data_dir() -> Path:
-    """The folder of srlab's shipped data files."""
-    return Path(str(resources.files("core") / "data"))
+    """The folder of srlab's data files: ``SRLAB_DATA_DIR`` if set, else the shipped one.
+
+    A lab may keep its own copy of ``core/data`` (its sensors, behaviours, worlds,
+    networks, conditions) and point every srlab command and the service at it.
+    """
+    own = os.environ.get(DATA_DIR_VARIABLE)
+    return Path(own) if own else Path(str(resources.files("core") / "data"))
 
 
 def _read(path: Path) -> dict[str, Any]:
@@ -392,8 +402,12 @@ def parse_knowledge(
     raw: Mapping[str, Mapping[str, Any]],
     stimuli: Iterable[Stimulus],
     behaviours: Iterable[Behaviour],
+    known: Mapping[str, KnowledgeSet] | None = None,
 ) -> dict[str, KnowledgeSet]:
-    """Knowledge sets from their data-file form, with `include` resolved."""
+    """Knowledge sets from their data-file form, with `include` resolved.
+
+    A set may include another of `raw` or one of `known` (sets already loaded).
+    """
     snames = {s.name for s in stimuli}
     bnames = {b.name for b in behaviours}
     done: dict[str, KnowledgeSet] = {}
@@ -401,6 +415,8 @@ def parse_knowledge(
     def resolve(name: str, stack: tuple[str, ...]) -> KnowledgeSet:
         if name in done:
             return done[name]
+        if name not in raw and known is not None and name in known:
+            return known[name]
         if name in stack:
             path = " -> ".join((*stack[stack.index(name) :], name))
             raise CatalogError(f"network {name!r} includes itself: {path}")
@@ -444,6 +460,26 @@ def parse_knowledge(
     for n in raw:
         resolve(n, ())
     return done
+
+
+def load_network_file(path: Path, catalog: Catalog) -> KnowledgeSet:
+    """A network file's knowledge set (the form of ``core/data/networks/*.toml``).
+
+    It may include the catalogue's sets; its name (``name``, else the file's stem) may not
+    be one of theirs. Errors name the file.
+    """
+    raw = _read(path)
+    name = str(raw.get("name", path.stem))
+    if name in catalog.knowledge:
+        raise CatalogError(
+            f"{path}: network {name!r} has the name of a built-in network: name it otherwise"
+        )
+    try:
+        return parse_knowledge({name: raw}, catalog.stimuli, catalog.behaviours, catalog.knowledge)[
+            name
+        ]
+    except CatalogError as e:
+        raise type(e)(f"{path}: {e}") from None
 
 
 def sensor_definitions(path: Path | None = None) -> dict[str, str]:

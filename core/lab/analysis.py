@@ -21,7 +21,7 @@ out) form one family, Holm-corrected; every other pair is exploratory.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -30,7 +30,7 @@ from core.errors import UnknownNameError
 from core.events import Cause, Outcome
 from core.lab.stats import holm, mean_interval, paired_difference, t_quantile
 from core.lab.tasks import TaskResult
-from core.run.conditions import CONDITIONS, get_condition
+from core.run.conditions import CONDITIONS, condition_definition
 
 CRITERION_WINDOW = 10
 CRITERION_RATE = 0.8
@@ -247,7 +247,7 @@ def summarise(
                 strict=True,
             )
         ]
-        condition = get_condition(c)
+        condition = rs[0].task.setup.lookup(c)
         memory = "rltm" if condition.kp else "ltm"
 
         def reliability(r: TaskResult, key: str, memory: str = memory) -> float:
@@ -258,7 +258,7 @@ def summarise(
         reliab = {k: mean_ci([reliability(r, k) for r in rs]) for k in keys}
         rows = success.astype(int).tolist()
         summary: dict[str, Any] = {
-            "description": CONDITIONS[c].description,
+            "description": condition.description,
             "seeds": len(rs),
             "episodes": n_ep,
             "success_rate": mean_ci(success.mean(axis=1).tolist()),
@@ -302,6 +302,8 @@ def summarise(
             }
         if camera and correct is not None:
             summary["correctness"] = correctness(rs, camera, correct)
+        if CONDITIONS.get(c) != condition:  # a researcher's: what it was, for a rerun
+            summary["definition"] = condition_definition(condition)
         out[c] = summary
     return out
 
@@ -399,8 +401,8 @@ DECLARED_ON: tuple[tuple[str, int | None, str | None], ...] = (
 """Each declared comparison is tested on all training episodes and held out, frozen."""
 
 
-def parse_pairs(text: str) -> list[tuple[str, str]]:
-    """Comma-separated comparisons ``a-b`` of known condition names, in order, no repeats.
+def parse_pairs(text: str, names: Collection[str] = CONDITIONS) -> list[tuple[str, str]]:
+    """Comma-separated comparisons ``a-b`` of condition `names`, in order, no repeats.
 
     Condition names hold hyphens themselves (``kp-qlambda-hybrid`` is kp against
     qlambda-hybrid), so each comparison is split where both sides name a condition; a
@@ -413,13 +415,13 @@ def parse_pairs(text: str) -> list[tuple[str, str]]:
         splits = [
             (item[:i], item[i + 1 :])
             for i, ch in enumerate(item)
-            if ch == "-" and item[:i] in CONDITIONS and item[i + 1 :] in CONDITIONS
+            if ch == "-" and item[:i] in names and item[i + 1 :] in names
         ]
         if len(splits) != 1:
             known = "no" if not splits else "more than one"
             raise UnknownNameError(
                 f"comparison {item!r}: {known} way to read it as a-b of two conditions "
-                f"(known: {', '.join(CONDITIONS)})"
+                f"(known: {', '.join(names)})"
             )
         if splits[0][0] == splits[0][1]:
             raise UnknownNameError(f"comparison {item!r} compares a condition with itself")

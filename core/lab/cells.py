@@ -17,7 +17,6 @@ from typing import Any
 from core.lab.analysis import paired, per_seed, summarise
 from core.lab.experiment import Backend, Task, TaskResult, run_tasks
 from core.params import Params, ParamValue, normalise, tuned_params
-from core.run.conditions import get_condition
 from core.run.setup import Setup
 
 HORIZONS = (("1-10", 10), ("all", None))
@@ -58,7 +57,7 @@ def cell(
     params: Mapping[str, ParamValue] | None = None,
 ) -> Cell:
     """A cell running `condition` with its tuned parameters (unless not `tuned`) and `params`."""
-    setup.condition(get_condition(condition))  # an unknown name, or a start it cannot take
+    setup.condition(setup.lookup(condition))  # an unknown name, or a start it cannot take
     base = dict(tuned_params(condition)) if tuned else {}
     return Cell(label, condition, normalise({**base, **(params or {})}), setup.resolved())
 

@@ -40,7 +40,7 @@ from core.params import (
     qlambda_config,
     tuned_params,
 )
-from core.run.conditions import DEEP_AGENTS, Condition, get_condition
+from core.run.conditions import DEEP_AGENTS, Condition
 from core.run.runner import EpisodeSummary, run
 from core.run.setup import Setup
 
@@ -50,16 +50,17 @@ if TYPE_CHECKING:
 CAMERA_SENSOR = "camera_obstacle"
 
 
-def parse_conditions(text: str) -> list[str]:
+def parse_conditions(text: str, setup: Setup | None = None) -> list[str]:
     """A comma-separated list of known condition names, in order, without repeats.
 
-    A deep baseline (dqn, ppo) without the srlab[baselines] extra installed is an error
-    here, before anything runs.
+    Known: the built-in conditions and `setup`'s own. A deep baseline (dqn, ppo) without
+    the srlab[baselines] extra installed is an error here, before anything runs.
     """
     names = [n.strip() for n in text.split(",") if n.strip()]
     if not names:
         raise UnknownNameError("no condition given")
-    deep = [n for n in names if get_condition(n).agent in DEEP_AGENTS]
+    lookup = (setup or Setup()).lookup
+    deep = [n for n in names if lookup(n).agent in DEEP_AGENTS]
     if deep:
         from core.learners import baselines
 
@@ -91,7 +92,7 @@ def run_task(task: Task, catalog: Catalog | None = None) -> TaskResult:
     try:
         setup = task.setup
         catalog = catalog or setup.catalog()
-        condition = setup.condition(get_condition(task.condition))
+        condition = setup.condition(setup.lookup(task.condition))
         if condition.agent == "qlambda":
             return _run_qlambda_task(task, catalog, condition)
         if condition.agent in DEEP_AGENTS:
@@ -379,7 +380,7 @@ _DEEP_COST = 10.0
 
 def expected_cost(task: Task) -> float:
     """A task's expected run time, in brain episodes: for ordering work, never for results."""
-    agent = get_condition(task.condition).agent
+    agent = task.setup.lookup(task.condition).agent
     per_episode = _AGENT_COST.get(agent, _DEEP_COST if agent in DEEP_AGENTS else 1.0)
     return per_episode * (task.episodes + 2 * task.eval_episodes * (1 + len(task.eval_after)))
 
@@ -466,7 +467,7 @@ def run_experiment(
         raise ValueError("jobs must be >= 1")
     setup = (setup or Setup()).resolved()
     for c in conditions:
-        setup.condition(get_condition(c))  # an unknown name, or a start it cannot take
+        setup.condition(setup.lookup(c))  # an unknown name, or a start it cannot take
     if eval_episodes < 0:
         raise ValueError("eval_episodes must be >= 0")
     tasks = experiment_tasks(conditions, seeds, episodes, setup, eval_episodes, tuned, params)
@@ -487,7 +488,7 @@ def experiment_tasks(
 
     def params_of(c: str) -> Params:
         base = dict(tuned_params(c)) if tuned else {}
-        return normalise({**base, **dict(applicable(get_condition(c), params or {}))})
+        return normalise({**base, **dict(applicable(setup.lookup(c), params or {}))})
 
     return [
         Task(c, s, episodes, params_of(c), setup=setup, eval_episodes=eval_episodes)

@@ -26,7 +26,6 @@ from core.lab.experiment import (
 )
 from core.lab.stats import paired_difference
 from core.params import Parameter, ParameterError, ParamValue, applicable, get_parameter
-from core.run.conditions import get_condition
 from core.run.setup import Setup
 
 Point = dict[str, ParamValue]
@@ -94,7 +93,7 @@ class Sweep:
             raise ValueError("at least one condition is needed")
         if not self.axes:
             raise ParameterError("give at least one --param NAME=V1,V2,...")
-        conditions = [get_condition(c) for c in self.conditions]
+        conditions = [self.setup.lookup(c) for c in self.conditions]
         for name, values in self.axes:
             parameter = get_parameter(name)
             for v in values:
@@ -119,7 +118,7 @@ class Sweep:
 
     def applies(self, name: str, condition: str) -> bool:
         """Whether `condition` uses the swept parameter `name`."""
-        return get_parameter(name).applies(get_condition(condition))
+        return get_parameter(name).applies(self.setup.lookup(condition))
 
     def task(self, point: Mapping[str, ParamValue], condition: str, seed: int) -> Task:
         """The task a (point, condition, seed) runs: only the parameters it uses are set."""
@@ -127,7 +126,7 @@ class Sweep:
             condition,
             seed,
             self.episodes,
-            applicable(get_condition(condition), point),
+            applicable(self.setup.lookup(condition), point),
             self.setup,
         )
 

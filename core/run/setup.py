@@ -12,10 +12,16 @@ from dataclasses import dataclass, replace
 from functools import cache
 from typing import Literal
 
-from core.brain.catalog import AssociationSpec, Catalog, load_catalog, sensor_definitions
+from core.brain.catalog import (
+    AssociationSpec,
+    Catalog,
+    KnowledgeSet,
+    load_catalog,
+    sensor_definitions,
+)
 from core.brain.network import BehaviourNetwork
 from core.errors import UnknownNameError
-from core.run.conditions import START_SETS, Condition, Start, with_start
+from core.run.conditions import CONDITIONS, START_SETS, Condition, Start, with_start
 from core.sim.world import WorldConfig
 from core.sim.worlds import WorldSettings, default_world, load_world, with_settings
 
@@ -40,6 +46,13 @@ def shared_catalog(sensors: str) -> Catalog:
     return load_catalog(sensors=sensors)
 
 
+@cache
+def _catalog_with(sensors: str, networks: tuple[KnowledgeSet, ...]) -> Catalog:
+    """The shipped catalogue under a sensor definition, with more knowledge sets."""
+    base = shared_catalog(sensors)
+    return replace(base, knowledge={**base.knowledge, **{ks.name: ks for ks in networks}})
+
+
 @dataclass(frozen=True, slots=True)
 class Setup:
     """The world, the sensor definition and the signal mode a condition runs in.
@@ -55,6 +68,13 @@ class Setup:
         start: what every condition's robot starts from: its own knowledge ("", the
             default), ``table1`` or ``design`` (kp's; `core.run.conditions.with_start`), so
             that methods are compared from equal starting knowledge.
+        conditions: conditions besides the built-in ones, a researcher's from a data file
+            (`core.run.conditions.load_conditions`): they travel with every task, so any
+            process runs them (`lookup`).
+        networks: knowledge sets besides the shipped ones (a network file's, or one made in
+            the S-R editor), by name in `catalog`.
+        network: a network every condition starts from instead of its own ("" for its
+            own): a shipped knowledge set's name or one of `networks`.
     """
 
     world: str = ""
@@ -62,6 +82,9 @@ class Setup:
     signal: SignalMode = "learned"
     world_settings: WorldSettings = ()
     start: Start = ""
+    conditions: tuple[Condition, ...] = ()
+    networks: tuple[KnowledgeSet, ...] = ()
+    network: str = ""
 
     def __post_init__(self) -> None:
         if self.signal not in SIGNAL_MODES:
@@ -76,6 +99,22 @@ class Setup:
         if self.start and self.start not in START_SETS:
             known = ", ".join(START_SETS)
             raise UnknownNameError(f"unknown start {self.start!r} (known: {known})")
+        if self.start and self.network:
+            raise UnknownNameError(
+                f"a start ({self.start}) and a network ({self.network}) both say what every "
+                "condition starts from: give one"
+            )
+        if self.network or self.conditions or self.networks:
+            knowledge = self.catalog().knowledge
+            wanted = [("network", self.network)] if self.network else []
+            for c in self.conditions:
+                wanted += [
+                    (f"condition {c.name!r}: network", n) for n in (c.network, *c.extra_networks)
+                ]
+            for what, name in wanted:
+                if name not in knowledge:
+                    known = ", ".join(sorted(knowledge))
+                    raise UnknownNameError(f"{what} {name!r} is no network (known: {known})")
 
     @property
     def world_name(self) -> str:
@@ -92,8 +131,23 @@ class Setup:
         return replace(self, world=self.world_name, sensors=self.sensors_name)
 
     def catalog(self) -> Catalog:
-        """The shipped catalogue under this setup's sensor definition (shared, read-only)."""
+        """The shipped catalogue under this setup's sensor definition, with its `networks`.
+
+        Shared, read-only.
+        """
+        if self.networks:
+            return _catalog_with(self.sensors_name, self.networks)
         return shared_catalog(self.sensors_name)
+
+    def lookup(self, name: str) -> Condition:
+        """The condition called `name`: one of this setup's `conditions`, else a built-in."""
+        for c in self.conditions:
+            if c.name == name:
+                return c
+        if name in CONDITIONS:
+            return CONDITIONS[name]
+        known = ", ".join((*CONDITIONS, *(c.name for c in self.conditions)))
+        raise UnknownNameError(f"unknown condition {name!r} (known: {known})")
 
     def world_config(self) -> WorldConfig:
         """The world preset's configuration, with the setup's settings changed."""
@@ -102,6 +156,8 @@ class Setup:
     def condition(self, condition: Condition) -> Condition:
         """`condition` as it runs in this setup."""
         condition = with_start(condition, self.start)
+        if self.network:
+            condition = replace(condition, network=self.network)
         if self.signal == "given":
             return replace(
                 condition,

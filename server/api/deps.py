@@ -19,6 +19,7 @@ from core.ports import NetworkRepository, RunQueries
 from server.api.ratelimit import RateLimiter
 from server.config import Settings
 from server.runtime import Runs
+from server.services.datafiles import DataWatch
 
 if TYPE_CHECKING:
     from core.studies import StudyRepository
@@ -40,6 +41,8 @@ class AppState:
     viewer: Viewer | None = None
     studies: StudyRepository | None = None
     """Trainer studies (None: this storage keeps none, e.g. the in-memory fakes)."""
+    data: DataWatch = field(default_factory=DataWatch)
+    """The data files as the service read them at its start, and which changed since."""
     run_networks: dict[int, int | None] = field(default_factory=dict)
     """Runs whose stored network was deleted while they ran here (None), overriding
     `RunSpec.network_id` of the engine's spec."""

@@ -23,6 +23,7 @@ from server.cli.common import (
     setup_of,
     task_progress,
 )
+from server.cli.conditions import add_network_arguments, with_conditions
 from server.reports.base import setup_params
 
 
@@ -38,10 +39,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     exp.add_argument(
         "--conditions",
         default="innate,delayed,dp,rp,kp,qlambda",
-        help=f"comma-separated, from: {', '.join(CONDITIONS)} (default: the paper's four, "
-        "innate and qlambda)",
+        help=f"comma-separated, from: {', '.join(CONDITIONS)}, or condition files (.toml, "
+        "docs/conditions.md; FILE.toml:NAME for one of a file's) (default: the paper's "
+        "four, innate and qlambda)",
     )
     add_task_arguments(exp, Path("results"))
+    add_network_arguments(exp)
     exp.add_argument(
         "--eval-episodes",
         type=non_negative_int,
@@ -89,11 +92,14 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
     from core.run.trainer import parse_teacher
     from server.reports.experiment import write_report
 
-    conditions = parse_conditions(args.conditions)
+    setup, named = with_conditions(
+        setup_of(args), args.conditions.split(","), args.network, args.url
+    )
+    conditions = parse_conditions(",".join(named), setup)
     if args.declare is None:
         declared = [p for p in DECLARED if set(p) <= set(conditions)]
     else:
-        declared = parse_pairs(args.declare)
+        declared = parse_pairs(args.declare, list(dict.fromkeys([*CONDITIONS, *conditions])))
         missing = sorted({c for p in declared for c in p} - set(conditions))
         if missing:
             raise UsageError(
@@ -101,10 +107,9 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
                 "comparison needs both its conditions run"
             )
     teacher = parse_teacher(args.teacher) if args.teacher else None
-    if teacher is not None and not any(CONDITIONS[c].trainer for c in conditions):
+    if teacher is not None and not any(setup.lookup(c).trainer for c in conditions):
         raise UsageError(f"--teacher: none of {', '.join(conditions)} has a teacher (rp has)")
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
-    setup = setup_of(args)
     catalog = setup.catalog()
     err = Console(file=stderr, stderr=True)
     with open_backend(args, err) as (backend, where):

@@ -14,19 +14,23 @@ from rich.table import Table
 from core.brain.catalog import Catalog
 from core.brain.selection import Strategy
 from core.events import Outcome
-from core.run.conditions import get_condition
 from core.run.runner import EpisodeSummary, RunSummary, run
 from core.run.simulation import Snapshot
 from server.cli.common import (
     CONDITION_METAVAR,
     OTHER_CONDITIONS,
+    UsageError,
     add_setup_arguments,
-    engine_condition,
     non_negative_int,
     positive_int,
     print_table,
     progress_bar,
     setup_of,
+)
+from server.cli.conditions import (
+    add_network_arguments,
+    engine_condition_or_file,
+    with_conditions,
 )
 from server.reports.base import setup_params
 
@@ -41,10 +45,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     sim.add_argument(
         "--condition",
         required=True,
-        type=engine_condition,
-        metavar=CONDITION_METAVAR,
-        help="which knowledge and learning the robot has (the baselines, "
-        f"{', '.join(OTHER_CONDITIONS)}, run in srlab experiment)",
+        type=engine_condition_or_file,
+        metavar=CONDITION_METAVAR[:-1] + ",FILE}",
+        help="which knowledge and learning the robot has: a built-in condition (the "
+        f"baselines, {', '.join(OTHER_CONDITIONS)}, run in srlab experiment), or a condition "
+        "file (.toml, docs/conditions.md) holding one, or FILE.toml:NAME for one of several",
     )
     sim.add_argument("--episodes", type=positive_int, default=50, help="episodes (default 50)")
     sim.add_argument("--seed", type=non_negative_int, default=0, help="random seed (default 0)")
@@ -63,6 +68,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     )
     sim.add_argument("--quiet", action="store_true", help="no progress bar (it goes to stderr)")
     add_setup_arguments(sim)
+    add_network_arguments(sim)
     sim.set_defaults(handler=simulate)
 
 
@@ -114,8 +120,13 @@ def summary_dict(result: RunSummary) -> dict[str, Any]:
 
 def simulate(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     """Run `srlab simulate`."""
-    setup = setup_of(args)
-    condition = setup.condition(get_condition(args.condition))
+    setup, names = with_conditions(setup_of(args), [args.condition], args.network, args.url)
+    if len(names) != 1:
+        raise UsageError(
+            f"--condition {args.condition} holds conditions {', '.join(names)}: name one as "
+            f"{args.condition}:NAME"
+        )
+    condition = setup.condition(setup.lookup(names[0]))
     if condition.agent != "brain":
         raise ValueError(
             f"condition {condition.name!r} is not the paper's architecture: run it with "

@@ -18,6 +18,7 @@ from server.cli.common import (
     run_batch,
     setup_of,
 )
+from server.cli.conditions import add_network_arguments, with_conditions
 from server.reports.base import fmt, setup_params
 
 
@@ -43,9 +44,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     sweep.add_argument(
         "--conditions",
         default="kp,qlambda",
-        help=f"comma-separated, from: {', '.join(CONDITIONS)} (default: kp,qlambda)",
+        help=f"comma-separated, from: {', '.join(CONDITIONS)}, or condition files (.toml, "
+        "docs/conditions.md; FILE.toml:NAME for one of a file's) (default: kp,qlambda)",
     )
     add_task_arguments(sweep, Path("results/sweep"))
+    add_network_arguments(sweep)
     sweep.set_defaults(handler=sweep_command)
 
 
@@ -56,12 +59,15 @@ def sweep_command(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) ->
     from core.params import format_value
     from server.reports.sweep import write_sweep_report
 
+    setup, named = with_conditions(
+        setup_of(args), args.conditions.split(","), args.network, args.url
+    )
     plan = Sweep(
         parse_grid(args.param),
-        tuple(parse_conditions(args.conditions)),
+        tuple(parse_conditions(",".join(named), setup)),
         tuple(range(args.seed_base, args.seed_base + args.seeds)),
         args.episodes,
-        setup_of(args),
+        setup,
     )
     tasks = plan.tasks()
     err = Console(file=stderr, stderr=True)

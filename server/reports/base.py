@@ -80,10 +80,12 @@ def head(cells: Sequence[str]) -> list[str]:
 
 
 def setup_params(setup: Setup) -> dict[str, str]:
-    """The setup as a report's parameters (its start only when one was chosen)."""
+    """The setup as a report's parameters (its start and network only when chosen)."""
     params = {"world": setup.world_name, "sensors": setup.sensors_name, "signal": setup.signal}
     if setup.world_settings:
         params["world_settings"] = settings_text(setup.world_settings)
+    if setup.network:
+        params["network"] = setup.network
     return params | ({"start": setup.start} if setup.start else {})
 
 

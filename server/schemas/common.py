@@ -116,6 +116,16 @@ class Health(BaseModel):
     viser_port: int | None = Field(
         None, description="Port of the 3D view on this host; null when it is not running."
     )
+    data_version: str = Field(
+        "",
+        description="a digest of srlab's data files (core/data: sensors, behaviours, worlds, "
+        "networks, conditions) as the service read them at its start",
+    )
+    data_changed: list[str] = Field(
+        default_factory=list,
+        description="data files edited, added or removed since the service started, "
+        "relative to core/data: it keeps using them as they were until it is restarted",
+    )
 
 
 def one_of(value: str | None, known: Sequence[JsonValue], what: str) -> str | None:

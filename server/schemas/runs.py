@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -13,23 +13,12 @@ from server.schemas.catalog import SENSOR_DEFINITIONS, WORLD_NAMES
 from server.schemas.common import Strict, one_of
 from server.schemas.networks import AssociationPublic
 
-EngineCondition = Literal[
-    "innate",
-    "delayed",
-    "dp",
-    "dp-rare",
-    "rp",
-    "trainer",
-    "kp",
-    "kp-punished",
-    "sonar",
-    "expert",
-    "reflexes",
-    "unaware",
-]
-assert set(EngineCondition.__args__) == {  # type: ignore[attr-defined]
-    n for n, c in CONDITIONS.items() if c.agent == "brain"
-}
+ENGINE_CONDITIONS = tuple(n for n, c in CONDITIONS.items() if c.agent == "brain")
+"""The conditions the engine runs: the data's (``core/data/conditions.toml``), in its order."""
+if TYPE_CHECKING:
+    EngineCondition = str
+else:  # the data's names, for validation and the OpenAPI schema's enum
+    EngineCondition = Literal[ENGINE_CONDITIONS]
 
 
 ReactionSeconds = Annotated[float, Field(ge=0.0, le=MAX_REACTION_S)]

@@ -8,7 +8,9 @@ behaviour and condition says what it means; and "Run this network" runs the open
 
 from __future__ import annotations
 
+import json
 import re
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ from playwright.sync_api import Page, Route, expect
 from webpage import cell, eventually, open_view
 
 from bench.liveserver import LiveServer, live_server
+from server.cli import main
 
 
 def association(server: LiveServer, network: str, stimulus: str, behaviour: str) -> Any:
@@ -159,7 +162,7 @@ def test_stimuli_behaviours_and_conditions_say_what_they_mean(
 
 @pytest.mark.parametrize("width", [1024, 1440])
 def test_run_this_network_and_compare_it_with_an_earlier_version(
-    page: Page, server: LiveServer, width: int
+    page: Page, server: LiveServer, width: int, capsys: pytest.CaptureFixture[str]
 ) -> None:
     name = f"trial{width}"
     fresh_network(server, name)
@@ -202,6 +205,14 @@ def test_run_this_network_and_compare_it_with_an_earlier_version(
     rate = out.locator(".side-a .big").get_attribute("data-rate")
     successes = sum(r["successes"] for r in runs[:2])
     assert rate is not None and float(rate) == pytest.approx(successes / 4)
+    # The command line the panel gives runs the same as the page's run of seed 0.
+    cli = out.locator(".run-cli code").inner_text()
+    assert cli == f"srlab simulate --condition dp --network {name} --episodes 2 --seed 0"
+    capsys.readouterr()
+    argv = [*shlex.split(cli)[1:], "--url", f"sqlite:///{server.database}", "--quiet", "--json"]
+    assert main(argv) == 0
+    seed_0 = next(r for r in runs[:2] if r["seed"] == 0)
+    assert json.loads(capsys.readouterr().out)["successes"] == seed_0["successes"]
 
 
 def test_runs_wait_for_a_free_slot_and_say_so(page: Page, tmp_path: Path) -> None:

@@ -22,14 +22,27 @@ function setOnline(up) {
   const conn = $("#conn");
   conn.className = `conn ${up ? "online" : "offline"}`;
   $(".conn-text", conn).textContent = up ? `online${health ? ` · v${health.version} · ${health.database}` : ""}` : "offline";
+  if (health) conn.title = `Connection to the service (data files ${health.data_version})`;
   $("#offline").hidden = up;
   if (up && wasOffline && ready) recover();
+}
+
+/** Say so when data files changed under the running service: it keeps what it read. */
+function showData() {
+  const changed = health?.data_changed ?? [];
+  const banner = $("#data-stale");
+  banner.hidden = changed.length === 0;
+  banner.textContent = changed.length
+    ? `Data files changed since the service started (core/data/${changed.join(", core/data/")}). ` +
+      "It keeps using them as they were: restart srlab serve to use the changes."
+    : "";
 }
 
 /** Ask the service how it is now and then, so a restart shows even on an idle page. */
 async function heartbeat() {
   try {
     health = await get("/health");
+    showData();
   } catch {
     // get() reported it: the banner is up and the next beat tries again
   }
@@ -43,6 +56,7 @@ async function recover() {
     toast("The service is back.", "ok");
     try {
       health = await get("/health");
+      showData();
     } catch {
       return;
     }
@@ -119,6 +133,7 @@ async function boot() {
   for (;;) {
     try {
       health = await get("/health");
+      showData();
       const [stimuli, behaviours, sensors] = await Promise.all([get("/stimuli"), get("/behaviours"), get("/sensors")]);
       catalog = { stimuli, behaviours, sensors };
       break;

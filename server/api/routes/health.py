@@ -19,7 +19,8 @@ def health(state: StateDep) -> Health:
     The service's database is read; the engines' process is as last heard (`Runs.outage`:
     its death is seen on its pipe), so a poll costs no trip to it. A SQLite file
     deleted or replaced since the service opened it, or its WAL index cut, is a 503 that
-    says which: the runs fail with the same error, and no write is taken.
+    says which: the runs fail with the same error, and no write is taken. It also says
+    which data files changed since the service started (it uses them as they were).
     """
     down = []
     dialect = ""
@@ -37,4 +38,6 @@ def health(state: StateDep) -> Health:
         database=dialect,
         runs_active=state.engines.running(),
         viser_port=state.viewer.port if state.viewer is not None else None,
+        data_version=state.data.version,
+        data_changed=state.data.changed(),
     )

@@ -233,7 +233,19 @@ function render() {
           : ` paired by seed (95% Student-t CI), sign-flip p = ${stats.p === null ? "—" : stats.p.toFixed(2)}${stats.complete ? "" : "; so far"}${floorNote(d.n)}` })));
   }
   parts.push(curve(batch));
+  if (batch.sides.length) parts.push(commandLine(batch));
   out.replaceChildren(...parts);
+}
+
+/** The same runs of the network as it is now, from the command line (docs/conditions.md). */
+function commandLine(batch) {
+  const [a] = batch.sides;
+  const seeds = a.runs.length;
+  const cmd = `srlab simulate --condition ${batch.condition} --network ${a.network} --episodes ${batch.episodes} --seed 0`;
+  return el("p", { class: "muted small run-cli" },
+    "The same from the command line: ", el("code", { text: cmd }),
+    seeds > 1 ? ` (and --seed 1${seeds > 2 ? ` to ${seeds - 1}` : ""} for the other runs)` : "",
+    a.network_version ? "; it runs the network as stored now, its latest version." : ".");
 }
 
 /**
