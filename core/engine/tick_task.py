@@ -98,6 +98,9 @@ class TickTask:
         self.episode_start_tick = sim.tick_count
         self.ended: tuple[int, int, int] | None = None
         """The episode that ended last: (episode, start tick, last tick)."""
+        self.ended_records: tuple[tuple[int, int, int], ...] = ()
+        """The records the brain kept aside at that episode's reset (`Brain.ended`), as
+        they were then: a reward on its replay takes its window's records from them."""
         self.need_reset = True
 
     @property
@@ -298,10 +301,28 @@ class TickTask:
         where = ", ".join(f"episode {e}: ticks {first}-{last}" for e, first, last in held)
         raise SeenTickError("tick_seen", f"tick {tick_seen} lies in no episode held ({where})")
 
+    def start_paused(self) -> None:
+        """A run paused at an episode's end starts the next one now, its first tick not run.
+
+        So a trainer's reward arriving then is credited at once, at the boundary the run is
+        paused at, and after the reset, where a replay of the log applies it. Not while a
+        boundary is being settled (its rewards apply at the next tick, as before).
+        """
+        controls = self.controls
+        if (
+            controls.paused
+            and not controls.stopping
+            and self.need_reset
+            and not self.boundary.settling
+            and self._episodes_left()
+        ):
+            self._start_episode()
+
     def _start_episode(self) -> None:
         if self.sim.episode >= 0:
             self.ended = (self.sim.episode, self.episode_start_tick, self.sim.tick_count)
         self.sim.reset()
+        self.ended_records = tuple(self.sim.brain.ended)
         self.need_reset = False
         self.episode_start_tick = self.sim.tick_count
         self.rewards.in_episode = 0
@@ -349,8 +370,8 @@ class TickTask:
 
         Nothing ticks before that boundary, so they credit what they would credit there:
         the STM records before it. Not while the boundary is being settled (a step runs:
-        a reward then is held for the next) nor once the episode ended (its rewards apply
-        after the reset, as a replay applies them).
+        a reward then is held for the next); a run paused at an episode's end has started
+        the next one first (`start_paused`), as a replay applies them after the reset.
         """
         if self.controls.paused and not self.need_reset and not self.boundary.settling:
             self.boundary.release(self.sim.tick_count + 1)
