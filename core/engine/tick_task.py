@@ -31,7 +31,7 @@ from core.events import EpisodeEnded, Event, Outcome, RewardDue
 from core.ports import EpisodeRecord, Mode, RunSpec, RunTotals
 from core.run.checkpoint import export_state
 from core.run.simulation import Simulation, Snapshot
-from core.run.trace import TraceRecorder
+from core.run.trace import TraceRecorder, trace_records
 
 
 class TickTask:
@@ -99,8 +99,10 @@ class TickTask:
         self.ended: tuple[int, int, int] | None = None
         """The episode that ended last: (episode, start tick, last tick)."""
         self.ended_records: tuple[tuple[int, int, int], ...] = ()
-        """The records the brain kept aside at that episode's reset (`Brain.ended`), as
-        they were then: a reward on its replay takes its window's records from them."""
+        """That episode's last records, kept aside at its reset as its trace has them (the
+        brain's, `Brain.ended`, if no trace is kept): a reward on its replay takes its
+        window's records from them, as from the stored trace."""
+        self._ending_records: tuple[tuple[int, int, int], ...] | None = None
         self.need_reset = True
 
     @property
@@ -322,7 +324,8 @@ class TickTask:
         if self.sim.episode >= 0:
             self.ended = (self.sim.episode, self.episode_start_tick, self.sim.tick_count)
         self.sim.reset()
-        self.ended_records = tuple(self.sim.brain.ended)
+        ending, self._ending_records = self._ending_records, None
+        self.ended_records = tuple(self.sim.brain.ended) if ending is None else ending
         self.need_reset = False
         self.episode_start_tick = self.sim.tick_count
         self.rewards.in_episode = 0
@@ -409,6 +412,9 @@ class TickTask:
             trace=b"",  # compressed by the writer (`EpisodeJob.stored`)
         )
         state = export_state(sim)
+        trace = self.trace.take() if self.trace is not None else None
+        if trace is not None:
+            self._ending_records = trace_records(trace, sim.brain.window.hi_ticks + 1)
         self.writer.episodes.put(
             EpisodeJob(
                 record,
@@ -418,7 +424,7 @@ class TickTask:
                 self.totals,
                 self.rewards.last_applied,
                 self.rewards.last_external,
-                self.trace.take() if self.trace is not None else None,
+                trace,
             )
         )
         self.need_reset = True

@@ -270,21 +270,33 @@ def credited(ev: RewardApplied) -> list[tuple[int, int, int, int]]:
     return [(c.tick, c.stimulus, c.behaviour, c.d_k) for c in ev.credits]
 
 
-def test_a_replay_reward_on_the_ended_episode_credits_as_its_stored_trace_says() -> None:
-    """The episode that ended last, scrubbed on its replay: at its last tick, while the
-    records kept aside at its end hold the window, from them; at an earlier tick, or once
-    they are let go, from its stored trace (the service's route falls back to it on
-    `episode`). The same press on the same tick credits the same records either way."""
+def ended_presses(pop_at: int | None) -> tuple[int, dict[str, list[tuple[int, int, int, int]]]]:
+    """Presses on the replay of the first episode to end (seed 7): at its last tick while
+    the run keeps its last records ("kept"), at that tick once they are let go and 3 ticks
+    before it (from its stored trace, "stored 0" and "stored -3"). With `pop_at`, a reward
+    worth 0 seen at that tick takes STM's records up to it first (as any reward pops what it
+    credits). Returns the episode's last tick and each press's credits."""
     store = InMemoryRunStore(CATALOG)
     engine = RunEngine.create(spec(7), store, catalog=CATALOG)
     out: dict[str, list[tuple[int, int, int, int]]] = {}
+    ends: list[int] = []
 
     async def script(t: Trainer) -> None:
-        end = await t.to_a_crash()
+        if pop_at is not None:
+            while t.e.sim.tick_count < pop_at:
+                await t.e.step()
+            await t.e.reward(0.0, tick_seen=pop_at)
+            await t.applied()
+        while not t.e.sim.snapshot.done:
+            await t.e.step()
+        end = t.e.sim.tick_count
         ended = t.e.sim.episode
+        ends.append(end)
         await t.e.reward(1.0, tick_seen=end, seen_episode=ended)  # paused at its end
         out["kept"] = credited(await t.applied())
+        out["brain kept"] = [(r[0], r[1], r[2], 0) for r in t.e.sim.brain.ended]
         records = from_trace(await stored_trace(store, t.e.run_id, ended))
+        out["trace"] = [(r[0], r[1], r[2], 0) for r in records]
         for tick in (end - 3, end):
             if tick == end:
                 while t.e.sim.tick_count <= end + WINDOW.hi_ticks:
@@ -294,11 +306,28 @@ def test_a_replay_reward_on_the_ended_episode_credits_as_its_stored_trace_says()
             assert caught.value.field == "episode"
             await t.e.reward(1.0, tick_seen=tick, seen_episode=ended, records=records)
             out[f"stored {tick - end}"] = credited(await t.applied())
-        # A tick in no episode the run holds, and the episode's own bounds, are refused.
+        # A tick the run has not reached is refused, naming it.
         with pytest.raises(SeenTickError) as caught:
             await t.e.reward(1.0, tick_seen=t.e.sim.tick_count + 1, seen_episode=ended)
         assert caught.value.field == "tick_seen"
 
     run(engine, script)
+    return ends[0], out
+
+
+def test_a_replay_reward_on_the_ended_episode_credits_as_its_stored_trace_says() -> None:
+    """The episode that ended last, scrubbed on its replay: at its last tick, while the
+    records kept aside at its end hold the window, from them; at an earlier tick, or once
+    they are let go, from its stored trace (the service's route falls back to it on
+    `episode`). The same press on the same tick credits the same records either way, even
+    when a reward took some of STM's records before the episode ended (the records kept
+    aside for a reward on its replay are its trace's, not what STM still held)."""
+    end, out = ended_presses(None)
     assert out["kept"] and out["kept"] == out["stored 0"]
     assert out["stored -3"] and out["stored -3"] != out["kept"]
+    again, popped = ended_presses(end - 3)
+    assert again == end  # the reward worth 0 changed nothing the robot did
+    # STM lost the records up to end - 3 to the reward worth 0; the trace keeps them.
+    assert {r[0] for r in popped["trace"]} & set(range(end - 10, end - 2))
+    assert not {r[0] for r in popped["brain kept"]} & set(range(end - 10, end - 2))
+    assert popped["kept"] == popped["stored 0"]
