@@ -211,8 +211,13 @@ class RunEngine:
         It is stamped with the next tick boundary, so it credits every STM record so far;
         with `tick_seen` (the tick its trainer saw, in `seen_episode`: by default the one
         it lies in), the reaction window before that tick (`core.brain.memory.credit_seen`;
-        `SeenTickError` for a tick the run has not reached or no longer holds).
-        A paused run takes it too and applies it at once, at the boundary it is paused at.
+        `SeenTickError` for a tick the run has not reached or no longer holds). With
+        `seen_episode` naming an ended episode (a reward on its replay), the records of its
+        window up to `tick_seen`: `records`, from its stored trace, or the records kept aside
+        at its end while they hold that window (else `SeenTickError` on `episode`: the
+        caller reads its stored trace).
+        A paused run takes it too and applies it at once, at the boundary it is paused at
+        (paused just as an episode ended, after starting the next, `TickTask.start_paused`).
         `uid` is its id from its arrival on ("": one made of its source, episode, boundary
         and how many rewards this engine took).
         """
@@ -225,6 +230,7 @@ class RunEngine:
             # would be applied in an order a later replay could not repeat.
             await self._ticks.replayed.wait()
             self._check_running(paused=True)
+        self._ticks.start_paused()
         window = None
         if tick_seen is None:
             seen_episode = None
@@ -232,8 +238,14 @@ class RunEngine:
             # A stored episode's tick, looked at at leisure: its window ends there.
             if seen_episode is None or seen_episode >= self.sim.episode:
                 raise SeenTickError("episode", "a stored episode's records need its number")
-            window = (tick_seen - reaction_window(self.spec).hi_ticks, tick_seen)
+            window = self._replay_window(tick_seen)
             records = tuple(r for r in records if window[0] <= r[0] <= window[1])
+        elif seen_episode is not None and seen_episode < self.sim.episode:
+            # The ended episode's tick, scrubbed on its replay: the same rule as a stored
+            # episode's, from the records kept aside at its end while they hold the window.
+            seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
+            window = self._replay_window(tick_seen)
+            records = self._kept_records(window)
         else:
             seen_episode = self._ticks.seen_episode(tick_seen, seen_episode)
             window = self._seen_window(tick_seen)
@@ -264,6 +276,28 @@ class RunEngine:
         self._writer.acknowledge(job)
         assert job.ack is not None
         return await job.ack
+
+    def _replay_window(self, tick_seen: int) -> tuple[int, int]:
+        """The ticks a reward on an ended episode's replay credits: up to the seen tick."""
+        return tick_seen - reaction_window(self.spec).hi_ticks, tick_seen
+
+    def _kept_records(self, window: tuple[int, int]) -> tuple[tuple[int, int, int], ...]:
+        """The ended episode's records kept aside at its end, in `window`.
+
+        Only while they hold the whole window: it starts no earlier than they do, and the
+        reward comes at most the window's length after the episode's end (later the brain
+        has let them go). Else `SeenTickError` on `episode`: its stored trace has them.
+        """
+        ticks, brain = self._ticks, self.sim.brain
+        assert ticks.ended is not None  # an episode before the current one is held
+        episode, _, last = ticks.ended
+        hi = brain.window.hi_ticks
+        held = brain.ended_tick == last and self.sim.tick_count - last <= hi
+        if not held or window[0] < last - hi:
+            raise SeenTickError(
+                "episode", f"episode {episode}'s records before tick {last} are its stored trace's"
+            )
+        return tuple(r for r in ticks.ended_records if window[0] <= r[0] <= window[1])
 
     def _seen_window(self, tick_seen: int) -> tuple[int, int]:
         """The ticks a reward seen at `tick_seen` credits, as it arrives (then logged).

@@ -31,7 +31,7 @@ from core.events import EpisodeEnded, Event, Outcome, RewardDue
 from core.ports import EpisodeRecord, Mode, RunSpec, RunTotals
 from core.run.checkpoint import export_state
 from core.run.simulation import Simulation, Snapshot
-from core.run.trace import TraceRecorder
+from core.run.trace import TraceRecorder, trace_records
 
 
 class TickTask:
@@ -98,6 +98,11 @@ class TickTask:
         self.episode_start_tick = sim.tick_count
         self.ended: tuple[int, int, int] | None = None
         """The episode that ended last: (episode, start tick, last tick)."""
+        self.ended_records: tuple[tuple[int, int, int], ...] = ()
+        """That episode's last records, kept aside at its reset as its trace has them (the
+        brain's, `Brain.ended`, if no trace is kept): a reward on its replay takes its
+        window's records from them, as from the stored trace."""
+        self._ending_records: tuple[tuple[int, int, int], ...] | None = None
         self.need_reset = True
 
     @property
@@ -298,10 +303,29 @@ class TickTask:
         where = ", ".join(f"episode {e}: ticks {first}-{last}" for e, first, last in held)
         raise SeenTickError("tick_seen", f"tick {tick_seen} lies in no episode held ({where})")
 
+    def start_paused(self) -> None:
+        """A run paused at an episode's end starts the next one now, its first tick not run.
+
+        So a trainer's reward arriving then is credited at once, at the boundary the run is
+        paused at, and after the reset, where a replay of the log applies it. Not while a
+        boundary is being settled (its rewards apply at the next tick, as before).
+        """
+        controls = self.controls
+        if (
+            controls.paused
+            and not controls.stopping
+            and self.need_reset
+            and not self.boundary.settling
+            and self._episodes_left()
+        ):
+            self._start_episode()
+
     def _start_episode(self) -> None:
         if self.sim.episode >= 0:
             self.ended = (self.sim.episode, self.episode_start_tick, self.sim.tick_count)
         self.sim.reset()
+        ending, self._ending_records = self._ending_records, None
+        self.ended_records = tuple(self.sim.brain.ended) if ending is None else ending
         self.need_reset = False
         self.episode_start_tick = self.sim.tick_count
         self.rewards.in_episode = 0
@@ -349,8 +373,8 @@ class TickTask:
 
         Nothing ticks before that boundary, so they credit what they would credit there:
         the STM records before it. Not while the boundary is being settled (a step runs:
-        a reward then is held for the next) nor once the episode ended (its rewards apply
-        after the reset, as a replay applies them).
+        a reward then is held for the next); a run paused at an episode's end has started
+        the next one first (`start_paused`), as a replay applies them after the reset.
         """
         if self.controls.paused and not self.need_reset and not self.boundary.settling:
             self.boundary.release(self.sim.tick_count + 1)
@@ -388,6 +412,9 @@ class TickTask:
             trace=b"",  # compressed by the writer (`EpisodeJob.stored`)
         )
         state = export_state(sim)
+        trace = self.trace.take() if self.trace is not None else None
+        if trace is not None:
+            self._ending_records = trace_records(trace, sim.brain.window.hi_ticks + 1)
         self.writer.episodes.put(
             EpisodeJob(
                 record,
@@ -397,7 +424,7 @@ class TickTask:
                 self.totals,
                 self.rewards.last_applied,
                 self.rewards.last_external,
-                self.trace.take() if self.trace is not None else None,
+                trace,
             )
         )
         self.need_reset = True

@@ -151,6 +151,25 @@ class TraceRecorder:
         return arr
 
 
+def trace_records(rows: TraceArray, last: int) -> tuple[tuple[int, int, int], ...]:
+    """The STM records of a trace's `last` rows: (tick, stimulus, behaviour), oldest first.
+
+    A tick's record is what STM took for it: the behaviour and the stimulus it answered
+    (`released_by`; none for the default behaviour's ticks).
+    """
+    tail = rows[-last:] if last > 0 else rows[:0]
+    return tuple(
+        (t, s, b)
+        for t, s, b in zip(
+            tail["tick"].tolist(),
+            tail["released_by"].tolist(),
+            tail["behaviour"].tolist(),
+            strict=True,
+        )
+        if s >= 0
+    )
+
+
 def compress(rows: TraceArray) -> bytes:
     """A trace's rows (`TraceRecorder.take`) as stored.
 

@@ -93,7 +93,8 @@ async def inject_reward(
         except SeenTickError as e:
             if e.field != "episode" or body.episode is None or body.tick_seen is None:
                 raise
-            # An episode the run no longer holds: a stored one, scrubbed on its replay.
+            # An ended episode scrubbed on its replay, at a tick whose window the run no
+            # longer holds: its stored trace has the records.
             records = await run_in_threadpool(
                 stored_records, store, run_id, body.episode, body.tick_seen
             )

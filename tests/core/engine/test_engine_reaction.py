@@ -14,7 +14,7 @@ from core.engine import RunEngine
 from core.errors import SeenTickError
 from core.events import RewardApplied
 from core.ports import Mode, RunSpec, RunStatus
-from core.run.trace import unpack
+from core.run.trace import TraceRow, unpack
 
 HZ = 500.0
 WINDOW_S = (0.004, 0.02)
@@ -219,3 +219,115 @@ def test_a_reward_on_a_stored_episode_is_replayed_with_the_records_it_carried() 
     again = RunEngine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
     assert asyncio.run(again.run(until_tick=ticks + 1)) is RunStatus.STOPPED
     assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
+
+
+async def stored_trace(store: InMemoryRunStore, run_id: int, episode: int) -> list[TraceRow]:
+    """Episode `episode`'s stored trace, once the run's episode writer has stored it."""
+    async with asyncio.timeout(30):  # a bound for a hang, not a speed test
+        while (stored := store.episode(run_id, episode)) is None:
+            await asyncio.sleep(0.01)
+    return unpack(stored.trace)
+
+
+def from_trace(rows: list[TraceRow]) -> tuple[tuple[int, int, int], ...]:
+    """A trace's STM records: the ticks whose behaviour answered a stimulus."""
+    return tuple((r.tick, r.released_by, r.behaviour) for r in rows if r.released_by >= 0)
+
+
+def test_a_run_paused_at_an_episodes_end_credits_a_replay_reward_at_once() -> None:
+    """The console's race: a fast run paused just as an episode ended held a reward on a
+    stored episode's replay until it went on, so whether it was credited by the time the
+    console looked depended on when the trainer resumed. Paused there, the run starts its
+    next episode as the reward comes (its first tick not run) and credits it at once, after
+    the reset, where a replay of the log applies it too."""
+    store = InMemoryRunStore(CATALOG)
+    engine = RunEngine.create(spec(7), store, catalog=CATALOG)
+    seen: list[tuple[int, int]] = []
+
+    async def script(t: Trainer) -> None:
+        await t.to_a_crash()
+        end = await t.to_a_crash()
+        assert t.e.sim.snapshot.done and t.e.sim.episode == 1  # paused at episode 1's end
+        records = from_trace(await stored_trace(store, t.e.run_id, 0))
+        tick = records[len(records) // 2][0]
+        await t.e.reward(1.0, tick_seen=tick, seen_episode=0, records=records)
+        ev = await t.applied()  # no step, no resume: credited while paused
+        assert t.e.status is RunStatus.PAUSED
+        assert (t.e.sim.tick_count, t.e.sim.episode, ev.episode) == (end, 2, 2)
+        assert ev.credits and all(tick - WINDOW.hi_ticks <= c.tick <= tick for c in ev.credits)
+        seen.append((tick, end))
+
+    run(engine, script)
+    assert seen
+    ticks = engine.sim.tick_count
+    store.set_status(engine.run_id, RunStatus.INTERRUPTED)
+    again = RunEngine.restore(engine.run_id, store, catalog=CATALOG, mode=Mode.FAST)
+    assert asyncio.run(again.run(until_tick=ticks + 1)) is RunStatus.STOPPED
+    assert again.sim.brain.ltm.as_dict() == engine.sim.brain.ltm.as_dict()
+
+
+def credited(ev: RewardApplied) -> list[tuple[int, int, int, int]]:
+    return [(c.tick, c.stimulus, c.behaviour, c.d_k) for c in ev.credits]
+
+
+def ended_presses(pop_at: int | None) -> tuple[int, dict[str, list[tuple[int, int, int, int]]]]:
+    """Presses on the replay of the first episode to end (seed 7): at its last tick while
+    the run keeps its last records ("kept"), at that tick once they are let go and 3 ticks
+    before it (from its stored trace, "stored 0" and "stored -3"). With `pop_at`, a reward
+    worth 0 seen at that tick takes STM's records up to it first (as any reward pops what it
+    credits). Returns the episode's last tick and each press's credits."""
+    store = InMemoryRunStore(CATALOG)
+    engine = RunEngine.create(spec(7), store, catalog=CATALOG)
+    out: dict[str, list[tuple[int, int, int, int]]] = {}
+    ends: list[int] = []
+
+    async def script(t: Trainer) -> None:
+        if pop_at is not None:
+            while t.e.sim.tick_count < pop_at:
+                await t.e.step()
+            await t.e.reward(0.0, tick_seen=pop_at)
+            await t.applied()
+        while not t.e.sim.snapshot.done:
+            await t.e.step()
+        end = t.e.sim.tick_count
+        ended = t.e.sim.episode
+        ends.append(end)
+        await t.e.reward(1.0, tick_seen=end, seen_episode=ended)  # paused at its end
+        out["kept"] = credited(await t.applied())
+        out["brain kept"] = [(r[0], r[1], r[2], 0) for r in t.e.sim.brain.ended]
+        records = from_trace(await stored_trace(store, t.e.run_id, ended))
+        out["trace"] = [(r[0], r[1], r[2], 0) for r in records]
+        for tick in (end - 3, end):
+            if tick == end:
+                while t.e.sim.tick_count <= end + WINDOW.hi_ticks:
+                    await t.e.step()  # the kept records are let go
+            with pytest.raises(SeenTickError) as caught:
+                await t.e.reward(1.0, tick_seen=tick, seen_episode=ended)
+            assert caught.value.field == "episode"
+            await t.e.reward(1.0, tick_seen=tick, seen_episode=ended, records=records)
+            out[f"stored {tick - end}"] = credited(await t.applied())
+        # A tick the run has not reached is refused, naming it.
+        with pytest.raises(SeenTickError) as caught:
+            await t.e.reward(1.0, tick_seen=t.e.sim.tick_count + 1, seen_episode=ended)
+        assert caught.value.field == "tick_seen"
+
+    run(engine, script)
+    return ends[0], out
+
+
+def test_a_replay_reward_on_the_ended_episode_credits_as_its_stored_trace_says() -> None:
+    """The episode that ended last, scrubbed on its replay: at its last tick, while the
+    records kept aside at its end hold the window, from them; at an earlier tick, or once
+    they are let go, from its stored trace (the service's route falls back to it on
+    `episode`). The same press on the same tick credits the same records either way, even
+    when a reward took some of STM's records before the episode ended (the records kept
+    aside for a reward on its replay are its trace's, not what STM still held)."""
+    end, out = ended_presses(None)
+    assert out["kept"] and out["kept"] == out["stored 0"]
+    assert out["stored -3"] and out["stored -3"] != out["kept"]
+    again, popped = ended_presses(end - 3)
+    assert again == end  # the reward worth 0 changed nothing the robot did
+    # STM lost the records up to end - 3 to the reward worth 0; the trace keeps them.
+    assert {r[0] for r in popped["trace"]} & set(range(end - 10, end - 2))
+    assert not {r[0] for r in popped["brain kept"]} & set(range(end - 10, end - 2))
+    assert popped["kept"] == popped["stored 0"]

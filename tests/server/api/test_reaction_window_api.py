@@ -101,6 +101,18 @@ async def applied(client: Any, run_id: int, reward_id: int | None = None) -> dic
             await asyncio.sleep(0.02)
 
 
+async def paused_after_two_episodes(client: Any) -> tuple[int, int]:
+    """A 1 kHz kp run paused once it has ended two episodes: its id and its episodes done."""
+    run_id = (await create(client, condition="kp", mode="realtime", hz=1000))["id"]
+    await client.post(f"/api/runs/{run_id}/start")
+    async with asyncio.timeout(60):  # a bound for a hang, not a speed test
+        while (await client.get(f"/api/runs/{run_id}")).json()["episodes_done"] < 2:
+            await asyncio.sleep(0.05)
+    paused = await client.post(f"/api/runs/{run_id}/pause")
+    assert paused.status_code == 200, paused.text
+    return run_id, int(paused.json()["episodes_done"])
+
+
 async def test_a_reward_on_a_stored_episode_s_tick_credits_its_stored_records(
     tmp_path: Path,
 ) -> None:
@@ -108,12 +120,7 @@ async def test_a_reward_on_a_stored_episode_s_tick_credits_its_stored_records(
     at one of its ticks: the records of its trace in the window up to that tick."""
     settings = settings_for(tmp_path, reaction_window="0.02-0.05")  # up to 50 ticks at 1 kHz
     async with client_for(settings) as (client, _):
-        run_id = (await create(client, condition="kp", mode="realtime", hz=1000))["id"]
-        await client.post(f"/api/runs/{run_id}/start")
-        async with asyncio.timeout(60):  # a bound for a hang, not a speed test
-            while (await client.get(f"/api/runs/{run_id}")).json()["episodes_done"] < 2:
-                await asyncio.sleep(0.05)
-        assert (await client.post(f"/api/runs/{run_id}/pause")).status_code == 200
+        run_id, _ = await paused_after_two_episodes(client)
         trace = (await client.get(f"/api/runs/{run_id}/episodes/0")).json()["trace"]
         answered = [row["tick"] for row in trace if row["released_by"] is not None]
         seen = answered[len(answered) // 2]
@@ -131,4 +138,34 @@ async def test_a_reward_on_a_stored_episode_s_tick_credits_its_stored_records(
             f"/api/runs/{run_id}/rewards", json={"value": 1, "tick_seen": 0, "episode": 99}
         )
         assert unknown.status_code == 422, unknown.text
+        await client.post(f"/api/runs/{run_id}/stop")
+
+
+async def test_every_tick_of_the_episode_that_ended_last_credits_its_stored_records(
+    tmp_path: Path,
+) -> None:
+    """Feedback on replay of the episode that ended last (the run still keeps its last
+    records aside): each tick credits the records of its trace in the window up to it, its
+    first as its last, and a tick outside it is a 422 naming `tick_seen`."""
+    settings = settings_for(tmp_path, reaction_window="0.02-0.05")  # up to 50 ticks at 1 kHz
+    async with client_for(settings) as (client, _):
+        run_id, episodes_done = await paused_after_two_episodes(client)
+        last = episodes_done - 1
+        async with asyncio.timeout(60):
+            while (
+                got := await client.get(f"/api/runs/{run_id}/episodes/{last}")
+            ).status_code != 200:
+                await asyncio.sleep(0.05)
+        trace = got.json()["trace"]
+        answered = [row["tick"] for row in trace if row["released_by"] is not None]
+        for seen in (answered[0], answered[len(answered) // 2], trace[-1]["tick"]):
+            expected = [t for t in answered if seen - 50 <= t <= seen]
+            body = {"value": 1, "tick_seen": seen, "episode": last}
+            r = await client.post(f"/api/runs/{run_id}/rewards", json=body)
+            assert r.status_code == 202, r.text
+            assert (r.json()["seen_episode"], r.json()["window"]) == (last, [seen - 50, seen])
+            assert (await applied(client, run_id, r.json()["id"]))["credited"] == len(expected)
+        outside = {"value": 1, "tick_seen": trace[0]["tick"] - 1, "episode": last}
+        bad = await client.post(f"/api/runs/{run_id}/rewards", json=outside)
+        assert bad.status_code == 422 and bad.json()["detail"][0]["loc"] == ["body", "tick_seen"]
         await client.post(f"/api/runs/{run_id}/stop")

@@ -241,13 +241,22 @@ const CREDIT_TRIES = 20;
 const CREDIT_WAIT_MS = 500;
 const LOG_TAIL = 200;
 
-/** The records reward `id` credited, read from the log's tail once it is applied (null: not yet). */
+/**
+ * The records reward `id` credited, read from the log once it is applied (null: not yet).
+ * The log is in log order and the reward is in it (its answer is its log entry), so it lies
+ * among the entries the log held at the first look: those are read each time, not the log's
+ * tail, which a running run's own rewards move past it.
+ */
 async function creditOf(runId, id) {
+  let at = null;
   for (let i = 0; i < CREDIT_TRIES; i += 1) {
-    const head = await attempt(() => get(`/runs/${runId}/rewards`, { limit: 1 }));
-    if (!head) return null;
-    const tail = await attempt(() => get(`/runs/${runId}/rewards`, { limit: LOG_TAIL, offset: Math.max(0, head.count - LOG_TAIL) }));
-    const row = tail ? tail.data.find((r) => r.id === id) : null;
+    if (at === null) {
+      const head = await attempt(() => get(`/runs/${runId}/rewards`, { limit: 1 }));
+      if (!head) return null;
+      at = Math.max(0, head.count - LOG_TAIL);
+    }
+    const page = await attempt(() => get(`/runs/${runId}/rewards`, { limit: LOG_TAIL, offset: at }));
+    const row = page ? page.data.find((r) => r.id === id) : null;
     if (row && row.applied) return row.credited;
     await new Promise((resolve) => setTimeout(resolve, CREDIT_WAIT_MS));
   }
