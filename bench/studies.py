@@ -358,6 +358,8 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
             cwd=ROOT,
             check=True,
         )
+        # The ticks read at once, and the CPU up to then: the same span, whatever comes after.
+        ticks = ticks_run(asyncio.run(collect(seats, with_logs=False))[0]) - ticks0
         split.stop()
         cpu = meter.report("trainers")
         for k, (pid, before) in enumerate(others, 1):
@@ -370,7 +372,7 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
         states, log = asyncio.run(collect(seats))
         result = figures(tallies, states, log)
         print(f"CPU while the trainers ran: {cpu}")
-        print(f"  of which: {split.report(ticks_run(states) - ticks0)}")
+        print(f"  of which: {split.report(ticks)}")
         print(f"load average (1 min) before / after: {load0[0]:.2f} / {load1[0]:.2f}")
         print_figures(result, states)
         return result
