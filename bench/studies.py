@@ -42,7 +42,7 @@ from typing import Any
 
 from bench.figures import percentile
 from bench.liveserver import ROOT
-from bench.procs import tree_cpu_seconds
+from bench.procs import cpu_seconds, descendants, tree_cpu_seconds
 from bench.service.clients import RawClient
 from bench.service.cpu import CpuMeter
 from bench.service.harness import Server, call, print_log, wait_healthy
@@ -154,18 +154,25 @@ async def reward_log(port: int, run: int) -> list[dict[str, Any]]:
         await client.aclose()
 
 
-async def collect(seats: list[Seat]) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
-    """Every run's state, then every run's reward log, a few runs at a time."""
+async def collect(
+    seats: list[Seat], *, with_logs: bool = True
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Every run's state, then every run's reward log (`with_logs`), a few runs at a time."""
     states: list[dict[str, Any]] = []
     logs: list[dict[str, Any]] = []
     for k in range(0, len(seats), 16):
         batch = seats[k : k + 16]
         states += await asyncio.gather(*(run_figures(s.port, s.run) for s in batch))
-    for k in range(0, len(seats), 16):
+    for k in range(0, len(seats) if with_logs else 0, 16):
         batch = seats[k : k + 16]
         for rows in await asyncio.gather(*(reward_log(s.port, s.run) for s in batch)):
             logs += rows
     return states, logs
+
+
+def ticks_run(states: list[dict[str, Any]]) -> int:
+    """The ticks the runs have run, all together (their states' live figures)."""
+    return sum(int(s["live"]["ticks_run"]) for s in states if s.get("live"))
 
 
 @dataclass
@@ -342,6 +349,8 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
         spec = {"trainers": people, "seconds": args.seconds, "seed": args.seed, "poll": args.poll}
         (folder / "spec.json").write_text(json.dumps(spec))
         meter = CpuMeter(servers[0].pid)
+        ticks0 = ticks_run(asyncio.run(collect(seats, with_logs=False))[0])
+        split = ProcessSplit(servers[0].pid)
         others = [(s.pid, tree_cpu_seconds(s.pid)) for s in servers[1:]]
         wall0 = time.perf_counter()
         subprocess.run(
@@ -349,6 +358,9 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
             cwd=ROOT,
             check=True,
         )
+        # The ticks read at once, and the CPU up to then: the same span, whatever comes after.
+        ticks = ticks_run(asyncio.run(collect(seats, with_logs=False))[0]) - ticks0
+        split.stop()
         cpu = meter.report("trainers")
         for k, (pid, before) in enumerate(others, 1):
             after = tree_cpu_seconds(pid)
@@ -360,6 +372,7 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
         states, log = asyncio.run(collect(seats))
         result = figures(tallies, states, log)
         print(f"CPU while the trainers ran: {cpu}")
+        print(f"  of which: {split.report(ticks)}")
         print(f"load average (1 min) before / after: {load0[0]:.2f} / {load1[0]:.2f}")
         print_figures(result, states)
         return result
@@ -368,6 +381,35 @@ def measure(args: argparse.Namespace, folder: Path) -> Figures:
             code = server.stop()
             print(f"service {k}: stopped (SIGINT), exit code {code}")
             print_log(server.log)
+
+
+class ProcessSplit:
+    """The service's own process and its engines' process apart, from `start` to `stop`."""
+
+    def __init__(self, service_pid: int) -> None:
+        self._service = service_pid
+        self._engines = sorted(descendants(service_pid))
+        self._wall = time.perf_counter()
+        self._spent = self._seconds()
+
+    def _seconds(self) -> tuple[float, float]:
+        own = cpu_seconds(self._service) or 0.0
+        return own, sum(cpu_seconds(p) or 0.0 for p in self._engines)
+
+    def stop(self) -> None:
+        """The CPU each spent since it was made."""
+        wall = time.perf_counter() - self._wall
+        own, engines = self._seconds()
+        self._wall, self._spent = wall, (own - self._spent[0], engines - self._spent[1])
+
+    def report(self, ticks: int) -> str:
+        """Each one's share of one core; the engines' CPU a tick of the `ticks` run."""
+        (own, engines), wall = self._spent, self._wall
+        per_tick = f"{engines * 1000 / ticks:.3f} ms" if ticks > 0 else "-"
+        return (
+            f"the service's process {own / wall:.0%}, the engines' {engines / wall:.0%} of one "
+            f"core ({per_tick} a tick, {ticks / wall:,.0f} ticks a second)"
+        )
 
 
 async def _healthy(server: Server) -> None:

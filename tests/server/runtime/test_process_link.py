@@ -382,3 +382,12 @@ def test_srlab_serve_ticks_runs_in_the_engines_process_unless_told_otherwise(
         assert _loads_numba(server.process.pid) is not in_process
         engines = [p for p, cmd in children(server.process.pid).items() if "runtime.process" in cmd]
         assert [_loads_numba(p) for p in engines] == ([True] if in_process else [])
+
+
+def test_on_sqlite_the_engines_storage_calls_share_one_thread() -> None:
+    """SQLite takes one writer at a time: every run's writes queue on one thread there.
+
+    PostgreSQL keeps asyncio's pool, whose threads' writes go in one transaction together.
+    """
+    assert engine_process.storage_threads("sqlite:///runs.db") == 1
+    assert engine_process.storage_threads("postgresql+psycopg://srlab@localhost/srlab") is None
