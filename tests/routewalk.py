@@ -13,6 +13,16 @@ from server.config import Settings
 from server.main import create_app
 
 
+def study_body(name: str, **changes: Any) -> dict[str, Any]:
+    """A study's creation body: one trainer condition, an hour each, a consent text."""
+    return {
+        "name": name,
+        "conditions": ["trainer"],
+        "budget": {"seconds": 3600},
+        "consent_text": "You will train a simulated robot.",
+    } | changes
+
+
 def api_routes() -> list[tuple[str, str, frozenset[str]]]:
     """Every (method, path, tags) of the app's API, from the app itself."""
     app = create_app(Settings(viser=False))

@@ -18,26 +18,19 @@ import json
 import re
 import zipfile
 from collections.abc import Iterator
-from typing import Any
 
 import httpx
 import pytest
 from browser import artifact
 from conftest import BROWSER_WAIT_MS
 from playwright.sync_api import Browser, BrowserContext, Page, Request, expect
+from routewalk import study_body
 from studypage import CODE, consent, create_study, invite, reward
 
 from bench.liveserver import LiveServer, live_server
 
 TOKEN = "organiser-s3cret"
-STUDY: dict[str, Any] = {
-    "name": "closed",
-    "conditions": ["trainer"],
-    "budget": {"seconds": 3600},
-    "consent_text": "You will train a simulated robot.",
-    "consent_version": "v1",
-    "completion_code": "C0DE42",
-}
+STUDY = study_body("closed", consent_version="v1", completion_code="C0DE42")
 
 
 @pytest.fixture(scope="module")

@@ -13,19 +13,14 @@ from typing import Any
 import httpx
 import pytest
 from apphelpers import client_for, settings_for
-from routewalk import api_routes, consented_participants, fill
+from routewalk import api_routes, consented_participants, fill, study_body
 
 from server.api.access import OPEN_TAGS
 from server.config import Settings
 
 pytestmark = pytest.mark.anyio
 TOKEN = "organiser-s3cret"
-STUDY: dict[str, Any] = {
-    "name": "closed",
-    "conditions": ["trainer"],
-    "budget": {"seconds": 3600},
-    "consent_text": "You will train a simulated robot.",
-}
+STUDY = study_body("closed")
 
 
 ROUTES = api_routes()

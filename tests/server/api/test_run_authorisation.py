@@ -11,18 +11,13 @@ from typing import Any
 import httpx
 import pytest
 from apphelpers import client_for, settings_for
-from routewalk import api_routes, consented_participants, fill
+from routewalk import api_routes, consented_participants, fill, study_body
 
 from server.api.access import PARTICIPANT_TAGS
 
 pytestmark = pytest.mark.anyio
 
-STUDY: dict[str, Any] = {
-    "name": "walk",
-    "conditions": ["trainer"],
-    "budget": {"seconds": 3600},
-    "consent_text": "You will train a simulated robot.",
-}
+STUDY = study_body("walk")
 
 
 ROUTES = api_routes()

@@ -16,7 +16,7 @@ import httpx
 import pytest
 from apphelpers import client_for, settings_for
 from gatehelpers import becomes_viewer, page_socket, shows, until, viewer_of
-from routewalk import consented_participants
+from routewalk import consented_participants, study_body
 from websockets.exceptions import InvalidStatus
 
 from bench.liveserver import free_port
@@ -28,12 +28,7 @@ pytestmark = pytest.mark.anyio
 
 TOKEN = "organiser-s3cret"
 ORGANISER = {"Authorization": f"Bearer {TOKEN}"}
-STUDY: dict[str, Any] = {
-    "name": "views",
-    "conditions": ["trainer"],
-    "budget": {"seconds": 3600},
-    "consent_text": "You will train a simulated robot.",
-}
+STUDY = study_body("views")
 
 
 @pytest.fixture(scope="module")
