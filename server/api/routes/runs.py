@@ -13,7 +13,7 @@ from core.engine.messages import Command, Pause, Resume, SetRate, Stop
 from core.errors import UnknownNameError
 from core.ports import StoredRun
 from core.run.trace import unpack
-from core.sim.track import TrackGeometry
+from core.sim.types import build_geometry
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
 from server.api.deps import EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -205,7 +205,7 @@ def world_public(name: str) -> RunWorldPublic:
     except UnknownNameError:
         preset = load_world()
     config = preset.config
-    geo = TrackGeometry.build(config.track)
+    geo = build_geometry(config.track)
     robot = config.robot
     d = geo.directions[config.track.signal.leg]
     half = config.track.corridor_width_m / 2
