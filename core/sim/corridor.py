@@ -364,22 +364,63 @@ def _cut(
     return [(x, y) for x, y in keep if y - x > 1e-9]
 
 
-def place_obstacles(geometry: CorridorGeometry, rng: np.random.Generator) -> list[PlacedObstacle]:
-    """An episode's obstacles, in the order the track lists them, drawn from `rng`.
+@dataclass(frozen=True, slots=True)
+class SeededArea:
+    """Where a seeded obstacle may go: straights less keep-outs (see `place_obstacles`).
 
-    A seeded obstacle goes anywhere on the straight parts of the full-width segments
-    (a narrow passage is left clear), at most `ObstacleConfig.max_lateral_m` off the centre
-    line, outside the keep-outs: the corners, ahead of the start, either side of the stop
-    line, the crossings, the ends of a narrow passage (as far as ahead of the start) and
-    the places of fixed and moving obstacles. A moving one starts at a point of its cycle
-    drawn here.
+    Attributes:
+        straights: (segment, from, to) metres along it, where the straight parts are.
+        keep_out: (segment, at, half span): no obstacle within half span of `at`.
+        lateral_m: per segment, how far off the centre line an obstacle's centre may be.
+    """
+
+    straights: tuple[tuple[int, float, float], ...]
+    keep_out: tuple[tuple[int, float, float], ...]
+    lateral_m: tuple[float, ...]
+
+    def spans(self) -> list[tuple[int, float, float]]:
+        """The straights with the keep-outs cut out: (segment, from, to)."""
+        out = []
+        for k, lo, hi in self.straights:
+            parts = [(lo, hi)]
+            for seg, at, half in self.keep_out:
+                if seg != k:
+                    continue
+                cut = []
+                for a, b in parts:
+                    if at - half > a:
+                        cut.append((a, min(b, at - half)))
+                    if at + half < b:
+                        cut.append((max(a, at + half), b))
+                parts = [(a, b) for a, b in cut if b > a]
+            out += [(k, a, b) for a, b in parts]
+        return out
+
+
+def seeded_area(geometry: CorridorGeometry) -> SeededArea:
+    """Where a seeded obstacle may go on a corridor track.
+
+    Anywhere on the straight parts of the full-width segments (a narrow passage is left
+    clear), at most `ObstacleConfig.max_lateral_m` off the centre line (less where the walls
+    are nearer), outside the keep-outs: the corners, ahead of the start, either side of the
+    stop line, the crossings, the ends of a narrow passage (as far as ahead of the start)
+    and the places of fixed and moving obstacles.
     """
     config = geometry.config
     obs = config.obstacle
     full = float(geometry.widths_m.max())
     stop_leg = config.signal.leg
-    stop_along = geometry.along_of(stop_leg, geometry.stopline_point)
+    n = len(geometry.leg_lengths_m)
     keep_out: list[tuple[int, float, float]] = []  # (segment, along, half span)
+    keep_out.append(
+        (
+            config.start_segment,
+            config.start_along_m + (obs.start_clearance_m - 0.3) / 2,
+            (obs.start_clearance_m + 0.3) / 2,
+        )
+    )
+    stop_along = geometry.along_of(stop_leg, geometry.stopline_point)
+    keep_out.append((stop_leg, stop_along, obs.stopline_clearance_m))
     for a, b in config.crossings:
         for k, other in ((a, b), (b, a)):
             seg = (tuple(geometry.starts_xy[k]), tuple(geometry.vertices[k]))
@@ -388,7 +429,6 @@ def place_obstacles(geometry: CorridorGeometry, rng: np.random.Generator) -> lis
             if at is not None:
                 half = float(geometry.widths_m[other]) / 2 + obs.corner_margin_m
                 keep_out.append((k, geometry.along_of(k, at), half))
-    n = len(geometry.leg_lengths_m)
     for k in range(n):  # either side of a narrow passage, as far as ahead of the start
         for side, nxt in ((0.0, (k - 1) % n), (1.0, (k + 1) % n)):
             if geometry.widths_m[k] == full and geometry.widths_m[nxt] < full:
@@ -407,9 +447,23 @@ def place_obstacles(geometry: CorridorGeometry, rng: np.random.Generator) -> lis
             continue
         lo, hi = geometry.straight_part(k)
         straights.append((k, lo + obs.corner_margin_m, hi - obs.corner_margin_m))
-    total = sum(max(hi - lo, 0.0) for _, lo, hi in straights)
+    lateral = tuple(
+        max(min(obs.max_lateral_m, float(w) / 2 - obs.size_m / 2 - WALL_CLEARANCE_M), 0.0)
+        for w in geometry.widths_m
+    )
+    return SeededArea(tuple(straights), tuple(keep_out), lateral)
+
+
+def place_obstacles(geometry: CorridorGeometry, rng: np.random.Generator) -> list[PlacedObstacle]:
+    """An episode's obstacles, in the order the track lists them, drawn from `rng`.
+
+    A seeded obstacle is drawn uniformly over `seeded_area` (the draw is rejected and
+    repeated where it falls in a keep-out); a moving one starts at a point of its cycle
+    drawn here.
+    """
+    area = seeded_area(geometry)
     placed = []
-    for p in config.obstacles:
+    for p in geometry.config.obstacles:
         if p.rule == "fixed":
             placed.append(PlacedObstacle(p.segment, p.along_m, p.lateral_m))
         elif p.rule == "moving":
@@ -419,21 +473,13 @@ def place_obstacles(geometry: CorridorGeometry, rng: np.random.Generator) -> lis
             path = PlacedObstacle(p.segment, low, p.lateral_m, low, high, p.speed_mps, phase)
             placed.append(dataclasses.replace(path, along_m=path.along_at(0.0)))
         else:
-            placed.append(_seeded(geometry, rng, straights, total, keep_out, stop_leg, stop_along))
+            placed.append(_seeded(area, rng))
     return placed
 
 
-def _seeded(
-    geometry: CorridorGeometry,
-    rng: np.random.Generator,
-    straights: list[tuple[int, float, float]],
-    total: float,
-    keep_out: list[tuple[int, float, float]],
-    stop_leg: int,
-    stop_along: float,
-) -> PlacedObstacle:
-    config = geometry.config
-    obs = config.obstacle
+def _seeded(area: SeededArea, rng: np.random.Generator) -> PlacedObstacle:
+    straights = area.straights
+    total = sum(max(hi - lo, 0.0) for _, lo, hi in straights)
     for _ in range(1000):
         u = float(rng.random()) * total
         leg, along = straights[-1][0], straights[-1][2]
@@ -443,16 +489,8 @@ def _seeded(
                 leg, along = k, lo + u
                 break
             u -= span
-        width = float(geometry.widths_m[leg])
-        limit = min(obs.max_lateral_m, width / 2 - obs.size_m / 2 - WALL_CLEARANCE_M)
-        lateral = (float(rng.random()) * 2 - 1) * limit
-        if leg == config.start_segment and (
-            -0.3 <= along - config.start_along_m <= obs.start_clearance_m
-        ):
-            continue
-        if leg == stop_leg and abs(along - stop_along) < obs.stopline_clearance_m:
-            continue
-        if any(leg == k and abs(along - at) < half for k, at, half in keep_out):
+        lateral = (float(rng.random()) * 2 - 1) * area.lateral_m[leg]
+        if any(leg == k and abs(along - at) < half for k, at, half in area.keep_out):
             continue
         return PlacedObstacle(leg, along, lateral)
     raise ValueError("the keep-outs leave no place for a seeded obstacle")

@@ -40,6 +40,7 @@ from core.sim.corridor import (
     CorridorConfig,
     CorridorGeometry,
     ObstaclePlacement,
+    seeded_area,
     segment_distance,
     segments_meet,
     turn_angle,
@@ -549,6 +550,13 @@ def _check_places(loader: _Loader, c: CorridorConfig, geo: CorridorGeometry) -> 
             f"segment {sig.leg} is too short for the signal: its straight part is "
             f"{hi - lo:.2f} m, the stop line and the lamp {sig.lamp_beyond_m:.2f} m beyond it "
             f"need {need:.2f} m and the lamp must stand on it",
+        )
+    seeded = [i for i, p in enumerate(c.obstacles) if p.rule == "seeded"]
+    if seeded and sum(hi - lo for _, lo, hi in seeded_area(geo).spans()) < c.obstacle.size_m:
+        raise loader.error(
+            ("track", "obstacles", seeded[0]),
+            "no room for a seeded obstacle: the corners, the start, the stop line, the "
+            "crossings and the other obstacles' keep-outs cover every straight",
         )
     for i, p in enumerate(c.obstacles):
         entry: Entry = ("track", "obstacles", i)
