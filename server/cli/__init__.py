@@ -5,9 +5,9 @@
 each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe`, `world-check` and
 `world` (list, check, show), `run` holds `run` and `runs`, `db` and `serve` the database
 and the service. `common` has what they share: argument types and groups, the backend
-choice, progress bars and tables. Each module adds its parsers with a `handler`, and imports what only its handler needs
-(storage, the service, the report writers) when it runs, so that a command starts without
-the others' dependencies.
+choice, progress bars and tables. Each module adds its parsers with a `handler`, and
+imports what only its handler needs (storage, the service, the report writers) when it
+runs, so that a command starts without the others' dependencies.
 """
 
 from __future__ import annotations
