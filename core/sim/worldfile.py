@@ -192,11 +192,14 @@ _REQUIRED_BY_RULE = {
 
 def json_schema() -> dict[str, Any]:
     """The JSON Schema of the format (docs/schemas/world.schema.json)."""
-    schema = _table_schema(SPEC, "srlab world")
+    schema = _table_schema(
+        SPEC,
+        "An srlab world: a corridor track of any shape (a closed centre line with a width), "
+        "its signal, its obstacles and the robot's settings (docs/worlds.md).",
+    )
     schema["required"] = ["track"]
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "$id": "https://srlab.example/schemas/world.schema.json",
         "title": "srlab world file",
         **schema,
     }

@@ -187,7 +187,7 @@ def add_world_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     """The `world` command (list, check, show) and its arguments."""
     w = sub.add_parser(
         "world",
-        help="world presets and world files: list them, check a file, draw a picture",
+        help="world presets and world files: list them, check a file, draw a picture, the schema",
         description="The world presets (core/data/worlds.toml and core/data/worlds/*.toml) "
         "and any world file (docs/worlds.md): list them, load one and report its errors, "
         "or draw it from above.",
@@ -208,6 +208,10 @@ def add_world_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     show.add_argument("world", metavar="NAME|FILE")
     show.add_argument("--png", type=Path, required=True, metavar="OUT", help="the picture")
     show.set_defaults(handler=world_show)
+    schema = actions.add_parser(
+        "schema", help="print the world file format's JSON Schema (docs/schemas/world.schema.json)"
+    )
+    schema.set_defaults(handler=world_schema)
 
 
 def _named_world(text: str) -> Any:
@@ -269,4 +273,12 @@ def world_show(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
     args.png.parent.mkdir(parents=True, exist_ok=True)
     draw_world(preset, args.png)
     stdout.write(f"wrote {args.png}\n")
+    return 0
+
+
+def world_schema(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """Run `srlab world schema`."""
+    from core.sim.worldfile import json_schema
+
+    stdout.write(json.dumps(json_schema(), indent=2) + "\n")
     return 0
