@@ -482,6 +482,8 @@ class CorridorWorld(PymunkWorld):
         self._n_obstacles = 0
         self._placed: tuple[PlacedObstacle, ...] = ()
         self._moving = False
+        self._paths: list[tuple[int, PlacedObstacle, float, float, float, float]] = []
+        self._half_size = track.obstacle.size_m / 2
         self._channels = sensing.empty_channels()
         self._noise = np.zeros((0, 8))
         self._noise_at = 0
@@ -511,6 +513,7 @@ class CorridorWorld(PymunkWorld):
         self._tick = 0
         self._placed = layout.obstacles
         self._moving = any(p.speed_mps > 0 for p in layout.obstacles)
+        self._paths = [self._path(i, p) for i, p in enumerate(layout.obstacles) if p.speed_mps > 0]
         self._move_obstacles(0.0)
         self._phase_index = 0
         self._lamp, self._phase_left = layout.signal_phases[0]
@@ -559,6 +562,18 @@ class CorridorWorld(PymunkWorld):
             body.position = center
             self._space.reindex_shapes_for_body(body)
 
+    def _path(
+        self, i: int, p: PlacedObstacle
+    ) -> tuple[int, PlacedObstacle, float, float, float, float]:
+        """A moving obstacle's path as plain numbers, for the tick path.
+
+        Its index, itself, where distance 0 along its segment is on its line, and the line's
+        direction.
+        """
+        bx, by = self._corridor.point_on_leg(p.segment, 0.0, p.lateral_m)
+        dx, dy = (float(v) for v in self._corridor.directions[p.segment])
+        return i, p, bx, by, dx, dy
+
     def _move_obstacles(self, time_s: float) -> None:
         """Every obstacle where it is `time_s` into the episode, standing still."""
         for i, p in enumerate(self._placed):
@@ -575,16 +590,15 @@ class CorridorWorld(PymunkWorld):
         if self._moving:
             dt = self._dt
             now_s = self._tick * dt
-            half = self.config.track.obstacle.size_m / 2
-            for i, p in enumerate(self._placed):
-                if p.speed_mps <= 0:
-                    continue
-                x0, y0 = self._corridor.obstacle_at(p, now_s)
-                x1, y1 = self._corridor.obstacle_at(p, now_s + dt)
+            half = self._half_size
+            for i, p, bx, by, dx, dy in self._paths:
+                a0 = p.along_at(now_s)
+                a1 = p.along_at(now_s + dt)
                 body = self._obstacle_bodies[i]
-                body.position = (x0, y0)
-                body.velocity = ((x1 - x0) / dt, (y1 - y0) / dt)
+                body.position = (bx + dx * a0, by + dy * a0)
+                body.velocity = (dx * (a1 - a0) / dt, dy * (a1 - a0) / dt)
                 self._space.reindex_shapes_for_body(body)
+                x1, y1 = bx + dx * a1, by + dy * a1
                 self._boxes[i] = (x1 - half, y1 - half, x1 + half, y1 + half)
         return super().step()
 
