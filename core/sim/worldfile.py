@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from core.errors import CatalogError
 from core.sim.corridor import (
     CROSSING_MARGIN_M,
@@ -91,8 +93,13 @@ _POINT: Mapping[str, Any] = {
 }
 
 
-def _dataclass_table(cls: type, skip: Sequence[str] = ()) -> dict[str, Field]:
-    """The keys of a config dataclass's overrides, typed as its defaults are."""
+def _dataclass_table(
+    cls: type, skip: Sequence[str] = (), *, physical: bool = False
+) -> dict[str, Field]:
+    """The keys of a config dataclass's overrides, typed as its defaults are.
+
+    With `physical`, every number is a size, a range or a duration: not negative.
+    """
     out: dict[str, Field] = {}
     for f in dataclasses.fields(cls):
         if f.name in skip:
@@ -104,9 +111,10 @@ def _dataclass_table(cls: type, skip: Sequence[str] = ()) -> dict[str, Field]:
         elif isinstance(default, int):
             schema = {"type": "integer"}
         elif isinstance(default, float):
-            schema = _NUMBER
+            schema = {**_NUMBER, "minimum": 0} if physical else _NUMBER
         else:
-            schema = {"type": "array", "items": {"type": "number"}, "minItems": len(default)}
+            item = {**_NUMBER, "minimum": 0} if physical else _NUMBER
+            schema = {"type": "array", "items": item, "minItems": len(default)}
             if len(default) == 2:
                 schema = {**schema, "maxItems": 2}
         out[f.name] = Field(schema, f"{cls.__name__}.{f.name}")
@@ -149,9 +157,9 @@ SPEC: Table = {
                 "where the stop line crosses the segment's straight part, 0..1",
                 required=True,
             ),
-            **_dataclass_table(SignalConfig, skip=("leg", "stopline_fraction")),
+            **_dataclass_table(SignalConfig, skip=("leg", "stopline_fraction"), physical=True),
         },
-        "obstacle": _dataclass_table(ObstacleConfig, skip=("enabled",)),
+        "obstacle": _dataclass_table(ObstacleConfig, skip=("enabled",), physical=True),
         "obstacles": TableList(
             {
                 "rule": Field(
@@ -398,8 +406,7 @@ def _world_config(loader: _Loader, raw: Mapping[str, Any]) -> WorldConfig:
         except CatalogError as e:
             raise loader.error(("robot",), str(e).removeprefix("robot: ")) from e
     extra = {k: raw[k] for k in ("dt_s", "max_ticks") if k in raw}
-    config = WorldConfig(track=track, robot=robot, **extra)
-    return config
+    return WorldConfig(track=track, robot=robot, **extra)
 
 
 def _corridor(loader: _Loader, t: Mapping[str, Any]) -> CorridorConfig:
@@ -441,8 +448,6 @@ def _corridor(loader: _Loader, t: Mapping[str, Any]) -> CorridorConfig:
 def _check_line(
     loader: _Loader, centre: tuple[tuple[float, float], ...], widths: Sequence[float]
 ) -> None:
-    import numpy as np
-
     n = len(centre)
     pts = np.asarray(centre)
     for k in range(n):

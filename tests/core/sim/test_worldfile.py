@@ -123,6 +123,13 @@ def line_of(text: str, needle: str) -> int:
             "speed_mps = 0.2",
         ),
         (
+            "echo_range_m = 0.3",
+            "echo_range_m = 0.3\nsize_m = -0.25",
+            "track.obstacle.size_m",
+            "must be at least 0, got -0.25",
+            "size_m",
+        ),
+        (
             'rule = "seeded"',
             'rule = "flying"',
             "track.obstacles[0].rule",
