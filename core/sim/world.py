@@ -149,6 +149,9 @@ def _body_property(name: str) -> property:
 
 _get_angle = cast(Callable[[pymunk.Body], float], _body_property("angle").fget)
 _get_position = cast(Callable[[pymunk.Body], pymunk.Vec2d], _body_property("position").fget)
+_set_position = cast(
+    Callable[[pymunk.Body, tuple[float, float]], None], _body_property("position").fset
+)
 _set_velocity = cast(
     Callable[[pymunk.Body, tuple[float, float]], None], _body_property("velocity").fset
 )
@@ -595,9 +598,9 @@ class CorridorWorld(PymunkWorld):
                 a0 = p.along_at(now_s)
                 a1 = p.along_at(now_s + dt)
                 body = self._obstacle_bodies[i]
-                body.position = (bx + dx * a0, by + dy * a0)
-                body.velocity = (dx * (a1 - a0) / dt, dy * (a1 - a0) / dt)
-                self._space.reindex_shapes_for_body(body)
+                # A kinematic body's shapes are reindexed by every step: no reindex here.
+                _set_position(body, (bx + dx * a0, by + dy * a0))
+                _set_velocity(body, (dx * (a1 - a0) / dt, dy * (a1 - a0) / dt))
                 x1, y1 = bx + dx * a1, by + dy * a1
                 self._boxes[i] = (x1 - half, y1 - half, x1 + half, y1 + half)
         return super().step()

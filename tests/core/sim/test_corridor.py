@@ -147,6 +147,20 @@ def test_a_moving_obstacle_is_where_its_path_says_at_every_tick() -> None:
     assert len({round(x, 6) for x, _ in first}) > 50  # it moved
 
 
+def test_a_moving_obstacle_runs_into_a_robot_standing_on_its_path() -> None:
+    world = corridor("l-shape")
+    world.reset(3, 1)
+    trolley = world.layout.obstacles[1]
+    middle = (trolley.low_m + trolley.high_m) / 2
+    x, y = world.geometry.point_on_leg(0, middle, trolley.lateral_m)
+    world._pose(x, y, math.pi / 2)  # across its path, where it passes twice a cycle
+    hits = []
+    for _ in range(int(2 * (trolley.high_m - trolley.low_m) / 0.2 / 0.1) + 1):
+        world.apply(MotorCommand(0.0, 0.0))
+        hits.append(world.step().collision)
+    assert "obstacle" in hits
+
+
 def test_seeded_obstacles_keep_out_of_corners_crossings_passages_and_paths() -> None:
     for name in ("l-shape", "figure-8", "narrow-passage"):
         world = corridor(name)
