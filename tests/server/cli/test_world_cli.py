@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from core.sim.worldfile import json_schema
+from core.sim.worlds import load_world
 from server.cli import main
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -57,3 +58,21 @@ def test_world_list_check_and_schema(capsys: pytest.CaptureFixture[str]) -> None
     )
     assert main(["world", "schema"]) == 0
     assert json.loads(capsys.readouterr().out) == json_schema()
+
+
+def test_simulate_runs_on_a_world_file_given_by_its_path(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    world = tmp_path / "doorway.toml"
+    world.write_text((ROOT / "core" / "data" / "worlds" / "narrow-passage.toml").read_text())
+    monkeypatch.chdir(tmp_path)
+    argv = ["simulate", "--condition", "expert", "--episodes", "1", "--json", "--quiet"]
+    assert main([*argv, "--world", "doorway.toml"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["world"] == str(world) and out["episodes"] == 1
+    world.write_text(world.read_text().replace("width_m = 1.2\n", "width_m = 1.2\nwall = 1\n"))
+    load_world.cache_clear()
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--world", "doorway.toml"])
+    assert e.value.code == 2
+    assert f"argument --world: {world}:" in capsys.readouterr().err
