@@ -160,6 +160,30 @@ _set_angular_velocity = cast(
 )
 
 
+def _sensing_vector(config: WorldConfig, geo: Geometry) -> np.ndarray[Any, np.dtype[np.float64]]:
+    """The geometry vector the sensing kernels read (`core.sim.sensing`'s G_ slots)."""
+    robot = config.robot
+    track = config.track
+    g = np.zeros(sensing.G_SIZE)
+    g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
+    g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
+    g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
+    g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
+    g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
+    g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
+    g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
+    g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
+    g[sensing.G_SIGNAL_LEG] = track.signal.leg
+    g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
+    g[sensing.G_CORNER_TRIGGER] = 0.1
+    g[sensing.G_HALF_LENGTH] = robot.length_m / 2
+    g[sensing.G_CORRIDOR] = track.corridor_width_m
+    g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
+    g[sensing.G_OBSTACLE_ECHO] = track.obstacle.echo_range_m
+    g[sensing.G_OBSTACLE_SIGHT] = min(robot.camera_range_m, track.obstacle.sight_range_m)
+    return g
+
+
 class PymunkWorld:
     """The world simulated with pymunk: rigid body contacts, analytic sensing.
 
@@ -175,17 +199,7 @@ class PymunkWorld:
         self.geometry: Geometry = TrackGeometry.build(self.config.track)
         robot = self.config.robot
         geo = self.geometry
-        self._space = pymunk.Space()
-        for a, b in geo.wall_segments():
-            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
-            seg.collision_type = _WALL
-            self._space.add(seg)
-        self._body = pymunk.Body(
-            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
-        )
-        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
-        self._robot_shape.collision_type = _ROBOT
-        self._space.add(self._body, self._robot_shape)
+        self._build_space(geo)
         self._obstacle_body = pymunk.Body(body_type=pymunk.Body.STATIC)
         size = self.config.track.obstacle.size_m
         self._obstacle_shape = pymunk.Poly.create_box(self._obstacle_body, (size, size))
@@ -194,30 +208,25 @@ class PymunkWorld:
         self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
         self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
 
-        g = np.zeros(sensing.G_SIZE)
-        g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
-        g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
-        g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
-        g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
-        g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
-        g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
-        g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
-        g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
-        g[sensing.G_SIGNAL_LEG] = self.config.track.signal.leg
-        g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
-        g[sensing.G_CORNER_TRIGGER] = 0.1
-        g[sensing.G_HALF_LENGTH] = robot.length_m / 2
-        g[sensing.G_CORRIDOR] = self.config.track.corridor_width_m
-        g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
-        g[sensing.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
-        g[sensing.G_OBSTACLE_SIGHT] = min(
-            robot.camera_range_m, self.config.track.obstacle.sight_range_m
+        g = _sensing_vector(self.config, geo)
+        self._tick_state(g)
+        self._obstacle_box = np.zeros(4)
+        self._has_obstacle = False
+        self._kernel_sense: Callable[..., None] | None = None
+        # Exact perception (the default) skips the estimates entirely: bit for bit as before.
+        perception = self.config.perception
+        self._perception = (
+            None
+            if perception.exact
+            else NoisyPerception(perception, g, self._sonar_angles, robot.camera_track_ticks)
         )
+
+    def _tick_state(self, g: np.ndarray[Any, np.dtype[np.float64]]) -> None:
+        """What the tick path reads and keeps, before the first episode."""
+        robot = self.config.robot
         self._track = np.zeros(4)
         self._g = g
         self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
-        self._obstacle_box = np.zeros(4)
-        self._has_obstacle = False
         self._channels = sensing.empty_channels()
         self._noise = np.zeros((0, 8))
         self._noise_at = 0
@@ -230,18 +239,25 @@ class PymunkWorld:
         self._lamp = LampColor.RED
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
         self._front_to_line = sensing.UNSEEN
-        self._kernel_sense: Callable[..., None] | None = None
-        # Exact perception (the default) skips the estimates entirely: bit for bit as before.
-        perception = self.config.perception
-        self._perception = (
-            None
-            if perception.exact
-            else NoisyPerception(perception, g, self._sonar_angles, robot.camera_track_ticks)
-        )
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps
         self._w_max = robot.max_turn_rad_s
         self._dt = self.config.dt_s
+
+    def _build_space(self, geo: Geometry) -> None:
+        """The physics space with the track's walls and the robot's body in it."""
+        robot = self.config.robot
+        self._space = pymunk.Space()
+        for a, b in geo.wall_segments():
+            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
+            seg.collision_type = _WALL
+            self._space.add(seg)
+        self._body = pymunk.Body(
+            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
+        )
+        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
+        self._robot_shape.collision_type = _ROBOT
+        self._space.add(self._body, self._robot_shape)
 
     @property
     def layout(self) -> EpisodeLayout:
@@ -433,18 +449,7 @@ class CorridorWorld(PymunkWorld):
         self.config = config
         geo = CorridorGeometry.build(track)
         self.geometry = self._corridor = geo
-        robot = config.robot
-        self._space = pymunk.Space()
-        for a, b in geo.wall_segments():
-            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
-            seg.collision_type = _WALL
-            self._space.add(seg)
-        self._body = pymunk.Body(
-            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
-        )
-        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
-        self._robot_shape.collision_type = _ROBOT
-        self._space.add(self._body, self._robot_shape)
+        self._build_space(geo)
         size = track.obstacle.size_m
         self._obstacle_bodies: list[pymunk.Body] = []
         for p in track.obstacles:
@@ -457,53 +462,19 @@ class CorridorWorld(PymunkWorld):
             self._obstacle_bodies.append(body)
         self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
         self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
-
-        g = np.zeros(sensing.G_SIZE)
-        g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
-        g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
-        g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
-        g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
-        g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
-        g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
-        g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
-        g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
-        g[sensing.G_SIGNAL_LEG] = track.signal.leg
-        g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
-        g[sensing.G_CORNER_TRIGGER] = 0.1
-        g[sensing.G_HALF_LENGTH] = robot.length_m / 2
-        g[sensing.G_CORRIDOR] = track.corridor_width_m
-        g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
-        g[sensing.G_OBSTACLE_ECHO] = track.obstacle.echo_range_m
-        g[sensing.G_OBSTACLE_SIGHT] = min(robot.camera_range_m, track.obstacle.sight_range_m)
-        self._g = g
+        g = _sensing_vector(config, geo)
+        self._tick_state(g)
         self._legs = corridor_legs(geo)
         self._walls = np.ascontiguousarray(geo.walls)
         self._leg_state = np.array([-1.0])
-        self._track = np.zeros(4)
-        self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
         self._boxes = np.zeros((max(len(track.obstacles), 1), 4))
         self._n_obstacles = 0
         self._placed: tuple[PlacedObstacle, ...] = ()
         self._moving = False
         self._paths: list[tuple[int, PlacedObstacle, float, float, float, float]] = []
         self._half_size = track.obstacle.size_m / 2
-        self._channels = sensing.empty_channels()
-        self._noise = np.zeros((0, 8))
-        self._noise_at = 0
-        self._rng = np.random.default_rng(0)
-        self._command = MotorCommand(0.0, 0.0)
-        self._tick = 0
-        self._hit = None
-        self._phase_index = 0
-        self._phase_left = 0
-        self._lamp = LampColor.RED
-        self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
-        self._front_to_line = sensing.UNSEEN
         self._corridor_sense: Callable[..., None] | None = None
         self._perception = None
-        self._v_max = robot.max_speed_mps
-        self._w_max = robot.max_turn_rad_s
-        self._dt = config.dt_s
 
     def reset(self, seed: int, episode: int) -> SensorFrame:
         """Start episode `episode` of the run seeded `seed`; return the first frame."""
