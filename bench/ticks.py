@@ -5,7 +5,9 @@ after a warm-up, so the ratios hold on any machine, for every world preset:
 
 (a) bare pymunk: the preset's track walls and robot box, one physics step and eight sonar
     ray casts (``segment_query_first``) per tick;
-(b) the world alone: ``PymunkWorld.step()`` (physics plus analytic sensing);
+(b) the world alone: ``PymunkWorld.step()`` (physics plus analytic sensing; on a corridor
+    track from a world file, ``CorridorWorld.step()`` with its walls as segments and its
+    moving obstacles);
 (c) the full architecture, ``expert``: sense, perceive, select, motor, step, record;
 (d) the full architecture, ``kp``: (c) with learning, exploration and propagation.
 
@@ -28,9 +30,10 @@ from core.run.conditions import get_condition
 from core.run.setup import Setup
 from core.run.simulation import Simulation
 from core.sim.channels import Channel
+from core.sim.corridor import CorridorConfig
 from core.sim.robot import RobotConfig
-from core.sim.track import TrackGeometry
-from core.sim.world import MotorCommand, PymunkWorld, WorldConfig
+from core.sim.types import Geometry, build_geometry
+from core.sim.world import MotorCommand, WorldConfig, make_world
 from core.sim.worlds import load_world, world_names
 
 Stepper = Callable[[int], None]
@@ -56,10 +59,24 @@ def measure(run: Stepper, seconds: float, warmup_s: float) -> float:
     raise AssertionError("unreachable")
 
 
+def first_straight(geo: Geometry) -> Callable[[float, float], bool]:
+    """Whether a point is past the start leg's last 0.5 m before its corner."""
+    x0, y0, th = geo.start_pose
+    dx, dy = math.cos(th), math.sin(th)
+    end_x, end_y = (float(v) for v in geo.vertices[geo_start_leg(geo)])
+    limit = (end_x - x0) * dx + (end_y - y0) * dy - 0.5
+    return lambda x, y: (x - x0) * dx + (y - y0) * dy > limit
+
+
+def geo_start_leg(geo: Geometry) -> int:
+    """The leg the start pose is on (the ring's is leg 0)."""
+    return geo.config.start_segment if isinstance(geo.config, CorridorConfig) else 0
+
+
 def bare_pymunk(config: WorldConfig) -> Stepper:
-    """The track and the robot in plain pymunk, driven up and down leg 0."""
+    """The track and the robot in plain pymunk, driven up and down the start leg."""
     robot: RobotConfig = config.robot
-    geo = TrackGeometry.build(config.track)
+    geo = build_geometry(config.track)
     space = pymunk.Space()
     for a, b in geo.wall_segments():
         space.add(pymunk.Segment(space.static_body, a, b, 0.01))
@@ -72,14 +89,14 @@ def bare_pymunk(config: WorldConfig) -> Stepper:
     sonar_filter = pymunk.ShapeFilter(group=1)
     angles = [math.radians(a) for a in robot.sonar_angles_deg]
     mount, reach = robot.sonar_mount_m, robot.sonar_range_m
-    x0, y0, _ = geo.start_pose
-    turn_x = float(geo.vertices[0][0]) - 0.5
+    x0, y0, th0 = geo.start_pose
+    past = first_straight(geo)
     dt, speed = config.dt_s, 0.45
     readings = [0.0] * 8
 
     def reset() -> None:
         body.position = (x0, y0)
-        body.angle = 0.0
+        body.angle = th0
         body.angular_velocity = 0.0
         space.reindex_shapes_for_body(body)
 
@@ -96,7 +113,7 @@ def bare_pymunk(config: WorldConfig) -> Stepper:
                 end = (start[0] + reach * dx, start[1] + reach * dy)
                 hit = space.segment_query_first(start, end, 0.0, sonar_filter)
                 readings[i] = reach * hit.alpha if hit is not None else reach
-            if p.x > turn_x:
+            if past(p.x, p.y):
                 reset()
 
     reset()
@@ -104,11 +121,11 @@ def bare_pymunk(config: WorldConfig) -> Stepper:
 
 
 def world_only(config: WorldConfig) -> Stepper:
-    """`PymunkWorld.step()` with a heading hold down leg 0, reset before the corner."""
-    world = PymunkWorld(config)
+    """The world's `step()` with a heading hold down the start leg, reset before the corner."""
+    world = make_world(config)
     episode = 0
     frame = world.reset(0, episode)
-    turn_x = float(world.geometry.vertices[0][0]) - 0.5
+    past = first_straight(world.geometry)
     heading_error = int(Channel.HEADING_ERROR_RAD)
 
     def run(n: int) -> None:
@@ -116,7 +133,7 @@ def world_only(config: WorldConfig) -> Stepper:
         for _ in range(n):
             world.apply(MotorCommand(0.45, -2.0 * float(frame.channels[heading_error])))
             frame = world.step()
-            if frame.collision is not None or frame.x > turn_x:
+            if frame.collision is not None or past(frame.x, frame.y):
                 episode += 1
                 frame = world.reset(0, episode)
 

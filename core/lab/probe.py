@@ -26,7 +26,7 @@ from core.brain.catalog import Catalog
 from core.brain.motor import Motor, cruise_scale
 from core.brain.sensors import compile_detector
 from core.run.setup import Setup
-from core.sim.world import PymunkWorld, WorldConfig
+from core.sim.world import WorldConfig, make_world
 
 CAMERA_SENSOR = "camera_obstacle"
 PASS_TICKS = 80
@@ -118,7 +118,7 @@ class _Prober:
     """One world and catalogue, reused for every placement and behaviour."""
 
     def __init__(self, config: WorldConfig, catalog: Catalog) -> None:
-        self.world = PymunkWorld(config)
+        self.world = make_world(config)
         self.catalog = catalog
         self.detect = compile_detector(catalog)
         robot = config.robot

@@ -27,7 +27,7 @@ from core.run.conditions import Condition
 from core.run.runner import EpisodeSummary
 from core.run.simulation import NO_INPUTS, Simulation, TickInputs
 from core.sim.render import TopDown
-from core.sim.world import WorldConfig
+from core.sim.world import CorridorWorld, WorldConfig
 
 ENV_ID = "srlab/AmigoTrack-v0"
 MAX_SKIPPED = 100
@@ -196,6 +196,10 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
             self._frame = TopDown(sim.world.geometry, sim.world.config)
         snap = sim.snapshot
         world = sim.world
+        if isinstance(world, CorridorWorld):
+            return self._frame.draw(
+                (snap.x, snap.y, snap.heading_rad), None, snap.lamp, world.obstacle_centers()
+            )
         return self._frame.draw(
             (snap.x, snap.y, snap.heading_rad), world.layout.obstacle_center, snap.lamp
         )

@@ -20,7 +20,7 @@ from core.run.conditions import Condition
 from core.run.setup import condition_network
 from core.run.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.sim.channels import Channel
-from core.sim.world import LampColor, PymunkWorld, World, WorldConfig
+from core.sim.world import LampColor, World, WorldConfig, make_world
 from core.sim.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)
@@ -97,7 +97,7 @@ class Simulation:
         self.condition = condition
         self.seed = seed
         self.catalog = catalog or load_catalog()
-        self.world = world or PymunkWorld(world_config or load_world().config)
+        self.world = world or make_world(world_config or load_world().config)
         if network is None:
             network = condition_network(self.catalog, condition)
         brain_rng = np.random.default_rng(np.random.SeedSequence([seed, 0, 3]))

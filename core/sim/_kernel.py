@@ -1,7 +1,9 @@
 """The sensing kernel: sonars, camera and map odometry, computed analytically.
 
-The track's walls and the obstacle are axis-aligned boxes, so every sonar reading is a slab
-test; numba compiles this to machine code so sensing costs less than the physics step.
+The ring's walls and the obstacle are axis-aligned boxes, so every sonar reading is a slab
+test (`sense`); a corridor track's walls are segments, its obstacles any number of boxes
+(`sense_corridor`). numba compiles both to machine code so sensing costs less than the
+physics step.
 """
 
 from __future__ import annotations
@@ -36,7 +38,15 @@ from core.sim.sensing import (
     empty_channels,
 )
 
-__all__ = ["empty_channels", "ray_entry", "ray_exit", "residuals_at", "sense"]
+__all__ = [
+    "empty_channels",
+    "ray_entry",
+    "ray_exit",
+    "ray_segment",
+    "residuals_at",
+    "sense",
+    "sense_corridor",
+]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -262,6 +272,218 @@ def sense(
         else:
             track[0] = 0.0
     ok, _, _, _ = _sees(cx, cy, c, s, g[G_LAMP_X], g[G_LAMP_Y], g, g[G_CAMERA_RANGE])
+    out[23] = lamp_color if ok else 0.0
+    if best == int(g[G_SIGNAL_LEG]):
+        ahead = (g[G_STOPLINE_X] - x) * dxl + (g[G_STOPLINE_Y] - y) * dyl
+        out[24] = ahead if ahead > 0.0 else UNSEEN
+        out[28] = ahead - g[G_HALF_LENGTH]
+    else:
+        out[24] = UNSEEN
+        out[28] = UNSEEN
+    out[25] = bumper
+    out[30] = th
+
+
+# Corridor tracks of any shape (`core.sim.corridor`): walls as segments, legs as rows.
+LEG_X = 0
+LEG_Y = 1
+LEG_DX = 2
+LEG_DY = 3
+LEG_LENGTH = 4
+LEG_START = 5  # arc length at the leg's start
+LEG_CORNER = 6  # how far before its end the next leg's corner starts
+LEG_LEFT90 = 7  # 1 where the leg ends in the ring's left turn of about 90 degrees
+LEG_COLUMNS = 8
+
+
+@_jit
+def ray_segment(ox: float, oy: float, dx: float, dy: float, w: Any) -> float:
+    """Distance along a ray from (ox, oy) to the wall segment w = (x0, y0, x1, y1), or INF."""
+    ex = w[2] - w[0]
+    ey = w[3] - w[1]
+    den = dx * ey - dy * ex
+    if abs(den) < 1e-12:
+        return INF
+    px = w[0] - ox
+    py = w[1] - oy
+    t = (px * ey - py * ex) / den
+    u = (px * dy - py * dx) / den
+    if t < 0.0 or u < 0.0 or u > 1.0:
+        return INF
+    return float(t)
+
+
+@_jit
+def _walls_hit(ox: float, oy: float, dx: float, dy: float, walls: Any) -> float:
+    """Distance along a ray to the first wall segment."""
+    best = INF
+    for k in range(walls.shape[0]):
+        t = ray_segment(ox, oy, dx, dy, walls[k])
+        if t < best:
+            best = t
+    return best
+
+
+@_jit
+def _sees_past_walls(
+    cx: float, cy: float, c: float, s: float, tx: float, ty: float, g: Any, reach: float,
+    walls: Any,
+) -> tuple[bool, float, float, float]:  # fmt: skip
+    """Whether the camera sees (tx, ty) within `reach`, no wall segment between."""
+    rx = tx - cx
+    ry = ty - cy
+    fwd = rx * c + ry * s
+    lat = -rx * s + ry * c
+    dist = math.sqrt(rx * rx + ry * ry)
+    if fwd <= 0.0 or dist > reach:
+        return False, dist, fwd, lat
+    if abs(math.atan2(lat, fwd)) > g[G_FOV_HALF]:
+        return False, dist, fwd, lat
+    if _walls_hit(cx, cy, rx, ry, walls) < 1.0:
+        return False, dist, fwd, lat
+    return True, dist, fwd, lat
+
+
+@_jit
+def _nearest_leg(x: float, y: float, legs: Any, first: int, count: int) -> tuple[int, float]:
+    """Of legs first, first + 1, ... (count of them, wrapping), the one nearest (x, y)."""
+    n = legs.shape[0]
+    best = first
+    best_d = INF
+    for i in range(count):
+        leg = (first + i) % n
+        along = (x - legs[leg, LEG_X]) * legs[leg, LEG_DX] + (y - legs[leg, LEG_Y]) * legs[
+            leg, LEG_DY
+        ]
+        along = min(max(along, 0.0), legs[leg, LEG_LENGTH])
+        ex = legs[leg, LEG_X] + along * legs[leg, LEG_DX] - x
+        ey = legs[leg, LEG_Y] + along * legs[leg, LEG_DY] - y
+        d = ex * ex + ey * ey
+        if d < best_d:
+            best_d = d
+            best = leg
+    return best, best_d
+
+
+@_jit
+def sense_corridor(
+    x: float,
+    y: float,
+    th: float,
+    g: Any,
+    sonar_angles: Any,
+    noise: Any,
+    obstacles: Any,
+    n_obstacles: int,
+    lamp_color: float,
+    bumper: float,
+    track: Any,
+    walls: Any,
+    legs: Any,
+    state: Any,
+    out: Any,
+) -> None:
+    """`sense` on a corridor track: walls as segments, any number of obstacles.
+
+    `obstacles` holds boxes (x0 y0 x1 y1), the first `n_obstacles` present. `state[0]` is
+    the leg the robot was on at the last reading (-1: none yet): the robot's leg is the
+    nearest of that one and its neighbours, so progress stays on the leg the robot is on
+    where two legs cross.
+    """
+    rng = g[G_SONAR_RANGE]
+    mount = g[G_SONAR_MOUNT]
+    echo = g[G_OBSTACLE_ECHO]
+    for i in range(8):
+        a = th + sonar_angles[i]
+        dx = math.cos(a)
+        dy = math.sin(a)
+        ox = x + mount * dx
+        oy = y + mount * dy
+        wall = _walls_hit(ox, oy, dx, dy, walls)
+        seen = wall
+        for j in range(n_obstacles):
+            hit = ray_entry(ox, oy, dx, dy, obstacles[j])
+            if hit <= echo:
+                seen = min(seen, hit)
+        wall = min(wall, rng)
+        reading = min(max(min(seen, rng) + noise[i], 0.0), rng)
+        out[i] = reading
+        out[8 + i] = wall - reading
+
+    # Map odometry: the leg the robot is on.
+    n = legs.shape[0]
+    cur = int(state[0])
+    if cur < 0:
+        best, _ = _nearest_leg(x, y, legs, 0, n)
+    else:
+        best, _ = _nearest_leg(x, y, legs, (cur + n - 1) % n, 3)
+    state[0] = best
+    dxl = legs[best, LEG_DX]
+    dyl = legs[best, LEG_DY]
+    along = (x - legs[best, LEG_X]) * dxl + (y - legs[best, LEG_Y]) * dyl
+    vertex_ahead = legs[best, LEG_LENGTH] - along
+    err_cur = _wrap(th - math.atan2(dyl, dxl))
+    nxt = (best + 1) % n
+    err_next = _wrap(th - math.atan2(legs[nxt, LEG_DY], legs[nxt, LEG_DX]))
+    ref = best
+    err = err_cur
+    left90 = legs[best, LEG_LEFT90] > 0.5
+    if vertex_ahead < legs[best, LEG_CORNER] and (not left90 or abs(err_next) < abs(err_cur)):
+        # The ring's left corner is turned by the Corner reflex; any other corner by the
+        # heading hold, towards the next leg from where the corner starts.
+        ref = nxt
+        err = err_next
+    rax = legs[ref, LEG_X]
+    ray_ = legs[ref, LEG_Y]
+    rdx = legs[ref, LEG_DX]
+    rdy = legs[ref, LEG_DY]
+    lateral = -(x - rax) * rdy + (y - ray_) * rdx
+    out[16] = lateral
+    out[17] = err
+    out[18] = vertex_ahead
+    out[19] = 1.0 if (left90 and ref == best and vertex_ahead < g[G_CORNER_TRIGGER]) else 0.0
+    out[26] = best
+    out[27] = legs[best, LEG_START] + min(max(along, 0.0), legs[best, LEG_LENGTH])
+
+    # Camera: the nearest obstacle in view.
+    c = math.cos(th)
+    s = math.sin(th)
+    cx = x + g[G_CAMERA_OFFSET] * c
+    cy = y + g[G_CAMERA_OFFSET] * s
+    out[20] = 0.0
+    out[21] = UNSEEN
+    out[22] = UNSEEN
+    out[29] = UNSEEN
+    out[31] = UNSEEN
+    nearest = INF
+    for j in range(n_obstacles):
+        ocx = 0.5 * (obstacles[j, 0] + obstacles[j, 2])
+        ocy = 0.5 * (obstacles[j, 1] + obstacles[j, 3])
+        ok, dist, fwd, lat = _sees_past_walls(cx, cy, c, s, ocx, ocy, g, g[G_OBSTACLE_SIGHT], walls)
+        if ok and dist < nearest:
+            nearest = dist
+            out[20] = 1.0
+            out[31] = math.atan2(lat, fwd) / g[G_FOV_HALF]
+            track[1] = ocx
+            track[2] = ocy
+    if nearest < INF:
+        track[0] = 1.0
+        track[3] = 0.0
+    elif track[0] > 0.0:
+        track[3] += 1.0
+    if track[0] > 0.0 and track[3] <= g[G_TRACK_HOLD]:
+        tx = track[1] - x
+        ty = track[2] - y
+        ahead = tx * rdx + ty * rdy
+        if ahead > -0.1:
+            out[21] = math.sqrt(tx * tx + ty * ty)
+            out[22] = -tx * rdy + ty * rdx
+            out[29] = -(track[1] - rax) * rdy + (track[2] - ray_) * rdx
+        else:
+            track[0] = 0.0
+    ok, _, _, _ = _sees_past_walls(
+        cx, cy, c, s, g[G_LAMP_X], g[G_LAMP_Y], g, g[G_CAMERA_RANGE], walls
+    )
     out[23] = lamp_color if ok else 0.0
     if best == int(g[G_SIGNAL_LEG]):
         ahead = (g[G_STOPLINE_X] - x) * dxl + (g[G_STOPLINE_Y] - y) * dyl

@@ -1,4 +1,4 @@
-"""A top-down picture of the track, drawn with numpy alone (the Gymnasium `rgb_array`).
+"""A top-down picture of a track of any shape, drawn with numpy alone (Gymnasium's `rgb_array`).
 
 Pure: a frame is a function of the geometry and one pose, so recording a video of an
 episode (`gymnasium.wrappers.RecordVideo`) changes nothing in the run.
@@ -7,11 +7,13 @@ episode (`gymnasium.wrappers.RecordVideo`) changes nothing in the run.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
 
-from core.sim.track import TrackGeometry
+from core.sim.corridor import CorridorGeometry
+from core.sim.types import Geometry
 from core.sim.world import LampColor, WorldConfig
 
 Frame = npt.NDArray[np.uint8]
@@ -39,7 +41,7 @@ _LAMP = {
 class TopDown:
     """Draws frames of one track; the static part is drawn once."""
 
-    def __init__(self, geometry: TrackGeometry, config: WorldConfig) -> None:
+    def __init__(self, geometry: Geometry, config: WorldConfig) -> None:
         self.geometry = geometry
         self.config = config
         x0, y0, x1, y1 = (float(v) for v in geometry.outer_box)
@@ -48,8 +50,11 @@ class TopDown:
         self.height = round((y1 - y0) * PX_PER_M)
         base = np.empty((self.height, self.width, 3), dtype=np.uint8)
         base[:] = _OUTSIDE
-        self._fill_box(base, geometry.outer_box, _FLOOR)
-        self._fill_box(base, geometry.inner_box, _ISLAND)
+        if isinstance(geometry, CorridorGeometry):
+            self._fill_corridor(base, geometry)
+        else:
+            self._fill_box(base, geometry.outer_box, _FLOOR)
+            self._fill_box(base, geometry.inner_box, _ISLAND)
         for a, b in geometry.wall_segments():
             self._line(base, a, b, 0.03, _WALL)
         self._stop_line(base)
@@ -64,6 +69,25 @@ class TopDown:
         c0, r1 = self._px(x0, y0)
         c1, r0 = self._px(x1, y1)
         img[max(0, round(r0)) : max(0, round(r1)), max(0, round(c0)) : max(0, round(c1))] = color
+
+    def _fill_corridor(self, img: Frame, geo: CorridorGeometry) -> None:
+        """The floor of a corridor track: each segment's corridor, out to its corners."""
+        rows, cols = np.ogrid[: self.height, : self.width]
+        x = self._origin[0] + (cols + 0.5) / PX_PER_M
+        y = self._origin[1] + (self.height - rows - 0.5) / PX_PER_M
+        floor = np.zeros((self.height, self.width), dtype=bool)
+        for k in range(len(geo.leg_lengths_m)):
+            (sx, sy), (dx, dy) = geo.starts_xy[k], geo.directions[k]
+            half = float(geo.widths_m[k]) / 2
+            along = (x - sx) * dx + (y - sy) * dy
+            lateral = -(x - sx) * dy + (y - sy) * dx
+            reach = geo.setbacks_m[k]
+            floor |= (
+                (np.abs(lateral) <= half)
+                & (along >= -reach[0])
+                & (along <= geo.leg_lengths_m[k] + reach[1])
+            )
+        img[floor] = _FLOOR
 
     def _disc(
         self, img: Frame, x: float, y: float, radius_m: float, color: tuple[int, int, int]
@@ -96,6 +120,8 @@ class TopDown:
         d = geo.directions[leg]
         normal = np.array([-d[1], d[0]])
         half = self.config.track.corridor_width_m / 2
+        if isinstance(geo, CorridorGeometry):
+            half = float(geo.widths_m[leg]) / 2
         sx, sy = geo.stopline_point
         a = (sx + normal[0] * half, sy + normal[1] * half)
         b = (sx - normal[0] * half, sy - normal[1] * half)
@@ -106,14 +132,14 @@ class TopDown:
         pose: tuple[float, float, float],
         obstacle: tuple[float, float] | None,
         lamp: LampColor,
+        more: Sequence[tuple[float, float]] = (),
     ) -> Frame:
-        """A frame: the track, the lamp in its colour, the obstacle and the robot."""
+        """A frame: the track, the lamp in its colour, the obstacles and the robot."""
         img = self._base.copy()
         lx, ly = self.geometry.lamp_point
         self._disc(img, lx, ly, 0.12, _LAMP[lamp])
-        if obstacle is not None:
-            half = self.config.track.obstacle.size_m / 2
-            ox, oy = obstacle
+        half = self.config.track.obstacle.size_m / 2
+        for ox, oy in [*([obstacle] if obstacle is not None else []), *more]:
             self._fill_box(img, (ox - half, oy - half, ox + half, oy + half), _OBSTACLE)
         x, y, th = pose
         robot = self.config.robot

@@ -12,6 +12,7 @@ from typing import Any, Literal, NamedTuple, Protocol
 
 import numpy as np
 
+from core.sim.corridor import CorridorConfig, CorridorGeometry, PlacedObstacle
 from core.sim.perception import PerceptionConfig
 from core.sim.robot import RobotConfig
 from core.sim.track import TrackConfig, TrackGeometry
@@ -19,14 +20,26 @@ from core.sim.track import TrackConfig, TrackGeometry
 __all__ = [
     "CollisionKind",
     "EpisodeLayout",
+    "Geometry",
     "LampColor",
     "MotorCommand",
     "SensorFrame",
     "World",
     "WorldConfig",
+    "build_geometry",
 ]
 
 CollisionKind = Literal["wall", "obstacle"]
+
+Geometry = TrackGeometry | CorridorGeometry
+"""A track's derived geometry: the rectangular ring's or a corridor track's."""
+
+
+def build_geometry(track: TrackConfig | CorridorConfig) -> Geometry:
+    """The geometry of either kind of track."""
+    if isinstance(track, CorridorConfig):
+        return CorridorGeometry.build(track)
+    return TrackGeometry.build(track)
 
 
 class LampColor(IntEnum):
@@ -43,7 +56,8 @@ class WorldConfig:
     """Everything that defines the simulated world.
 
     Attributes:
-        track: the corridor, signal and obstacle.
+        track: the corridor, signal and obstacle: the rectangular ring (`TrackConfig`) or a
+            track of any shape from a world file (`CorridorConfig`).
         robot: the AmigoBot.
         perception: how far the robot's estimates are from the truth (exact by default;
             `core.sim.perception`).
@@ -51,7 +65,7 @@ class WorldConfig:
         max_ticks: an episode's time limit in ticks (120 s by default).
     """
 
-    track: TrackConfig = field(default_factory=TrackConfig)
+    track: TrackConfig | CorridorConfig = field(default_factory=TrackConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     dt_s: float = 0.1
@@ -77,6 +91,9 @@ class EpisodeLayout:
     obstacle_leg: int
     signal_phases: tuple[tuple[LampColor, int], ...]
     """The lamp's cycle as (colour, ticks), repeated if the episode outlasts it."""
+    obstacles: tuple[PlacedObstacle, ...] = ()
+    """On a corridor track (`CorridorConfig`), every obstacle and how it moves; the first is
+    also `obstacle_center` and `obstacle_leg` at the episode's start."""
 
 
 class SensorFrame(NamedTuple):
@@ -100,7 +117,11 @@ class World(Protocol):
     """What the brain's simulation needs from a world."""
 
     config: WorldConfig
-    geometry: TrackGeometry
+
+    @property
+    def geometry(self) -> Geometry:
+        """The track's derived geometry."""
+        ...
 
     def reset(self, seed: int, episode: int) -> SensorFrame:
         """Start episode `episode` of the run seeded `seed`; return the first frame."""

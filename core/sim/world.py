@@ -10,11 +10,13 @@ import numpy as np
 import pymunk
 
 from core.sim import sensing
+from core.sim.corridor import CorridorConfig, CorridorGeometry, PlacedObstacle, place_obstacles
 from core.sim.perception import NoisyPerception
-from core.sim.track import TrackGeometry
+from core.sim.track import TrackConfig, TrackGeometry
 from core.sim.types import (
     CollisionKind,
     EpisodeLayout,
+    Geometry,
     LampColor,
     MotorCommand,
     SensorFrame,
@@ -24,6 +26,7 @@ from core.sim.types import (
 
 __all__ = [
     "CollisionKind",
+    "CorridorWorld",
     "EpisodeLayout",
     "LampColor",
     "MotorCommand",
@@ -32,6 +35,7 @@ __all__ = [
     "World",
     "WorldConfig",
     "episode_layout",
+    "make_world",
 ]
 """The world's plain types live in `core.sim.types`; they are re-exported here."""
 
@@ -39,13 +43,16 @@ _ROBOT, _WALL, _OBSTACLE = 1, 2, 3
 
 
 def episode_layout(
-    config: WorldConfig, geometry: TrackGeometry, seed: int, episode: int
+    config: WorldConfig, geometry: Geometry, seed: int, episode: int
 ) -> EpisodeLayout:
     """Draw an episode's obstacle and lamp cycle from (seed, episode) alone.
 
     Every condition of an experiment meets the same obstacles and lamp cycles for the same
     seed and episode, whatever happened in earlier episodes (common random numbers).
     """
+    if isinstance(geometry, CorridorGeometry):
+        return corridor_layout(config, geometry, seed, episode)
+    assert isinstance(config.track, TrackConfig)
     rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 1]))
     track = config.track
     obs = track.obstacle
@@ -76,7 +83,19 @@ def episode_layout(
             break
         else:  # pragma: no cover - the keep-outs never cover the whole track
             raise RuntimeError("no place for the obstacle")
-    sig = track.signal
+    phases = _signal_phases(config, rng)
+    return EpisodeLayout(
+        obstacle_center=center,
+        obstacle_leg=leg_chosen,
+        signal_phases=phases,
+    )
+
+
+def _signal_phases(
+    config: WorldConfig, rng: np.random.Generator
+) -> tuple[tuple[LampColor, int], ...]:
+    """An episode's lamp cycle, drawn from `rng` after the obstacles."""
+    sig = config.track.signal
     per_s = 1.0 / config.dt_s
     n = 64
     reds = np.maximum(1, np.rint(rng.uniform(*sig.red_s, n) * per_s)).astype(int).tolist()
@@ -86,10 +105,21 @@ def episode_layout(
     for red, green in zip(reds, greens, strict=True):
         phases += [(LampColor.RED, red), (LampColor.GREEN, green), (LampColor.YELLOW, yellow)]
     shift = int(rng.integers(len(phases) // 2))
+    return tuple(phases[shift:] + phases[:shift])
+
+
+def corridor_layout(
+    config: WorldConfig, geometry: CorridorGeometry, seed: int, episode: int
+) -> EpisodeLayout:
+    """`episode_layout` on a corridor track: every obstacle, then the lamp's cycle."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 1]))
+    placed = tuple(place_obstacles(geometry, rng))
+    first = placed[0] if placed else None
     return EpisodeLayout(
-        obstacle_center=center,
-        obstacle_leg=leg_chosen,
-        signal_phases=tuple(phases[shift:] + phases[:shift]),
+        obstacle_center=None if first is None else geometry.obstacle_at(first, 0.0),
+        obstacle_leg=-1 if first is None else first.segment,
+        signal_phases=_signal_phases(config, rng),
+        obstacles=placed,
     )
 
 
@@ -119,12 +149,39 @@ def _body_property(name: str) -> property:
 
 _get_angle = cast(Callable[[pymunk.Body], float], _body_property("angle").fget)
 _get_position = cast(Callable[[pymunk.Body], pymunk.Vec2d], _body_property("position").fget)
+_set_position = cast(
+    Callable[[pymunk.Body, tuple[float, float]], None], _body_property("position").fset
+)
 _set_velocity = cast(
     Callable[[pymunk.Body, tuple[float, float]], None], _body_property("velocity").fset
 )
 _set_angular_velocity = cast(
     Callable[[pymunk.Body, float], None], _body_property("angular_velocity").fset
 )
+
+
+def _sensing_vector(config: WorldConfig, geo: Geometry) -> np.ndarray[Any, np.dtype[np.float64]]:
+    """The geometry vector the sensing kernels read (`core.sim.sensing`'s G_ slots)."""
+    robot = config.robot
+    track = config.track
+    g = np.zeros(sensing.G_SIZE)
+    g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
+    g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
+    g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
+    g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
+    g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
+    g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
+    g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
+    g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
+    g[sensing.G_SIGNAL_LEG] = track.signal.leg
+    g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
+    g[sensing.G_CORNER_TRIGGER] = 0.1
+    g[sensing.G_HALF_LENGTH] = robot.length_m / 2
+    g[sensing.G_CORRIDOR] = track.corridor_width_m
+    g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
+    g[sensing.G_OBSTACLE_ECHO] = track.obstacle.echo_range_m
+    g[sensing.G_OBSTACLE_SIGHT] = min(robot.camera_range_m, track.obstacle.sight_range_m)
+    return g
 
 
 class PymunkWorld:
@@ -137,20 +194,12 @@ class PymunkWorld:
 
     def __init__(self, config: WorldConfig | None = None) -> None:
         self.config = config or WorldConfig()
-        self.geometry = TrackGeometry.build(self.config.track)
+        if not isinstance(self.config.track, TrackConfig):
+            raise TypeError("a corridor track is a CorridorWorld's (see make_world)")
+        self.geometry: Geometry = TrackGeometry.build(self.config.track)
         robot = self.config.robot
         geo = self.geometry
-        self._space = pymunk.Space()
-        for a, b in geo.wall_segments():
-            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
-            seg.collision_type = _WALL
-            self._space.add(seg)
-        self._body = pymunk.Body(
-            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
-        )
-        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
-        self._robot_shape.collision_type = _ROBOT
-        self._space.add(self._body, self._robot_shape)
+        self._build_space(geo)
         self._obstacle_body = pymunk.Body(body_type=pymunk.Body.STATIC)
         size = self.config.track.obstacle.size_m
         self._obstacle_shape = pymunk.Poly.create_box(self._obstacle_body, (size, size))
@@ -159,30 +208,25 @@ class PymunkWorld:
         self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
         self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
 
-        g = np.zeros(sensing.G_SIZE)
-        g[sensing.G_OUTER : sensing.G_OUTER + 4] = geo.outer_box
-        g[sensing.G_INNER : sensing.G_INNER + 4] = geo.inner_box
-        g[sensing.G_SONAR_RANGE] = robot.sonar_range_m
-        g[sensing.G_SONAR_MOUNT] = robot.sonar_mount_m
-        g[sensing.G_FOV_HALF] = math.radians(robot.camera_fov_deg / 2)
-        g[sensing.G_CAMERA_RANGE] = robot.camera_range_m
-        g[sensing.G_CAMERA_OFFSET] = robot.camera_offset_m
-        g[sensing.G_LAMP_X], g[sensing.G_LAMP_Y] = geo.lamp_point
-        g[sensing.G_SIGNAL_LEG] = self.config.track.signal.leg
-        g[sensing.G_STOPLINE_X], g[sensing.G_STOPLINE_Y] = geo.stopline_point
-        g[sensing.G_CORNER_TRIGGER] = 0.1
-        g[sensing.G_HALF_LENGTH] = robot.length_m / 2
-        g[sensing.G_CORRIDOR] = self.config.track.corridor_width_m
-        g[sensing.G_TRACK_HOLD] = robot.camera_track_ticks
-        g[sensing.G_OBSTACLE_ECHO] = self.config.track.obstacle.echo_range_m
-        g[sensing.G_OBSTACLE_SIGHT] = min(
-            robot.camera_range_m, self.config.track.obstacle.sight_range_m
+        g = _sensing_vector(self.config, geo)
+        self._tick_state(g)
+        self._obstacle_box = np.zeros(4)
+        self._has_obstacle = False
+        self._kernel_sense: Callable[..., None] | None = None
+        # Exact perception (the default) skips the estimates entirely: bit for bit as before.
+        perception = self.config.perception
+        self._perception = (
+            None
+            if perception.exact
+            else NoisyPerception(perception, g, self._sonar_angles, robot.camera_track_ticks)
         )
+
+    def _tick_state(self, g: np.ndarray[Any, np.dtype[np.float64]]) -> None:
+        """What the tick path reads and keeps, before the first episode."""
+        robot = self.config.robot
         self._track = np.zeros(4)
         self._g = g
         self._sonar_angles = np.radians(np.asarray(robot.sonar_angles_deg, dtype=np.float64))
-        self._obstacle_box = np.zeros(4)
-        self._has_obstacle = False
         self._channels = sensing.empty_channels()
         self._noise = np.zeros((0, 8))
         self._noise_at = 0
@@ -195,18 +239,25 @@ class PymunkWorld:
         self._lamp = LampColor.RED
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
         self._front_to_line = sensing.UNSEEN
-        self._kernel_sense: Callable[..., None] | None = None
-        # Exact perception (the default) skips the estimates entirely: bit for bit as before.
-        perception = self.config.perception
-        self._perception = (
-            None
-            if perception.exact
-            else NoisyPerception(perception, g, self._sonar_angles, robot.camera_track_ticks)
-        )
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps
         self._w_max = robot.max_turn_rad_s
         self._dt = self.config.dt_s
+
+    def _build_space(self, geo: Geometry) -> None:
+        """The physics space with the track's walls and the robot's body in it."""
+        robot = self.config.robot
+        self._space = pymunk.Space()
+        for a, b in geo.wall_segments():
+            seg = pymunk.Segment(self._space.static_body, a, b, 0.01)
+            seg.collision_type = _WALL
+            self._space.add(seg)
+        self._body = pymunk.Body(
+            robot.mass_kg, pymunk.moment_for_box(robot.mass_kg, (robot.length_m, robot.width_m))
+        )
+        self._robot_shape = pymunk.Poly.create_box(self._body, (robot.length_m, robot.width_m))
+        self._robot_shape.collision_type = _ROBOT
+        self._space.add(self._body, self._robot_shape)
 
     @property
     def layout(self) -> EpisodeLayout:
@@ -376,3 +427,210 @@ class PymunkWorld:
         return SensorFrame(
             self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
         )
+
+
+class CorridorWorld(PymunkWorld):
+    """`PymunkWorld` on a corridor track of any shape (`core.sim.corridor`).
+
+    The walls are the geometry's segments; each obstacle is a box, static where it stands
+    still and kinematic where it moves (its position a function of the tick alone, so an
+    episode replays exactly). Sensing is `core.sim._kernel.sense_corridor`.
+    """
+
+    def __init__(self, config: WorldConfig) -> None:
+        track = config.track
+        if not isinstance(track, CorridorConfig):
+            raise TypeError("CorridorWorld needs a corridor track (CorridorConfig)")
+        if not config.perception.exact:
+            raise ValueError(
+                "noisy perception is available on the rectangular ring only, not on "
+                "a corridor track"
+            )
+        self.config = config
+        geo = CorridorGeometry.build(track)
+        self.geometry = self._corridor = geo
+        self._build_space(geo)
+        size = track.obstacle.size_m
+        self._obstacle_bodies: list[pymunk.Body] = []
+        for p in track.obstacles:
+            kind = pymunk.Body.KINEMATIC if p.rule == "moving" else pymunk.Body.STATIC
+            body = pymunk.Body(body_type=kind)
+            body.position = (-100.0 - 2 * len(self._obstacle_bodies), -100.0)
+            shape = pymunk.Poly.create_box(body, (size, size))
+            shape.collision_type = _OBSTACLE
+            self._space.add(body, shape)
+            self._obstacle_bodies.append(body)
+        self._space.on_collision(_ROBOT, _WALL, begin=self._on_wall)
+        self._space.on_collision(_ROBOT, _OBSTACLE, begin=self._on_obstacle)
+        g = _sensing_vector(config, geo)
+        self._tick_state(g)
+        self._legs = corridor_legs(geo)
+        self._walls = np.ascontiguousarray(geo.walls)
+        self._leg_state = np.array([-1.0])
+        self._boxes = np.zeros((max(len(track.obstacles), 1), 4))
+        self._n_obstacles = 0
+        self._placed: tuple[PlacedObstacle, ...] = ()
+        self._moving = False
+        self._paths: list[tuple[int, PlacedObstacle, float, float, float, float]] = []
+        self._half_size = track.obstacle.size_m / 2
+        self._corridor_sense: Callable[..., None] | None = None
+        self._perception = None
+
+    def reset(self, seed: int, episode: int) -> SensorFrame:
+        """Start episode `episode` of the run seeded `seed`; return the first frame."""
+        layout = corridor_layout(self.config, self._corridor, seed, episode)
+        self._layout = layout
+        self._rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 2]))
+        self._refill_noise()
+        x, y, th = self._corridor.start_pose
+        self._pose(x, y, th)
+        self._tick = 0
+        self._placed = layout.obstacles
+        self._moving = any(p.speed_mps > 0 for p in layout.obstacles)
+        self._paths = [self._path(i, p) for i, p in enumerate(layout.obstacles) if p.speed_mps > 0]
+        self._move_obstacles(0.0)
+        self._phase_index = 0
+        self._lamp, self._phase_left = layout.signal_phases[0]
+        frame = self._sense(violation=False)
+        self._front_to_line = float(frame.channels[28])
+        return frame
+
+    def place(
+        self, x: float, y: float, heading_rad: float, obstacle: tuple[float, float] | None
+    ) -> SensorFrame:
+        """Put the robot at a pose and one obstacle at a centre (None: no obstacle).
+
+        As `PymunkWorld.place`: the episode's other obstacles are taken away.
+        """
+        self._pose(x, y, heading_rad)
+        self._placed = ()
+        self._moving = False
+        for body in self._obstacle_bodies:
+            body.position = (-100.0, -100.0)
+            self._space.reindex_shapes_for_body(body)
+        self._n_obstacles = 0
+        if obstacle is not None:
+            self._put_obstacle(0, obstacle)
+            self._n_obstacles = 1
+        frame = self._sense(violation=False)
+        self._front_to_line = float(frame.channels[28])
+        return frame
+
+    def _pose(self, x: float, y: float, th: float) -> None:
+        self._body.position = (x, y)
+        self._body.angle = th
+        self._body.velocity = (0.0, 0.0)
+        self._body.angular_velocity = 0.0
+        self._space.reindex_shapes_for_body(self._body)
+        self._track[:] = 0.0
+        self._leg_state[0] = -1.0
+        self._command = MotorCommand(0.0, 0.0)
+        self._hit = None
+
+    def _put_obstacle(self, i: int, center: tuple[float, float]) -> None:
+        ox, oy = center
+        half = self.config.track.obstacle.size_m / 2
+        self._boxes[i] = (ox - half, oy - half, ox + half, oy + half)
+        if i < len(self._obstacle_bodies):
+            body = self._obstacle_bodies[i]
+            body.position = center
+            self._space.reindex_shapes_for_body(body)
+
+    def _path(
+        self, i: int, p: PlacedObstacle
+    ) -> tuple[int, PlacedObstacle, float, float, float, float]:
+        """A moving obstacle's path as plain numbers, for the tick path.
+
+        Its index, itself, where distance 0 along its segment is on its line, and the line's
+        direction.
+        """
+        bx, by = self._corridor.point_on_leg(p.segment, 0.0, p.lateral_m)
+        dx, dy = (float(v) for v in self._corridor.directions[p.segment])
+        return i, p, bx, by, dx, dy
+
+    def _move_obstacles(self, time_s: float) -> None:
+        """Every obstacle where it is `time_s` into the episode, standing still."""
+        for i, p in enumerate(self._placed):
+            self._put_obstacle(i, self._corridor.obstacle_at(p, time_s))
+            self._obstacle_bodies[i].velocity = (0.0, 0.0)
+        self._n_obstacles = len(self._placed)
+
+    def step(self) -> SensorFrame:
+        """Advance one tick as `PymunkWorld.step`, the moving obstacles moving with it.
+
+        A moving obstacle starts the step where it is at this tick, with the velocity that
+        takes it to where it is at the next; the reading after the step sees it there.
+        """
+        if self._moving:
+            dt = self._dt
+            now_s = self._tick * dt
+            half = self._half_size
+            for i, p, bx, by, dx, dy in self._paths:
+                a0 = p.along_at(now_s)
+                a1 = p.along_at(now_s + dt)
+                body = self._obstacle_bodies[i]
+                # A kinematic body's shapes are reindexed by every step: no reindex here.
+                _set_position(body, (bx + dx * a0, by + dy * a0))
+                _set_velocity(body, (dx * (a1 - a0) / dt, dy * (a1 - a0) / dt))
+                x1, y1 = bx + dx * a1, by + dy * a1
+                self._boxes[i] = (x1 - half, y1 - half, x1 + half, y1 + half)
+        return super().step()
+
+    def obstacle_centers(self) -> list[tuple[float, float]]:
+        """Where the obstacles are now (for pictures and views)."""
+        return [((b[0] + b[2]) / 2, (b[1] + b[3]) / 2) for b in self._boxes[: self._n_obstacles]]
+
+    def _sense(self, violation: bool) -> SensorFrame:
+        if self._noise_at >= len(self._noise):
+            self._refill_noise()
+        noise = self._noise[self._noise_at]
+        self._noise_at += 1
+        body = self._body
+        pos = _get_position(body)
+        th = _get_angle(body)
+        out = self._channels
+        kernel = self._corridor_sense
+        if kernel is None:
+            from core.sim._kernel import sense_corridor
+
+            kernel = self._corridor_sense = sense_corridor
+        kernel(
+            pos.x,
+            pos.y,
+            th,
+            self._g,
+            self._sonar_angles,
+            noise,
+            self._boxes,
+            self._n_obstacles,
+            float(self._lamp),
+            1.0 if self._hit else 0.0,
+            self._track,
+            self._walls,
+            self._legs,
+            self._leg_state,
+            out,
+        )
+        return SensorFrame(
+            self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
+        )
+
+
+def corridor_legs(geo: CorridorGeometry) -> np.ndarray[Any, np.dtype[np.float64]]:
+    """The legs as the corridor kernel reads them (`core.sim._kernel`'s LEG_ columns)."""
+    n = len(geo.leg_lengths_m)
+    legs = np.zeros((n, 8))
+    legs[:, 0:2] = geo.starts_xy
+    legs[:, 2:4] = geo.directions
+    legs[:, 4] = geo.leg_lengths_m
+    legs[:, 5] = geo.leg_start_m
+    legs[:, 6] = geo.setbacks_m[:, 1]
+    legs[:, 7] = geo.left_corner
+    return legs
+
+
+def make_world(config: WorldConfig) -> PymunkWorld:
+    """The pymunk world of a config: the ring's `PymunkWorld` or a `CorridorWorld`."""
+    if isinstance(config.track, CorridorConfig):
+        return CorridorWorld(config)
+    return PymunkWorld(config)

@@ -1,8 +1,10 @@
-"""World presets: named worlds as data (`core/data/worlds.toml`), every dimension a parameter.
+"""World presets: named worlds as data, every dimension a parameter.
 
-A preset is a set of overrides of `WorldConfig`'s defaults, nested as the dataclasses are
-(``[world.robot]``, ``[world.track.obstacle]`` ...), with the physical reasons for them
-written beside them. `srlab world-check --world NAME` measures whether a preset poses the
+A preset in `core/data/worlds.toml` is a set of overrides of `WorldConfig`'s defaults (the
+rectangular ring), nested as the dataclasses are (``[world.robot]``,
+``[world.track.obstacle]`` ...), with the physical reasons for them written beside them. A
+preset in `core/data/worlds/NAME.toml` is a world file (`core.sim.worldfile`): a corridor
+track of any shape. `srlab world-check --world NAME` measures whether a preset poses the
 paper's problem, on properties of the world alone (no learning). `WORLD_PARAMETERS` names
 the settings a phase diagram varies around a preset (`srlab phase`, `core.lab.phase`).
 """
@@ -15,6 +17,7 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 from core.brain.catalog import data_dir
@@ -131,11 +134,21 @@ def _raw() -> dict[str, dict[str, Any]]:
     return out
 
 
+@cache
+def _files() -> dict[str, Path]:
+    """The world files of `core/data/worlds/`, by name (the file's stem)."""
+    found = sorted((data_dir() / "worlds").glob("*.toml"))
+    clash = [p.stem for p in found if p.stem in _raw()]
+    if clash:
+        raise CatalogError(f"{data_dir() / 'worlds'}: {clash[0]!r} is also in worlds.toml")
+    return {p.stem: p for p in found}
+
+
 def world_names() -> tuple[str, ...]:
-    """The presets' names, the default first."""
+    """The presets' names, the default first, then worlds.toml's, then the world files'."""
     raw = _raw()
     default = raw[""]["name"]
-    return (default, *(n for n in raw if n and n != default))
+    return (default, *(n for n in raw if n and n != default), *_files())
 
 
 def default_world() -> str:
@@ -145,9 +158,18 @@ def default_world() -> str:
 
 @cache
 def load_world(name: str | None = None) -> WorldPreset:
-    """The preset called `name` (None: the default)."""
+    """The preset called `name` (None: the default), or the world file at path `name`.
+
+    A name ending in ``.toml`` is a path (`core.sim.worldfile`); a bad file is a
+    `WorldFileError` naming the file, the line, the entry and the reason.
+    """
     raw = _raw()
     name = name or default_world()
+    if name in _files() or name.endswith(".toml"):
+        from core.sim.worldfile import load_world_file
+
+        path = _files().get(name) or Path(name)
+        return load_world_file(path, name if name in _files() else None)
     spec = raw.get(name) if name else None
     if spec is None:
         known = ", ".join(world_names())

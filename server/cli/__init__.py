@@ -2,12 +2,12 @@
 
 `simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise`,
 `export` and `study` (its actions: create, add, status, forget, export) have a module
-each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`,
-`run` holds `run` and `runs`, `db` and `serve` the database and the service. `common` has
-what they share: argument types and groups, the backend choice, progress bars and tables.
-Each module adds its parsers with a `handler`, and imports what only its handler needs
-(storage, the service, the report writers) when it runs, so that a command starts without
-the others' dependencies.
+each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe`, `world-check` and
+`world` (list, check, show), `run` holds `run` and `runs`, `db` and `serve` the database
+and the service. `common` has what they share: argument types and groups, the backend
+choice, progress bars and tables. Each module adds its parsers with a `handler`, and
+imports what only its handler needs (storage, the service, the report writers) when it
+runs, so that a command starts without the others' dependencies.
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_tune_parser(sub)
     world.add_probe_parser(sub)
     world.add_world_check_parser(sub)
+    world.add_world_parser(sub)
     teachers.add_parser(sub)
     equal_start.add_parser(sub)
     noise.add_parser(sub)

@@ -90,6 +90,29 @@ def engine_condition(text: str) -> str:
     )
 
 
+def world_type(text: str) -> str:
+    """An argparse type: `--world`'s preset name, or a world file's path (made absolute).
+
+    A world file is loaded here, so that a bad one is the command's one error line.
+    """
+    from core.errors import CoreError
+    from core.sim.worlds import load_world, world_names
+
+    if not text or text in world_names():  # "" is the default preset
+        return text
+    if text.endswith(".toml"):
+        path = str(Path(text).resolve())
+        try:
+            load_world(path)
+        except CoreError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+        return path
+    raise argparse.ArgumentTypeError(
+        f"invalid choice: {text!r} (choose from {', '.join(world_names())}, "
+        "or a world file FILE.toml)"
+    )
+
+
 def perception_type(text: str) -> WorldSettings:
     """An argparse type: `--perception`'s world settings (`core.sim.worlds.parse_perception`)."""
     from core.errors import CoreError
@@ -111,9 +134,11 @@ def add_setup_arguments(
 
     parser.add_argument(
         "--world",
-        choices=world_names(),
+        type=world_type,
         default="",
-        help=f"world preset (default {default_world()}; see `srlab world-check`)",
+        metavar="NAME|FILE.toml",
+        help=f"world preset ({', '.join(world_names())}; default {default_world()}; see "
+        "`srlab world list`) or a world file's path (docs/worlds.md)",
     )
     parser.add_argument(
         "--perception",

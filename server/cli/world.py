@@ -1,4 +1,8 @@
-"""`srlab probe` and `srlab world-check`: what a world poses, with no learning anywhere."""
+"""`srlab probe`, `srlab world-check` and `srlab world`: what a world poses, and the worlds.
+
+`probe` and `world-check` measure a world with no learning anywhere; `world` lists the
+presets and world files, checks one and draws it.
+"""
 
 from __future__ import annotations
 
@@ -177,3 +181,104 @@ def world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
         if not args.json:
             console.print(f"wrote {args.out / 'world-check.json'} and world-check.md")
     return 0 if all_hold else 1
+
+
+def add_world_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The `world` command (list, check, show) and its arguments."""
+    w = sub.add_parser(
+        "world",
+        help="world presets and world files: list them, check a file, draw a picture, the schema",
+        description="The world presets (core/data/worlds.toml and core/data/worlds/*.toml) "
+        "and any world file (docs/worlds.md): list them, load one and report its errors, "
+        "or draw it from above.",
+    )
+    actions = w.add_subparsers(dest="action", required=True, metavar="ACTION")
+    ls = actions.add_parser("list", help="the world presets, one a line")
+    ls.add_argument("--json", action="store_true", help="print one JSON object")
+    ls.set_defaults(handler=world_list)
+    check = actions.add_parser(
+        "check", help="load a world (a preset's name or a file) and report its first error"
+    )
+    check.add_argument("world", metavar="NAME|FILE")
+    check.set_defaults(handler=world_file_check)
+    show = actions.add_parser(
+        "show",
+        help="draw a world from above: walls, centre line, start, signal, obstacles",
+    )
+    show.add_argument("world", metavar="NAME|FILE")
+    show.add_argument("--png", type=Path, required=True, metavar="OUT", help="the picture")
+    show.set_defaults(handler=world_show)
+    schema = actions.add_parser(
+        "schema", help="print the world file format's JSON Schema (docs/schemas/world.schema.json)"
+    )
+    schema.set_defaults(handler=world_schema)
+
+
+def _named_world(text: str) -> Any:
+    """The preset called `text`, or the world file at path `text`."""
+    from core.sim.worldfile import load_world_file
+    from core.sim.worlds import load_world, world_names
+
+    if text in world_names():
+        return load_world(text)
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists():
+        return load_world_file(path)
+    known = ", ".join(world_names())
+    raise ValueError(f"no world preset or world file {text!r} (presets: {known})")
+
+
+def world_list(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """Run `srlab world list`."""
+    from core.sim.corridor import CorridorConfig
+    from core.sim.worlds import default_world, load_world, world_names
+
+    rows: list[dict[str, str]] = []
+    for name in world_names():
+        preset = load_world(name)
+        kind = "corridor" if isinstance(preset.config.track, CorridorConfig) else "ring"
+        default = " (default)" if name == default_world() else ""
+        rows.append({"name": name, "track": kind, "description": preset.description,
+                     "default": default})  # fmt: skip
+    if args.json:
+        stdout.write(json.dumps({"worlds": rows}) + "\n")
+        return 0
+    table = Table(title="srlab world presets")
+    for col in ("name", "track", "description"):
+        table.add_column(col)
+    for r in rows:
+        table.add_row(r["name"] + r["default"], r["track"], r["description"])
+    print_table(stdout, table)
+    return 0
+
+
+def world_file_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """Run `srlab world check`."""
+    from core.sim.types import build_geometry
+
+    preset = _named_world(args.world)
+    geo = build_geometry(preset.config.track)
+    stdout.write(
+        f"{args.world}: world {preset.name!r} loads: {len(geo.leg_lengths_m)} segments, "
+        f"a lap of {geo.lap_length_m:.2f} m, {len(geo.wall_segments())} wall segments\n"
+    )
+    return 0
+
+
+def world_show(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """Run `srlab world show`."""
+    from server.reports.world_picture import draw_world
+
+    preset = _named_world(args.world)
+    args.png.parent.mkdir(parents=True, exist_ok=True)
+    draw_world(preset, args.png)
+    stdout.write(f"wrote {args.png}\n")
+    return 0
+
+
+def world_schema(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
+    """Run `srlab world schema`."""
+    from core.sim.worldfile import json_schema
+
+    stdout.write(json.dumps(json_schema(), indent=2) + "\n")
+    return 0

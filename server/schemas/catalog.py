@@ -97,8 +97,25 @@ class RunWorldPublic(BaseModel):
     """A run's world as a top-down view draws it: the fixed parts, in metres."""
 
     world: str = Field(description="its world preset ('' for the default)")
-    outer_box: list[float] = Field(description="[x0, y0, x1, y1]: the track's outer walls")
-    inner_box: list[float] = Field(description="[x0, y0, x1, y1]: the island's walls")
+    outer_box: list[float] = Field(
+        description="[x0, y0, x1, y1]: the track's outer walls (on a corridor track of any "
+        "shape, the walls' bounding box)"
+    )
+    inner_box: list[float] = Field(
+        description="[x0, y0, x1, y1]: the island's walls (on a corridor track of any shape, "
+        "an empty box at the bounding box's centre: its walls are `walls`)"
+    )
+    walls: list[list[float]] = Field(
+        description="every wall as a segment [x0, y0, x1, y1], for a track of any shape"
+    )
+    centre_line: list[list[float]] = Field(
+        description="the corridor's centre line, its vertices [x, y] in lap order (closed: "
+        "the last joins the first)"
+    )
+    corridor_widths_m: list[float] = Field(
+        description="the corridor's width on each centre-line segment (segment k runs from "
+        "vertex k to vertex k + 1)"
+    )
     corridor_width_m: float
     stopline: list[list[float]] = Field(description="the stop line's two ends, [[x, y], [x, y]]")
     lamp: list[float] = Field(description="[x, y] of the traffic lamp")

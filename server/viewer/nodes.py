@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import viser
 
-from core.sim.track import TrackGeometry
+from core.sim.types import Geometry
 from core.sim.world import WorldConfig
 from server.viewer.scene import (
     BULBS,
@@ -64,7 +64,7 @@ class SceneNodes:
     server: viser.ViserServer | viser.ClientHandle
     static: StaticScene
     world: WorldConfig
-    geometry: TrackGeometry
+    geometry: Geometry
     _cache: Cache
     _trail_nodes: list[viser.LineSegmentsHandle]
     _trail_sent: list[int]

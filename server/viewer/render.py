@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 
 import viser
 
-from core.sim.track import TrackGeometry
+from core.sim.types import build_geometry
 from core.sim.world import EpisodeLayout, WorldConfig, episode_layout
 from server.viewer.nodes import Cache, SceneNodes
 from server.viewer.panel import Panel, episode_of_label, run_label, run_of_label, speed_label
@@ -76,7 +76,7 @@ class Renderer(SceneNodes, Panel):
         self.server = server
         self.static = scene
         self.world = world
-        self.geometry = TrackGeometry.build(world.track)
+        self.geometry = build_geometry(world.track)
         self.post = post
         self.fixed = fixed
         self.frames = 0
@@ -161,7 +161,7 @@ class Renderer(SceneNodes, Panel):
             return
         self.world = world
         self.static = static_scene(world)
-        self.geometry = TrackGeometry.build(world.track)
+        self.geometry = build_geometry(world.track)
         self._layouts.clear()
         with self.server.atomic():
             self._build_scene()  # the same node names: each replaces the one before

@@ -10,7 +10,7 @@ from core.brain.catalog import Catalog
 from core.errors import UnknownNameError
 from core.ports import NetworkPair, RunQueries
 from core.run.trace import TraceRow, unpack
-from core.sim.track import TrackGeometry
+from core.sim.types import build_geometry
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig, episode_layout
 from core.sim.worlds import load_world
 from server.viewer.scene import TickView
@@ -197,7 +197,7 @@ def load_replay(
     if not rows:
         raise LookupError(f"episode {episode} of run {run_id} has an empty trace")
     world = world or run_world(run.spec.world)
-    layout = episode_layout(world, TrackGeometry.build(world.track), run.spec.seed, episode)
+    layout = episode_layout(world, build_geometry(world.track), run.spec.seed, episode)
     stimuli = [s.name for s in catalog.stimuli]
     behaviours = [b.name for b in catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
     views = replay_views(

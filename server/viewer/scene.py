@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from core.sim.robot import RobotConfig
-from core.sim.track import TrackGeometry
+from core.sim.types import build_geometry
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig
 
 Rgb = tuple[int, int, int]
@@ -85,7 +85,7 @@ class StaticScene:
 
 def static_scene(config: WorldConfig) -> StaticScene:
     """The fixed parts of the world `config` describes."""
-    geo = TrackGeometry.build(config.track)
+    geo = build_geometry(config.track)
     robot = config.robot
     ox0, oy0, ox1, oy1 = (float(v) for v in geo.outer_box)
     ix0, iy0, ix1, iy1 = (float(v) for v in geo.inner_box)

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from core.sim.channels import Channel
-from core.sim.track import TrackGeometry
+from core.sim.track import TrackConfig, TrackGeometry
 from core.sim.world import (
     CollisionKind,
     EpisodeLayout,
@@ -90,7 +90,9 @@ class ScriptedWorld:
         initial: Mapping[Channel, float] | None = None,
     ) -> None:
         self.config = config or WorldConfig()
-        self.geometry = TrackGeometry.build(self.config.track)
+        track = self.config.track
+        assert isinstance(track, TrackConfig), "a scripted world is on the ring"
+        self.geometry = TrackGeometry.build(track)
         self._script = script
         self._initial = dict(initial or {})
         self._steps: Sequence[ScriptedStep] = ()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated
 
+import numpy as np
 from fastapi import HTTPException, Path, Query, Request, Response, status
 from pydantic_core import to_json
 from starlette.concurrency import run_in_threadpool as io
@@ -13,7 +14,8 @@ from core.engine.messages import Command, Pause, Resume, SetRate, Stop
 from core.errors import UnknownNameError
 from core.ports import StoredRun
 from core.run.trace import unpack
-from core.sim.track import TrackGeometry
+from core.sim.corridor import CorridorGeometry
+from core.sim.types import build_geometry
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
 from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -205,10 +207,17 @@ def world_public(name: str) -> RunWorldPublic:
     except UnknownNameError:
         preset = load_world()
     config = preset.config
-    geo = TrackGeometry.build(config.track)
+    geo = build_geometry(config.track)
     robot = config.robot
-    d = geo.directions[config.track.signal.leg]
-    half = config.track.corridor_width_m / 2
+    leg = config.track.signal.leg
+    d = geo.directions[leg]
+    if isinstance(geo, CorridorGeometry):
+        centre = geo.centre_line()
+        widths = [float(w) for w in geo.widths_m]
+    else:  # the ring: leg k runs from vertices[k - 1] to vertices[k]
+        centre = [(float(x), float(y)) for x, y in np.roll(geo.vertices, 1, axis=0)]
+        widths = [config.track.corridor_width_m] * 4
+    half = widths[leg] / 2
     sx, sy = geo.stopline_point
     nx, ny = float(-d[1]) * half, float(d[0]) * half
     mount = robot.sonar_mount_m
@@ -220,6 +229,9 @@ def world_public(name: str) -> RunWorldPublic:
         world=name,
         outer_box=[float(v) for v in geo.outer_box],
         inner_box=[float(v) for v in geo.inner_box],
+        walls=[[*a, *b] for a, b in geo.wall_segments()],
+        centre_line=[list(p) for p in centre],
+        corridor_widths_m=widths,
         corridor_width_m=config.track.corridor_width_m,
         stopline=[[sx - nx, sy - ny], [sx + nx, sy + ny]],
         lamp=list(geo.lamp_point),

@@ -13,6 +13,8 @@ from gymnasium.utils.env_checker import check_env
 from core.events import Outcome
 from core.learners.envs import ENV_ID, AmigoTrackEnv, register
 from core.run.runner import EpisodeSummary
+from core.sim.world import CorridorWorld
+from core.sim.worlds import load_world
 
 
 @pytest.mark.parametrize("prior", ["innate", "kp"])
@@ -263,3 +265,21 @@ def test_record_video_writes_an_episode(tmp_path: Path) -> None:
     env.close()  # type: ignore[no-untyped-call]  # gymnasium's RecordVideo.close is untyped
     videos = list(folder.glob("*.mp4"))
     assert videos and videos[0].stat().st_size > 1000
+
+
+def test_rgb_array_frames_draw_a_corridor_track_and_its_obstacles() -> None:
+    env = AmigoTrackEnv(
+        prior="kp", render_mode="rgb_array", world_config=load_world("l-shape").config
+    )
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame is not None and frame.shape == (6 * 64, 8 * 64, 3)
+    top_down = env._frame
+    assert top_down is not None
+    world = env.simulation.world
+    assert isinstance(world, CorridorWorld)
+    for ox, oy in world.obstacle_centers():  # both the seeded obstacle and the trolley
+        col, row = top_down._px(ox, oy)
+        assert tuple(frame[round(row), round(col)]) == (150, 95, 40)
+    col, row = top_down._px(6.0, 5.0)  # outside the L: no floor there
+    assert tuple(frame[round(row), round(col)]) == (120, 120, 120)

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from core.sim import _kernel as k
 from core.sim.channels import Channel
 from core.sim.robot import RobotConfig
-from core.sim.track import ObstacleConfig, TrackConfig, TrackGeometry
+from core.sim.track import ObstacleConfig, TrackConfig
+from core.sim.types import Geometry
 from core.sim.world import MotorCommand, PymunkWorld, WorldConfig
 
 Segment = tuple[tuple[float, float], tuple[float, float]]
@@ -40,7 +41,7 @@ def ray_to_segment(ox: float, oy: float, dx: float, dy: float, segment: Segment)
 
 
 def expected_sonars(
-    geometry: TrackGeometry,
+    geometry: Geometry,
     robot: RobotConfig,
     x: float,
     y: float,

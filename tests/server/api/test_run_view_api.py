@@ -12,6 +12,7 @@ from apphelpers import client_for, create, settings_for, until
 
 from core.errors import RunStateError
 from server.api.routes.events import encode
+from server.api.routes.runs import world_public
 from server.runtime import Runs
 from server.runtime.local import LocalLink
 from server.schemas import TickEvent
@@ -114,7 +115,22 @@ async def test_world_describes_the_runs_track(tmp_path: Path) -> None:
         assert x0 < ix0 < ix1 < x1 and y0 < iy0 < iy1 < y1
         assert len(w["sonars"]) == 8 and w["sonar_range_m"] > 0
         assert len(w["stopline"]) == 2 and len(w["lamp"]) == 2
+        # the walls as segments: the ring's are the two boxes' sides
+        assert [x0, y0, x1, y0] in w["walls"]
+        assert len(w["walls"]) == 8 and len(w["centre_line"]) == 4
+        assert w["corridor_widths_m"] == [w["corridor_width_m"]] * 4
         assert (await client.get("/api/runs/99/world")).status_code == 404
+
+
+def test_a_corridor_worlds_view_has_its_walls_and_centre_line() -> None:
+    w = world_public("figure-8")
+    assert w.centre_line == [
+        [0.6, 3.1], [6.6, 3.1], [6.6, 7.1], [3.6, 7.1], [3.6, 0.6], [0.6, 0.6]
+    ]  # fmt: skip
+    assert w.corridor_widths_m == [1.2] * 6
+    assert len(w.walls) == 16  # 12 mitred sides, 2 of them cut open at the crossing
+    x0, y0, x1, y1 = w.outer_box
+    assert all(x0 <= x <= x1 and y0 <= y <= y1 for s in w.walls for x, y in (s[:2], s[2:]))
 
 
 async def test_tick_events_carry_sonar_readings_and_the_obstacle(tmp_path: Path) -> None:

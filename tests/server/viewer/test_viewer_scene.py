@@ -11,7 +11,7 @@ import pytest
 import viser
 from viser._messages import EnableLightsMessage, EnvironmentMapMessage, HemisphereLightMessage
 
-from core.sim.track import TrackGeometry
+from core.sim.types import build_geometry
 from core.sim.world import EpisodeLayout, LampColor, MotorCommand, PymunkWorld, WorldConfig
 from server.viewer.render import Renderer
 from server.viewer.scene import (
@@ -40,7 +40,7 @@ from server.viewer.scene import (
 
 WORLD = WorldConfig()
 SCENE = static_scene(WORLD)
-GEO = TrackGeometry.build(WORLD.track)
+GEO = build_geometry(WORLD.track)
 
 
 def view(**kw: object) -> TickView:
