@@ -29,6 +29,8 @@ _PATH = "#c0392b"
 def seeded_spans(geo: Geometry) -> list[tuple[int, float, float, float]]:
     """Where a seeded obstacle may go: (leg, from, to, lateral limit), metres."""
     if isinstance(geo, CorridorGeometry):
+        if not any(p.rule == "seeded" for p in geo.config.obstacles):
+            return []  # nothing is placed by the seed: no area to shade
         area = seeded_area(geo)
         return [(k, lo, hi, area.lateral_m[k]) for k, lo, hi in area.spans()]
     track = geo.config

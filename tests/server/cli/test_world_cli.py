@@ -76,3 +76,15 @@ def test_simulate_runs_on_a_world_file_given_by_its_path(
         main([*argv, "--world", "doorway.toml"])
     assert e.value.code == 2
     assert f"argument --world: {world}:" in capsys.readouterr().err
+
+
+def test_the_picture_shades_a_seeded_area_only_where_an_obstacle_is_seeded(tmp_path: Path) -> None:
+    from core.sim.types import build_geometry
+    from server.reports.world_picture import seeded_spans
+
+    text = (ROOT / "core" / "data" / "worlds" / "u-shape.toml").read_text()
+    assert seeded_spans(build_geometry(load_world("u-shape").config.track))
+    fixed = text.replace('rule = "seeded"', 'rule = "fixed"\nsegment = 0\nalong_m = 4.0')
+    (tmp_path / "fixed.toml").write_text(fixed)
+    world = load_world(str(tmp_path / "fixed.toml"))
+    assert seeded_spans(build_geometry(world.config.track)) == []
