@@ -10,6 +10,10 @@ seeds answering correctly, wrongly or not at all::
 
     .venv/bin/python scripts/signal_answers.py docs/results/signal-kp --jobs 2
 
+Before any learner, it also measures what the beacon's reflexes alone would teach the
+camera's colour stimuli (`core.lab.copies` with `beacon-reflexes`: KP's RSTM reasoned at
+each episode's end, nothing learned), judged by the same rule.
+
 It writes ``answers.md`` (starting with that command) and ``answers.json`` into the folder.
 """
 
@@ -22,6 +26,7 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from core.lab.copies import Copy, copy_report, reflex_copies
 from core.params import configure, tuned_params
 from core.run.runner import run
 from core.run.setup import Setup
@@ -53,6 +58,22 @@ def answers(condition: str, seed: int, episodes: int) -> dict[str, tuple[str | N
     return out
 
 
+RULE = {
+    "Red": frozenset({"stop"}),
+    "Yellow": frozenset({"stop"}),
+    "Green": frozenset(f"goforward{i}" for i in range(1, 6)),
+}
+"""The signal's rule as sets of correct behaviours (the probe's form, `core.lab.copies`)."""
+
+
+def copies(seed: int, episodes: int) -> list[Copy]:
+    """What the beacon's reflexes would teach the camera over one seed's episodes."""
+    setup = Setup("stop-line", signal="learned")
+    return [
+        c for c in reflex_copies(setup, seed, episodes, "beacon-reflexes") if c.stimulus in RULE
+    ]
+
+
 def judge(stimulus: str, behaviour: str | None) -> str:
     """correct, wrong or none: `behaviour` as the answer to `stimulus` by the signal's rule."""
     if behaviour is None:
@@ -80,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     jobs = [(c, s, args.episodes) for c in conditions for s in range(args.seeds)]
     with ProcessPoolExecutor(args.jobs) as pool:
         results = list(pool.map(answers, *zip(*jobs, strict=True)))
+    with ProcessPoolExecutor(args.jobs) as pool:
+        taught = list(pool.map(copies, range(args.seeds), [args.episodes] * args.seeds))
+    report = copy_report(taught, RULE)
     per: dict[str, dict[str, dict[str, int]]] = {}
     sources: dict[str, dict[str, dict[str, int]]] = {}
     for (c, _, _), got in zip(jobs, results, strict=True):
@@ -114,10 +138,32 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(
                 f"| {c} | {st} | {cell['correct']} | {cell['wrong']} | {cell['none']} | {seen} |"
             )
+    c, cr = report.correct, report.correct_rewarded
+    lines += [
+        "",
+        "## What the beacon's reflexes would teach",
+        "",
+        "Before any learner: `beacon-reflexes` (no learning) with KP recording and never "
+        "learning; at each episode's end each colour stimulus's RSTM is reasoned over as KP "
+        "would on a reward. Share of each seed's copies that the signal's rule judges "
+        f"correct, mean over seeds: {c.mean:.0%} [{c.low:.0%}, {c.high:.0%}]; over the copies "
+        f"of successful episodes (the only ones KP propagates): {cr.mean:.0%} "
+        f"[{cr.low:.0%}, {cr.high:.0%}].",
+        "",
+        "| stimulus | copies | correct | of successful episodes | correct | behaviours copied |",
+        "|---|---|---|---|---|---|",
+    ]
+    for st, (n, ok, nr, okr, bs) in report.by_stimulus.items():
+        copied = ", ".join(f"{b}: {k}" for b, k in bs.items())
+        lines.append(f"| {st} | {n} | {ok} | {nr} | {okr} | {copied} |")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "answers.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (args.out / "answers.json").write_text(
-        json.dumps({"command": command, "judged": per, "answers": sources}, indent=1) + "\n",
+        json.dumps(
+            {"command": command, "judged": per, "answers": sources, "copies": report.as_dict()},
+            indent=1,
+        )
+        + "\n",
         encoding="utf-8",
     )
     sys.stdout.write("\n".join(lines) + "\n")
