@@ -43,7 +43,8 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
     Observation: which of the catalogue's stimuli are active (MultiBinary), leaving out
     those of a logical sensor the world lacks the physical sensor for (the stop-line
     beacon's, in a world without one). Action: which of its behaviours to run (Discrete).
-    Reward: `success_reward` when a lap is completed, 0 otherwise. `terminated` on success, collision or violation; `truncated` on time-out.
+    Reward: `success_reward` when a lap is completed, 0 otherwise. `terminated` on success,
+    collision or violation; `truncated` on time-out.
 
     Episodes in which the learner never has to decide (the robot crashed before meeting a
     learnable stimulus) are run inside `reset` and reported in ``info["skipped"]``.
