@@ -14,7 +14,8 @@ Before any learner, it also measures what the beacon's reflexes alone would teac
 camera's colour stimuli (`core.lab.copies` with `beacon-reflexes`: KP's RSTM reasoned at
 each episode's end, nothing learned), judged by the same rule.
 
-It writes ``answers.md`` (starting with that command) and ``answers.json`` into the folder.
+It writes ``answers.md`` (starting with that command), ``answers.json`` and ``answers.png``
+into the folder.
 """
 
 from __future__ import annotations
@@ -88,6 +89,27 @@ def judge(stimulus: str, behaviour: str | None) -> str:
     return "correct" if family == CORRECT[stimulus] else "wrong"
 
 
+def plot(path: Path, per: dict[str, dict[str, dict[str, int]]], seeds: int) -> None:
+    """Seeds answering each colour stimulus correctly, wrongly or not at all, per condition."""
+    from server.reports.plots import save, subplots
+
+    conditions = list(per)
+    fig, axes = subplots(len(conditions), figsize=(3.2 * len(conditions), 3.2), sharey=True)
+    shades = {"correct": "#2a9d8f", "wrong": "#e76f51", "none": "#cccccc"}
+    for ax, c in zip(axes[0], conditions, strict=True):
+        bottom = [0] * len(STIMULI)
+        for verdict, colour in shades.items():
+            counts = [per[c][st][verdict] for st in STIMULI]
+            ax.bar(STIMULI, counts, bottom=bottom, color=colour, label=verdict)
+            bottom = [b + n for b, n in zip(bottom, counts, strict=True)]
+        ax.set_title(c)
+        ax.set_ylim(0, seeds)
+    axes[0][0].set_ylabel("seeds")
+    axes[0][-1].legend(loc="lower right", fontsize=8)
+    fig.suptitle("The camera's colour stimuli after training, judged by the signal's rule")
+    save(fig, path)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Train, read the answers, write answers.md and answers.json."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -157,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
         copied = ", ".join(f"{b}: {k}" for b, k in bs.items())
         lines.append(f"| {st} | {n} | {ok} | {nr} | {okr} | {copied} |")
     args.out.mkdir(parents=True, exist_ok=True)
+    lines += ["", "![Seeds answering each colour stimulus correctly](answers.png)"]
+    plot(args.out / "answers.png", per, args.seeds)
     (args.out / "answers.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     (args.out / "answers.json").write_text(
         json.dumps(
