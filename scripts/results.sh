@@ -82,6 +82,14 @@ run noisy-phase phase --param echo_range_m=0.1,0.2,0.3,0.4,0.5,0.6 \
 # A teacher that is wrong: kp, kp-punished and sonar, 20 seeds x 200 episodes, two worlds.
 SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py "$OUT"/wrong-teacher \
     --jobs "$JOBS"
+# KP on a second objective: the stop-line beacon's responses teaching the camera's colours
+# (signal learned, no obstacle), its world's properties and what the camera answers.
+run signal-kp experiment --conditions kp-signal,beacon,rp,reflexes,beacon-reflexes,expert \
+    --world stop-line --signal learned --declare kp-signal-beacon,kp-signal-rp --seeds 20 \
+    --episodes 50 --eval-episodes 10 --jobs "$JOBS" --quiet --no-probe --out "$OUT"/signal-kp
+run signal-kp world-check --world stop-line --seeds 20 --episodes 50 --jobs "$JOBS" --quiet \
+    --out "$OUT"/signal-kp/world-check
+SRLAB=.venv/bin/python run signal-kp scripts/signal_answers.py "$OUT"/signal-kp --jobs "$JOBS"
 # Exploration on equal terms: frozen after 50, 200 and 1,000 episodes (kp and both
 # qlambda-hybrids to 1,000, qlambda and qlambda-decay to 200; dqn and ppo are in deep-curve).
 SRLAB=.venv/bin/python run exploration scripts/frozen_budgets.py "$OUT"/exploration \

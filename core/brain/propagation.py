@@ -328,6 +328,15 @@ class KnowledgePropagation:
         catalog = self.catalog
         dt = self._dt
         parts = [catalog.behaviours[b] for b in behaviours]
+        stops = [b for b in parts if b.family == "stop"]
+        if stops and 2 * len(stops) >= len(parts):
+            # A stop has no heading to add to the sum (the paper's reasoningKPM sums
+            # headings, and its sources always moved): when the low-level responses were
+            # stops at least as often as moves, B is the stop; otherwise the sum runs over
+            # the moves. Without a stop among the sources nothing changes.
+            stop = stops[0]
+            return (stop, "snapped", (0.0, 0.0), 0.0, 0.0, stop)
+        parts = [b for b in parts if b.family != "stop"]
         sx = sum(math.cos(steer_angle(b, dt)) for b in parts)
         sy = sum(math.sin(steer_angle(b, dt)) for b in parts)
         angle = resultant_direction(parts, dt)

@@ -44,11 +44,15 @@ class Copy:
     """Whether the episode succeeded (only then would KP have propagated it)."""
 
 
-def reflex_copies(setup: Setup, seed: int, episodes: int) -> list[Copy]:
-    """Every copy the reflexes would teach over `episodes` episodes of `seed`, in order."""
+def reflex_copies(setup: Setup, seed: int, episodes: int, teacher: str = CONDITION) -> list[Copy]:
+    """Every copy the reflexes would teach over `episodes` episodes of `seed`, in order.
+
+    `teacher` is the condition whose reflexes teach: the sonar's (`reflexes`) by default,
+    the stop-line beacon's (`beacon-reflexes`) for the camera's colour stimuli.
+    """
     setup = setup.resolved()
     catalog = setup.catalog()
-    condition = setup.condition(get_condition(CONDITION))
+    condition = setup.condition(get_condition(teacher))
     base = condition.brain_config()
     # KP records (it is enabled) but learns nothing: the condition has no reward at all,
     # and learning is off, so nothing ever reaches RLTM or the network.

@@ -48,10 +48,17 @@ def frozen(condition: Condition) -> Condition:
     )
 
 
+BEACON_SENSOR = "beacon"
+
+
 def without_sonar(catalog: Catalog, network: BehaviourNetwork) -> BehaviourNetwork:
-    """A copy of `network` without the sonar's obstacle responses."""
-    sonar = {s.id for s in catalog.stimuli if s.sensor == SONAR_SENSOR}
-    return BehaviourNetwork(len(catalog.stimuli), (a for a in network if a.stimulus not in sonar))
+    """A copy of `network` without the low-level responses KP learns from.
+
+    The sonar's obstacle responses and the stop-line beacon's signal responses (which only
+    a world with a beacon raises): what is left of the camera's is what it learned.
+    """
+    low = {s.id for s in catalog.stimuli if s.sensor in (SONAR_SENSOR, BEACON_SENSOR)}
+    return BehaviourNetwork(len(catalog.stimuli), (a for a in network if a.stimulus not in low))
 
 
 def frozen_config(config: BrainConfig) -> BrainConfig:

@@ -47,6 +47,8 @@ from core.run.setup import Setup
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
+    from core.learners.envs import AmigoTrackEnv
+
 CAMERA_SENSOR = "camera_obstacle"
 
 
@@ -215,7 +217,8 @@ def _run_qlambda_task(task: Task, catalog: Catalog, condition: Condition) -> Tas
             agent = agent_ref[0]
             answers.append(
                 tuple(
-                    _name(catalog.behaviours, answer(agent, _alone(catalog, st))) for st in camera
+                    _name(catalog.behaviours, answer(agent, _alone(catalog, st, env)))
+                    for st in camera
                 )
             )
             if done[0] in task.eval_after:
@@ -244,7 +247,6 @@ def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskRe
     """A deep baseline (DQN or PPO, `core.learners.baselines`), trained and evaluated as any."""
     from core.lab.evaluation import eval_seed
     from core.learners import baselines
-    from core.learners.envs import AmigoTrackEnv
 
     algo: baselines.Algo = "dqn" if condition.agent == "dqn" else "ppo"
     config = baselines.BaselineConfig.with_params(algo, baseline_params(condition, task.params))
@@ -255,7 +257,7 @@ def _run_deep_task(task: Task, catalog: Catalog, condition: Condition) -> TaskRe
 
     env = env_for(condition.network)
     camera = [st for st in catalog.stimuli if st.sensor == CAMERA_SENSOR]
-    alone = [_alone(catalog, st) for st in camera]
+    alone = [_alone(catalog, st, env) for st in camera]
     answers: list[tuple[str | None, ...]] = []
     model_ref: list[BaseAlgorithm] = []
 
@@ -306,15 +308,14 @@ LANE_STIMULI = {"L": "Left", "M": "Middle", "R": "Right"}
 """The position stimulus of each lane letter of a camera stimulus's name (Obstacle_M_R)."""
 
 
-def _alone(catalog: Catalog, stimulus: Stimulus) -> npt.NDArray[np.int8]:
+def _alone(catalog: Catalog, stimulus: Stimulus, env: AmigoTrackEnv) -> npt.NDArray[np.int8]:
     """The observation of a camera stimulus seen alone, with its lane's position stimulus."""
-    obs = np.zeros(len(catalog.stimuli), dtype=np.int8)
-    obs[stimulus.id] = 1
+    active = [stimulus.id]
     parts = stimulus.name.split("_")
     lane = LANE_STIMULI.get(parts[1]) if len(parts) == 3 else None
     if lane is not None:
-        obs[catalog.stimulus(lane).id] = 1
-    return obs
+        active.append(catalog.stimulus(lane).id)
+    return env.observation(active)
 
 
 def _name(behaviours: Sequence[Behaviour], b: int) -> str | None:

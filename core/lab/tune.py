@@ -65,6 +65,8 @@ GRIDS: dict[str, Axes] = {
     "sonar": _BRAIN,
     "kp": _KP,
     "kp-punished": _KP,
+    "kp-signal": _KP,
+    "beacon": _BRAIN,
     "qlambda": _QLAMBDA,
     "qlambda-hybrid": _QLAMBDA,
     "qlambda-decay": _QLAMBDA_DECAY,

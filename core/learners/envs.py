@@ -14,6 +14,7 @@ prior's knowledge need not override it to find out what it is worth. ``render_mo
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -39,9 +40,11 @@ Observation = npt.NDArray[np.int8]
 class AmigoTrackEnv(gym.Env[Observation, np.int64]):
     """The AmigoBot track as a semi-Markov decision process over S-R stimuli.
 
-    Observation: which of the catalogue's stimuli are active (MultiBinary). Action: which of
-    its behaviours to run (Discrete). Reward: `success_reward` when a lap is completed, 0
-    otherwise. `terminated` on success, collision or violation; `truncated` on time-out.
+    Observation: which of the catalogue's stimuli are active (MultiBinary), leaving out
+    those of a logical sensor the world lacks the physical sensor for (the stop-line
+    beacon's, in a world without one). Action: which of its behaviours to run (Discrete).
+    Reward: `success_reward` when a lap is completed, 0 otherwise. `terminated` on success,
+    collision or violation; `truncated` on time-out.
 
     Episodes in which the learner never has to decide (the robot crashed before meeting a
     learnable stimulus) are run inside `reset` and reported in ``info["skipped"]``.
@@ -80,7 +83,14 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
         self.success_reward = success_reward
         self.world_config = world_config
         self._learnable = frozenset(s.id for s in self.catalog.stimuli if s.sensor in learnable)
-        self.observation_space = gym.spaces.MultiBinary(len(self.catalog.stimuli))
+        absent = (world_config or WorldConfig()).absent_physical()
+        self.observed = np.array(
+            [st.id for st in self.catalog.stimuli if not absent & set(self._physical(st.sensor))],
+            dtype=np.intp,
+        )
+        """The stimuli observed: those of sensors the world has (a world without the stop
+        line's beacon leaves the beacon's out, so its observation is as it always was)."""
+        self.observation_space = gym.spaces.MultiBinary(len(self.observed))
         self.defer = defer
         self.defer_action = len(self.catalog.behaviours) if defer else -1
         """The "let the built-in behaviour answer" action (-1: there is none)."""
@@ -113,10 +123,17 @@ class AmigoTrackEnv(gym.Env[Observation, np.int64]):
             raise gym.error.ResetNeeded("call reset() first")
         return self._sim
 
-    def _observe(self) -> Observation:
+    def _physical(self, sensor: str) -> tuple[str, ...]:
+        return next((s.physical for s in self.catalog.sensors if s.name == sensor), ())
+
+    def observation(self, active: Sequence[int]) -> Observation:
+        """The observation of the stimuli `active` (catalogue ids)."""
         obs = np.zeros(len(self.catalog.stimuli), dtype=np.int8)
-        obs[self.simulation.upcoming_stimuli()] = 1
-        return obs
+        obs[list(active)] = 1
+        return obs[self.observed]
+
+    def _observe(self) -> Observation:
+        return self.observation(self.simulation.upcoming_stimuli())
 
     def open_stimulus(self) -> int:
         """The learnable stimulus the learner's next decision answers (-1: no decision)."""

@@ -64,6 +64,11 @@ class Channel(IntEnum):
     """Camera: where the obstacle's centre appears across the image, from -1 (right edge)
     to +1 (left edge): its bearing off the camera's axis over half the field of view;
     99 while it is not in view."""
+    BEACON_PHASE = 32
+    """The stop line's beacon (a world with `track.signal.beacon`): the signal's phase, 1
+    red, 2 yellow, 3 green, in the last message the front receiver heard while within
+    `beacon_range_m` of the line (the beacon repeats it every `beacon_period_s`); 0 out of
+    its range, before its first message there, and in a world without a beacon."""
 
 
 CHANNELS: tuple[str, ...] = tuple(c.name.lower() for c in Channel)

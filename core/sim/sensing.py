@@ -37,4 +37,4 @@ G_SIZE = 24
 
 def empty_channels() -> np.ndarray[Any, np.dtype[np.float64]]:
     """A channel vector to fill."""
-    return np.zeros(32, dtype=np.float64)
+    return np.zeros(33, dtype=np.float64)

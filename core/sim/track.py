@@ -23,6 +23,12 @@ class SignalConfig:
         red_s: range of a red phase's duration, seconds, drawn uniformly per phase.
         green_s: range of a green phase's duration, seconds.
         yellow_s: a yellow phase's duration, seconds. The cycle is red, green, yellow, red.
+        beacon: whether an infrared beacon at the stop line broadcasts the phase (the
+            `beacon_phase` channel, the `beacon` logical sensor).
+        beacon_range_m: how far along the lane either side of the stop line the robot's
+            front receiver hears the beacon.
+        beacon_period_s: the beacon repeats its message (the phase) this often; each
+            episode draws when its first message goes out.
     """
 
     leg: int = 2
@@ -31,6 +37,9 @@ class SignalConfig:
     red_s: tuple[float, float] = (4.0, 8.0)
     green_s: tuple[float, float] = (4.0, 8.0)
     yellow_s: float = 1.5
+    beacon: bool = False
+    beacon_range_m: float = 0.12
+    beacon_period_s: float = 0.5
 
 
 @dataclass(frozen=True, slots=True)

@@ -75,6 +75,14 @@ class WorldConfig:
         if self.dt_s <= 0 or self.max_ticks <= 0:
             raise ValueError("dt_s and max_ticks must be positive")
 
+    def absent_physical(self) -> frozenset[str]:
+        """Physical sensors a logical sensor may name that this world does not have.
+
+        The stop line's beacon is part of the world, not of the robot: without it the
+        `beacon` logical sensor's stimuli never occur.
+        """
+        return frozenset() if self.track.signal.beacon else frozenset({"beacon"})
+
 
 class MotorCommand(NamedTuple):
     """Wheel command for one tick: forward speed and turning rate (+ = left)."""

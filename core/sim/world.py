@@ -10,6 +10,7 @@ import numpy as np
 import pymunk
 
 from core.sim import sensing
+from core.sim.channels import Channel
 from core.sim.corridor import CorridorConfig, CorridorGeometry, PlacedObstacle, place_obstacles
 from core.sim.perception import NoisyPerception
 from core.sim.track import TrackConfig, TrackGeometry
@@ -40,6 +41,8 @@ __all__ = [
 """The world's plain types live in `core.sim.types`; they are re-exported here."""
 
 _ROBOT, _WALL, _OBSTACLE = 1, 2, 3
+_BEACON_PHASE = int(Channel.BEACON_PHASE)
+_FRONT_TO_LINE = int(Channel.FRONT_TO_STOPLINE_M)
 
 
 def episode_layout(
@@ -239,6 +242,12 @@ class PymunkWorld:
         self._lamp = LampColor.RED
         self._layout = EpisodeLayout(None, -1, ((LampColor.GREEN, 1),))
         self._front_to_line = sensing.UNSEEN
+        sig = self.config.track.signal
+        self._beacon = sig.beacon
+        self._beacon_range = sig.beacon_range_m
+        self._beacon_period = max(1, round(sig.beacon_period_s / self.config.dt_s))
+        self._beacon_first = 0
+        self._beacon_heard = 0.0
         # Constants of the tick path, read once (the config is frozen).
         self._v_max = robot.max_speed_mps
         self._w_max = robot.max_turn_rad_s
@@ -279,6 +288,10 @@ class PymunkWorld:
         self._refill_noise()
         if self._perception is not None:
             self._perception.reset(seed, episode)
+        if self._beacon:  # its own stream: a world without a beacon draws as before
+            beacon_rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 3]))
+            self._beacon_first = int(beacon_rng.integers(self._beacon_period))
+        self._beacon_heard = 0.0
         x, y, th = self.geometry.start_pose
         self._body.position = (x, y)
         self._body.angle = th
@@ -330,6 +343,7 @@ class PymunkWorld:
             self._obstacle_body.position = (ox, oy)
         self._space.reindex_shapes_for_body(self._obstacle_body)
         self._track[:] = 0.0
+        self._beacon_heard = 0.0
         if self._perception is not None:
             self._perception.relocate()
         self._command = MotorCommand(0.0, 0.0)
@@ -378,6 +392,14 @@ class PymunkWorld:
             )
         return frame
 
+    def _hear_beacon(self, front_to_line: float) -> float:
+        """The phase in the beacon's last message heard within its range (0: none)."""
+        if abs(front_to_line) > self._beacon_range:
+            self._beacon_heard = 0.0
+        elif (self._tick - self._beacon_first) % self._beacon_period == 0:
+            self._beacon_heard = float(self._lamp)
+        return self._beacon_heard
+
     def _refill_noise(self) -> None:
         self._noise = self._rng.normal(0.0, self.config.robot.sonar_noise_m, (256, 8))
         self._noise_at = 0
@@ -422,6 +444,8 @@ class PymunkWorld:
             geo.leg_start_m,
             out,
         )
+        if self._beacon:
+            out[_BEACON_PHASE] = self._hear_beacon(float(out[_FRONT_TO_LINE]))
         if self._perception is not None:
             self._perception.apply(out, pos.x, pos.y)
         return SensorFrame(

@@ -82,7 +82,9 @@ def add_world_check_parser(sub: argparse._SubParsersAction[argparse.ArgumentPars
         description="With the signal's responses given and no learning anywhere: (a) no "
         "obstacle knowledge succeeds <= 20%%, (b) the sonar reflexes alone 40-80%%, (c) the "
         "expert's camera responses >= 95%%; and (d) innate knowledge alone <= 10%% (Table "
-        "II). Prints each with its 95%% Student's t interval over seeds.",
+        "II). A world with a stop-line beacon (stop-line) is checked on the signal instead: "
+        "(a) no signal knowledge <= 65%%, (b) the beacon's reflexes alone 65-90%%, (c) the "
+        "expert's >= 95%%. Prints each with its 95%% Student's t interval over seeds.",
     )
     check.add_argument(
         "--world",
@@ -108,7 +110,7 @@ def world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
     """Run `srlab world-check`."""
     from core.brain.catalog import sensor_definitions
     from core.lab.stats import pct
-    from core.lab.worldcheck import PROPERTIES
+    from core.lab.worldcheck import properties_for
     from core.lab.worldcheck import world_check as check_world
     from core.sim.worlds import load_world, world_names
 
@@ -133,7 +135,7 @@ def world_check(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> i
     with open_backend(args, err) as (backend, where):
         for w in worlds:
             for d in sensors:
-                total = len(PROPERTIES) * len(seeds)
+                total = len(properties_for(w)) * len(seeds)
                 progress, on_result = task_progress(
                     err, f"world-check {w} ({d})", total, args.quiet
                 )

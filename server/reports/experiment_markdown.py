@@ -12,6 +12,7 @@ from core.brain.catalog import Catalog
 from core.lab.analysis import CRITERION_RATE, CRITERION_WINDOW, HELD_OUT, HORIZONS, paired_table
 from core.lab.experiment import CAMERA_SENSOR, TaskResult
 from core.lab.stats import p_text, wilson
+from core.sim.worlds import load_world
 from server.reports.base import diff, failed_lines, head, interval_line, row
 from server.reports.paper import PAPER_TABLE_II, PAPER_TABLE_III
 
@@ -90,6 +91,13 @@ def _setup_line(params: dict[str, Any]) -> str:
     )
 
 
+def _teacher(params: dict[str, Any]) -> str:
+    """Whose responses the camera-only test removes: the low-level ones KP learns from."""
+    world = params.get("world")
+    beacon = bool(world) and load_world(str(world)).config.track.signal.beacon
+    return "stop-line beacon's signal" if beacon else "sonar's obstacle"
+
+
 def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]:
     labels = [label for label, _ in HORIZONS]
     present = [
@@ -109,7 +117,7 @@ def _success_lines(summary: dict[str, Any], params: dict[str, Any]) -> list[str]
         + (
             f" Held-out: after training, what was learned frozen (no exploration, no learning) "
             f"for {params.get('eval_episodes')} episodes on seeds the training never used; "
-            "camera only: the same with the sonar's obstacle responses removed."
+            f"camera only: the same with the {_teacher(params)} responses removed."
             if evaluated
             else ""
         ),

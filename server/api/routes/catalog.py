@@ -36,6 +36,9 @@ _MEANINGS = {
     "SonarObstacleFront": "an echo dead ahead (both central sonars) that is not a wall",
     "SonarObstacleRight": "an echo on the right that the map of the walls does not explain",
     "Collision": "the bumper is pressed",
+    "BeaconRed": "the stop line's beacon, heard only near the line, says red",
+    "BeaconYellow": "the stop line's beacon, heard only near the line, says yellow",
+    "BeaconGreen": "the stop line's beacon, heard only near the line, says green",
 }
 _LANE = {"L": "left", "M": "middle", "R": "right"}
 _SIDE = {"L": "left", "M": "ahead (middle)", "R": "right"}

@@ -44,7 +44,7 @@ def network(*associations: Mapping[str, Any], **extra: Any) -> dict[str, Any]:
 
 def test_shipped_catalogue_loads(catalog: Catalog) -> None:
     assert len(catalog.behaviours) == 21  # Table III
-    assert len(catalog.stimuli) == 22
+    assert len(catalog.stimuli) == 25  # 22, and the stop-line beacon's 3
     assert {"innate", "expert"} <= set(catalog.knowledge)
     assert [s.id for s in catalog.stimuli] == list(range(len(catalog.stimuli)))
     assert [b.id for b in catalog.behaviours] == list(range(len(catalog.behaviours)))

@@ -40,3 +40,13 @@ def test_the_report_scores_copies_per_seed_and_among_rewarded_episodes() -> None
     assert report.by_stimulus["Obstacle_M_L"][:4] == (3, 2, 1, 1)
     assert report.by_stimulus["Obstacle_M_L"][4] == {"rightturn30": 2, "leftturn30": 1}
     assert report.by_stimulus["Obstacle_M_R"][:4] == (1, 0, 1, 0)
+
+
+def test_the_beacon_teaches_the_cameras_colours_what_the_signal_says() -> None:
+    """In `stop-line` the beacon's reflexes would teach the camera's colour stimuli: stop on
+    red and yellow, go on green (a copy can be wrong where the lamp changes at the line)."""
+    got = reflex_copies(Setup("stop-line", signal="learned"), 1, 8, "beacon-reflexes")
+    assert {c.stimulus for c in got} <= {"Red", "Yellow", "Green"}
+    assert {c.stimulus for c in got} >= {"Red", "Green"}
+    right = {"Red": "stop", "Yellow": "stop", "Green": "goforward3"}
+    assert sum(c.behaviour == right[c.stimulus] for c in got) >= 0.8 * len(got)

@@ -24,8 +24,12 @@ BUILT_IN_DIGEST = "310556885a7e74be0636238152a6ce58"
 they became data: the results were made with exactly these."""
 
 
+SIGNAL_CONDITIONS = ("kp-signal", "beacon", "beacon-reflexes")
+"""The stop-line beacon's conditions (`docs/results/signal-kp/`), defined after the digest."""
+
+
 def test_the_built_in_conditions_are_the_ones_the_results_were_made_with() -> None:
-    text = "".join(f"{c!r}\n" for c in CONDITIONS.values())
+    text = "".join(f"{c!r}\n" for c in CONDITIONS.values() if c.name not in SIGNAL_CONDITIONS)
     assert hashlib.md5(text.encode()).hexdigest() == BUILT_IN_DIGEST
     assert list(CONDITIONS)[:3] == ["innate", "delayed", "dp"]
 

@@ -23,7 +23,7 @@ async def test_catalogue_lists_stimuli_behaviours_and_sensors(tmp_path: Path) ->
         stimuli = (await client.get("/api/stimuli")).json()
         behaviours = (await client.get("/api/behaviours")).json()
         sensors = (await client.get("/api/sensors")).json()
-    assert len(stimuli) == 22 and {"name": "Corner"}.items() <= stimuli[3].items()
+    assert len(stimuli) == 25 and {"name": "Corner"}.items() <= stimuli[3].items()
     assert len(behaviours) == 21
     turn90 = next(b for b in behaviours if b["name"] == "leftturn90")
     assert turn90["motion"][2] == pytest.approx(1.5708, abs=1e-3)

@@ -92,3 +92,7 @@ async def test_stimuli_say_what_they_mean_and_conditions_are_listed(tmp_path: Pa
             conditions["dp"]["learning"] and "Direct programming" in conditions["dp"]["description"]
         )
         assert "qlambda" not in conditions
+        # the signal's KP pairing and its ablation (docs/results/signal-kp/)
+        assert conditions["kp-signal"]["kp"] and conditions["kp-signal"]["network"] == "beacon"
+        assert not conditions["beacon"]["kp"] and conditions["beacon"]["network"] == "beacon"
+        assert "beacon_phase == 1" in stimuli["BeaconRed"]["rule"]

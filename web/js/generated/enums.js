@@ -33,6 +33,9 @@ export const Condition = Object.freeze({
   expert: "expert",
   reflexes: "reflexes",
   unaware: "unaware",
+  kp_signal: "kp-signal",
+  beacon: "beacon",
+  beacon_reflexes: "beacon-reflexes",
 });
 
 /** EpisodePublic.outcome */
