@@ -288,10 +288,7 @@ class PymunkWorld:
         self._refill_noise()
         if self._perception is not None:
             self._perception.reset(seed, episode)
-        if self._beacon:  # its own stream: a world without a beacon draws as before
-            beacon_rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 3]))
-            self._beacon_first = int(beacon_rng.integers(self._beacon_period))
-        self._beacon_heard = 0.0
+        self._reset_beacon(seed, episode)
         x, y, th = self.geometry.start_pose
         self._body.position = (x, y)
         self._body.angle = th
@@ -391,6 +388,13 @@ class PymunkWorld:
                 True,
             )
         return frame
+
+    def _reset_beacon(self, seed: int, episode: int) -> None:
+        """When the beacon's first message of the episode comes (a seeded offset)."""
+        if self._beacon:  # its own stream: a world without a beacon draws as before
+            beacon_rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 3]))
+            self._beacon_first = int(beacon_rng.integers(self._beacon_period))
+        self._beacon_heard = 0.0
 
     def _hear_beacon(self, front_to_line: float) -> float:
         """The phase in the beacon's last message heard within its range (0: none)."""
@@ -506,6 +510,7 @@ class CorridorWorld(PymunkWorld):
         self._layout = layout
         self._rng = np.random.default_rng(np.random.SeedSequence([seed, episode, 2]))
         self._refill_noise()
+        self._reset_beacon(seed, episode)
         x, y, th = self._corridor.start_pose
         self._pose(x, y, th)
         self._tick = 0
@@ -635,6 +640,8 @@ class CorridorWorld(PymunkWorld):
             self._leg_state,
             out,
         )
+        if self._beacon:
+            out[_BEACON_PHASE] = self._hear_beacon(float(out[_FRONT_TO_LINE]))
         return SensorFrame(
             self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
         )

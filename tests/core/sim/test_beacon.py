@@ -10,6 +10,7 @@ stimuli follow the channel; the camera's colour stimuli are the far ones.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -82,3 +83,28 @@ def test_a_world_without_a_beacon_never_hears_one() -> None:
     seen = watch("soft-obstacle", 0.02)
     assert all(phase == 0.0 for _, phase, _, _ in seen)
     assert not any(n.startswith("Beacon") for _, _, _, names in seen for n in names)
+
+
+def test_a_corridor_world_file_with_a_beacon_hears_it_near_its_stop_line(tmp_path: Path) -> None:
+    from core.sim.world import CorridorWorld
+
+    text = (Path(__file__).parents[3] / "core" / "data" / "worlds" / "u-shape.toml").read_text()
+    with_beacon = text.replace(
+        "signal = { segment = 1, fraction = 0.5 }",
+        "signal = { segment = 1, fraction = 0.5, beacon = true, beacon_range_m = 0.2 }",
+    )
+    (tmp_path / "beacon.toml").write_text(with_beacon)
+    heard = {}
+    for name, path in (("with", tmp_path / "beacon.toml"), ("without", None)):
+        world = CorridorWorld(load_world(str(path) if path else "u-shape").config)
+        world.reset(3, 0)
+        geo = world.geometry
+        d = geo.directions[1]
+        x, y = np.asarray(geo.stopline_point) - d * (0.05 + world.config.robot.length_m / 2)
+        frame = world.place(float(x), float(y), math.atan2(d[1], d[0]), None)
+        phases = []
+        for _ in range(TICKS):
+            phases.append(frame.channels[Channel.BEACON_PHASE])
+            frame = world.step()
+        heard[name] = phases
+    assert any(heard["with"]) and not any(heard["without"])
