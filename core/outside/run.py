@@ -59,6 +59,11 @@ class SeedRun:
             learned, explored, default...).
         answers: per high-level stimulus, the behaviour its network releases at the end
             ("" for none).
+        onsets: training ticks where a low-level stimulus of an objective a high-level
+            sensor shares became active (a reflex's onset).
+        leads: for each onset the high-level sensor saw coming (a stimulus of the same
+            objective active within KP's window before it), how many ticks before the
+            onset that sighting began.
     """
 
     condition: str
@@ -67,6 +72,42 @@ class SeedRun:
     held_out: tuple[Episode, ...]
     origins: dict[str, int]
     answers: dict[str, str]
+    onsets: int = 0
+    leads: tuple[int, ...] = ()
+
+
+class Lead:
+    """Counts reflex onsets and how long before each the high-level sensor saw it coming."""
+
+    def __init__(self, world: OutsideWorld, window: int) -> None:
+        stimuli = world.catalog.stimuli
+        shared = {s.objective for s in stimuli if s.level == "high"}
+        self.high = frozenset(s.id for s in stimuli if s.level == "high")
+        self.low = frozenset(s.id for s in stimuli if s.level == "low" and s.objective in shared)
+        self.window = window
+        self.onsets = 0
+        self.leads: list[int] = []
+        self.reset()
+
+    def reset(self) -> None:
+        """A new episode: nothing seen."""
+        self._low_before = False
+        self._high_start = -1
+        self._high_last = -(10**9)
+
+    def see(self, tick: int, active: list[int]) -> None:
+        """One tick's active stimuli."""
+        high = any(s in self.high for s in active)
+        low = any(s in self.low for s in active)
+        if high:
+            if self._high_last < tick - 1:
+                self._high_start = tick
+            self._high_last = tick
+        if low and not self._low_before:
+            self.onsets += 1
+            if self._high_start >= 0 and tick - self._high_last <= self.window:
+                self.leads.append(tick - self._high_start)
+        self._low_before = low
 
 
 def brain_for(world: OutsideWorld, condition: Condition, seed: int) -> Brain:
@@ -114,17 +155,22 @@ def run_episode(
     tick: int,
     success_reward: float | None,
     origins: Counter[str] | None = None,
+    lead: Lead | None = None,
 ) -> tuple[Episode, int]:
     """One episode from `env_seed`, ticks counted on from `tick`; the episode and next tick."""
     actions = world.actions
     channels = env.reset(env_seed)
     brain.reset_episode()
+    if lead is not None:
+        lead.reset()
     ret = 0.0
     start = tick
     while True:
-        _, wheels = brain.step(tick, channels)
+        active, wheels = brain.step(tick, channels)
         if origins is not None:
             origins[brain.last.origin] += 1
+        if lead is not None:
+            lead.see(tick, active)
         step = env.step(actions[brain.motor.running], wheels)
         tick += 1
         ret += step.reward
@@ -150,12 +196,14 @@ def run_seed(
     brain = brain_for(world, condition, seed)
     env = world.make()
     origins: Counter[str] = Counter()
+    lead = Lead(world, brain.config.kp.window_ticks)
     try:
         tick = 0
         trained: list[Episode] = []
         for e in range(world.episodes if episodes is None else episodes):
             ep, tick = run_episode(
-                world, env, brain, episode_seed(seed, e), tick, condition.success_reward, origins
+                world, env, brain, episode_seed(seed, e), tick, condition.success_reward, origins,
+                lead,
             )
             trained.append(ep)
         still = frozen(world, brain)
@@ -172,4 +220,7 @@ def run_seed(
         for s in brain.catalog.stimuli
         if s.level == "high"
     }
-    return SeedRun(condition.name, seed, tuple(trained), tuple(tested), dict(origins), answers)
+    return SeedRun(
+        condition.name, seed, tuple(trained), tuple(tested), dict(origins), answers,
+        lead.onsets, tuple(lead.leads),
+    )  # fmt: skip
