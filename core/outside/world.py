@@ -34,12 +34,14 @@ from core.brain.catalog import (
     parse_knowledge,
     parse_sensors,
 )
-from core.errors import CatalogError, ConditionFileError, UnknownNameError
+from core.errors import CatalogError, ConditionFileError, ExtraMissingError, UnknownNameError
 from core.run.conditions import Condition, parse_condition_file
 from core.sim.types import MotorCommand
 
 OUTSIDE_FOLDER = "outside"
 """The shipped outside worlds' folder, in ``core/data/``."""
+INSTALL_HINT = "make install-worlds"
+"""How to install the srlab[worlds] extra (the outside worlds' environments)."""
 MEASURES = ("success", "return")
 """What a world's declared comparison is on: the share of successful episodes, or the
 environment's own return per episode."""
@@ -125,8 +127,18 @@ class OutsideWorld:
         return importlib.import_module(self.adapter)
 
     def make(self) -> OutsideEnv:
-        """A fresh environment (its options with ``folder``, the world's folder, for files)."""
-        env: OutsideEnv = self.module().make({**self.options, "folder": str(self.folder)})
+        """A fresh environment (its options with ``folder``, the world's folder, for files).
+
+        Without the environment's package (the srlab[worlds] extra), an `ExtraMissingError`
+        saying how to install it.
+        """
+        try:
+            env: OutsideEnv = self.module().make({**self.options, "folder": str(self.folder)})
+        except ModuleNotFoundError as e:
+            raise ExtraMissingError(
+                f"outside world {self.name!r} needs {e.name!r}, of the srlab[worlds] extra: "
+                f"run `{INSTALL_HINT}`"
+            ) from None
         return env
 
     def condition(self, name: str) -> Condition:

@@ -1,8 +1,8 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
 `simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise`,
-`export` and `study` (its actions: create, add, status, forget, export) have a module
-each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`,
+`export`, `outside` (list, check, experiment) and `study` (its actions: create, add,
+status, forget, export) have a module each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`,
 `run` holds `run` and `runs`, `db` and `serve` the database and the service. `common` has
 what they share: argument types and groups, the backend choice, progress bars and tables.
 Each module adds its parsers with a `handler`, and imports what only its handler needs
@@ -25,6 +25,7 @@ from server.cli import (
     experiment,
     export,
     noise,
+    outside,
     phase,
     run,
     serve,
@@ -58,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     equal_start.add_parser(sub)
     noise.add_parser(sub)
     tune.add_qlambda_sweep_parser(sub)
+    outside.add_parser(sub)
     db.add_parser(sub)
     run.add_run_parser(sub)
     serve.add_parser(sub)
