@@ -284,9 +284,7 @@ def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
     return tuple(out)
 
 
-def _parse_condition(
-    raw: Any, where: str, channels: tuple[str, ...] = CHANNELS
-) -> RuleCondition:
+def _parse_condition(raw: Any, where: str, channels: tuple[str, ...] = CHANNELS) -> RuleCondition:
     if not (isinstance(raw, list | tuple) and len(raw) == 3):
         raise CatalogError(
             f"{where}: a condition is [channel, op, value] or [channel, op, channel], got {raw!r}"

@@ -123,7 +123,9 @@ def declared(
             raise ValueError(f"{a} and {b} did not run on the same seeds")
         for on in DECLARED_ON:
             held = on == "held-out"
-            d = paired_difference(per_seed(runs[a], measure, held), per_seed(runs[b], measure, held))
+            d = paired_difference(
+                per_seed(runs[a], measure, held), per_seed(runs[b], measure, held)
+            )
             rows.append({"pair": f"{a} - {b}", "on": on, "diff": d.diff.as_dict(), "p": d.p})
     for r, q in zip(rows, holm([r["p"] for r in rows]), strict=True):
         r["p_holm"] = q
@@ -232,7 +234,8 @@ def check_markdown(report: dict[str, Any]) -> list[str]:
 
 def _condition_row(name: str, s: dict[str, Any], held: bool) -> str:
     outcomes = ", ".join(f"{k} {v:.0%}" for k, v in sorted(s["outcomes"].items()))
-    row = f"| {name} | {pct(Estimate.of(s['success']))} | {_value(Estimate.of(s['return']), 'return')}"
+    ret = _value(Estimate.of(s["return"]), "return")
+    row = f"| {name} | {pct(Estimate.of(s['success']))} | {ret}"
     if held:
         row += (
             f" | {pct(Estimate.of(s['held_out_success']))}"
@@ -275,8 +278,6 @@ def experiment_markdown(report: dict[str, Any]) -> list[str]:
     lines += ["", "Training ticks by what released the behaviour:", ""]
     for c, s in report["conditions"].items():
         total = sum(s["ticks_by_origin"].values()) or 1
-        cells = ", ".join(
-            f"{k} {v / total:.0%}" for k, v in sorted(s["ticks_by_origin"].items())
-        )
+        cells = ", ".join(f"{k} {v / total:.0%}" for k, v in sorted(s["ticks_by_origin"].items()))
         lines.append(f"- {c}: {cells}")
     return lines

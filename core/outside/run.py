@@ -202,7 +202,13 @@ def run_seed(
         trained: list[Episode] = []
         for e in range(world.episodes if episodes is None else episodes):
             ep, tick = run_episode(
-                world, env, brain, episode_seed(seed, e), tick, condition.success_reward, origins,
+                world,
+                env,
+                brain,
+                episode_seed(seed, e),
+                tick,
+                condition.success_reward,
+                origins,
                 lead,
             )
             trained.append(ep)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -250,13 +251,16 @@ def load_outside(name_or_path: str | Path) -> OutsideWorld:
         raise _with_file(sfile, e) from None
 
     raw_sets: dict[str, dict[str, Any]] = {}
+    files: dict[str, Path] = {}
     for f in sorted((folder / "networks").glob("*.toml")):
         spec = _read(f)
         raw_sets[str(spec.get("name", f.stem))] = spec
+        files[str(spec.get("name", f.stem))] = f
     try:
         knowledge = parse_knowledge(raw_sets, stimuli, behaviours)
     except CatalogError as e:
-        raise _with_file(folder / "networks", e) from None
+        named = re.match(r"network '([^']+)'", str(e))
+        raise _with_file(files.get(named[1] if named else "", folder / "networks"), e) from None
     catalog = Catalog(stimuli, behaviours, sensors, knowledge, "")
 
     default = str(raw.get("default_behaviour", ""))

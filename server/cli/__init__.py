@@ -2,9 +2,10 @@
 
 `simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise`,
 `export`, `outside` (list, check, experiment) and `study` (its actions: create, add,
-status, forget, export) have a module each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe` and `world-check`,
-`run` holds `run` and `runs`, `db` and `serve` the database and the service. `common` has
-what they share: argument types and groups, the backend choice, progress bars and tables.
+status, forget, export) have a module each; `tune` holds `tune` and `qlambda-sweep`,
+`world` holds `probe` and `world-check`, `run` holds `run` and `runs`, `db` and `serve`
+the database and the service. `common` has what they share: argument types and groups,
+the backend choice, progress bars and tables.
 Each module adds its parsers with a `handler`, and imports what only its handler needs
 (storage, the service, the report writers) when it runs, so that a command starts without
 the others' dependencies.

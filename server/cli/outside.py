@@ -49,9 +49,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
             p.add_argument(
                 "--held-out", type=positive_int, help="held-out episodes a seed (the world's)"
             )
-            p.add_argument(
-                "--conditions", default="kp,sonar", help="conditions to run (kp,sonar)"
-            )
+            p.add_argument("--conditions", default="kp,sonar", help="conditions to run (kp,sonar)")
             p.add_argument(
                 "--declare",
                 default="kp-sonar",
@@ -78,7 +76,9 @@ def _prepare(args: argparse.Namespace) -> Any:
     return world
 
 
-def _write(args: argparse.Namespace, stdout: IO[str], report: dict[str, Any], md: list[str]) -> None:
+def _write(
+    args: argparse.Namespace, stdout: IO[str], report: dict[str, Any], md: list[str]
+) -> None:
     command = command_line(args)
     report = {"command": command, **report}
     if args.out is not None:
