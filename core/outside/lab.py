@@ -205,6 +205,35 @@ def experiment(
     }
 
 
+def reading(props: dict[str, Any], report: dict[str, Any]) -> list[str]:
+    """What the figures say, in words drawn from them (for the summary's top)."""
+    failed = [p for p in props["properties"] if not p["holds"]]
+    lines = ["## Reading", ""]
+    if failed:
+        which = "; ".join(f"{p['key']} ({p['label']}: {p['figure']})" for p in failed)
+        lines.append(
+            f"Not every property of the world holds: {which}. Where one fails the world does "
+            "not pose the problem KP is claimed to solve, and the comparison below says how "
+            "KP fares there, not whether the claim holds."
+        )
+    else:
+        lines.append("Every property of the world holds: it poses the problem KP addresses.")
+    lines.append("")
+    for r in report["declared"]:
+        d = Estimate.of(r["diff"])
+        if r["p_holm"] < 0.05 and d.low > 0:
+            verdict = "kp does better than its ablation"
+        elif r["p_holm"] < 0.05 and d.high < 0:
+            verdict = "kp does worse than its ablation"
+        else:
+            verdict = "no difference is shown"
+        lines.append(
+            f"- {r['pair']}, {r['on']}: {_value(d, report['measure'])} "
+            f"({_p(r['p_holm'])} after Holm): {verdict}."
+        )
+    return lines
+
+
 def _p(p: float) -> str:
     return "p < 0.001" if p < 0.001 else f"p {p:.3f}"
 

@@ -117,6 +117,10 @@ def experiment(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> in
     report = lab.experiment(
         world, conditions, pairs, seeds, args.episodes, args.held_out, args.jobs
     )
-    md = [*lab.check_markdown(props), "", *lab.experiment_markdown(report)]
+    md = [
+        *lab.reading(props, report), "",
+        *lab.check_markdown(props), "",
+        *lab.experiment_markdown(report),
+    ]  # fmt: skip
     _write(args, stdout, {**report, "properties": props}, md)
     return 0

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
 from clihelpers import exits_2
 
+from core.errors import ExtraMissingError
 from core.outside.world import OutsideWorldError, load_outside, outside_folder, outside_names
 
 
@@ -95,3 +97,16 @@ def test_the_cli_says_which_world_is_unknown(capsys: pytest.CaptureFixture[str])
     err = exits_2(["outside", "check", "atlantis"], capsys)
     assert "unknown outside world 'atlantis'" in err
     assert "minigrid-dynamic" in err
+
+
+@pytest.mark.parametrize(("name", "package"), [("minigrid-dynamic", "minigrid"),
+                                               ("irsim-corridor", "irsim")])  # fmt: skip
+def test_a_world_without_its_package_says_how_to_install_it(
+    name: str, package: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, package, None)  # as if the extra were not installed
+    with pytest.raises(ExtraMissingError, match=rf"needs '{package}', of the srlab\[worlds\] "
+                       r"extra: run `make install-worlds`"):  # fmt: skip
+        load_outside(name).make()
+    err = exits_2(["outside", "check", name, "--seeds", "1"], capsys)
+    assert "make install-worlds" in err
