@@ -1,11 +1,11 @@
 """The brain's overhead on the outside worlds: the environment's own step against srlab's tick.
 
 Run as ``.venv/bin/python -m bench.outside`` (needs the srlab[worlds] extra:
-``make install-worlds``). For each outside world, side by side in one run, timing steps
-only (an episode's reset is left out of all three):
+``make install-worlds``). For each outside world, side by side in one run, interleaved 50
+steps at a time, timing steps only (an episode's reset is left out of all three):
 
 (a) the environment alone: its own step (MiniGrid's ``env.step`` with its observation;
-    ir-sim's ``env.step``, which runs its lidar), actions drawn at random;
+    ir-sim's ``env.step``, which runs its lidar), replaying (c)'s actions;
 (b) the adapter: (a) plus the channels mapping (observation -> named channels);
 (c) the brain on the adapter, the ``kp`` condition: logical sensors, perception, selection,
     motor, STM, KP's RSTM, then (b).
@@ -54,43 +54,54 @@ def _bare_step(world: OutsideWorld, env: Any) -> Callable[[int], bool]:
     return irs
 
 
-def measure(world: OutsideWorld, steps: int) -> tuple[float, float, float]:
-    """Seconds per step of (a), (b) and (c) over `steps` steps each."""
-    env = world.make()
-    n_b = len(world.catalog.behaviours)
-    rng = np.random.default_rng(0)
-    out = []
+def measure(world: OutsideWorld, steps: int, chunk: int = 50) -> tuple[float, float, float]:
+    """Seconds per step of (a), (b) and (c) over `steps` steps each.
+
+    Each runs on its own environment, interleaved `chunk` steps at a time so that the
+    machine's drifting speed falls on all three alike: (c) steps first and its behaviours
+    are recorded, then (b) and (a) replay them from the same episode seeds, so all three
+    drive the same trajectories.
+    """
+    envs = {mode: world.make() for mode in ("brain", "adapter", "bare")}
+    behaviours = world.catalog.behaviours
+    wheels = [MotorCommand(b.speed_mps, float(np.radians(b.turn_dps))) for b in behaviours]
+    brain = brain_for(world, world.condition("kp"), 0)
+    bare = _bare_step(world, envs["bare"])
+    chosen: list[int] = []
+    spent = dict.fromkeys(envs, 0.0)
+    episode = dict.fromkeys(envs, 0)
+    channels = envs["brain"].reset(episode_seed(0, 0))
+    for mode in ("adapter", "bare"):
+        envs[mode].reset(episode_seed(0, 0))
+    brain.reset_episode()
     try:
-        for mode in ("bare", "adapter", "brain"):
-            brain = brain_for(world, world.condition("kp"), 0)
-            bare = _bare_step(world, env)
-            channels = env.reset(episode_seed(0, 0))
-            brain.reset_episode()
-            spent, done_steps, episode = 0.0, 0, 0
-            while done_steps < steps:
-                t = time.perf_counter()
-                if mode == "brain":
-                    _, wheels = brain.step(done_steps, channels)
-                    r = env.step(world.actions[brain.motor.running], wheels)
-                    ended = r.outcome is not None
-                    channels = r.channels
-                elif mode == "adapter":
-                    b = int(rng.integers(n_b))
-                    beh = world.catalog.behaviours[b]
-                    wheels = MotorCommand(beh.speed_mps, float(np.radians(beh.turn_dps)))
-                    ended = env.step(world.actions[b], wheels).outcome is not None
-                else:
-                    ended = bare(int(rng.integers(n_b)))
-                spent += time.perf_counter() - t
-                done_steps += 1
-                if ended:
-                    episode += 1
-                    channels = env.reset(episode_seed(0, episode))
-                    brain.reset_episode()
-            out.append(spent / steps)
+        for first in range(0, steps, chunk):
+            last = min(steps, first + chunk)
+            for mode, env in envs.items():
+                for i in range(first, last):
+                    t = time.perf_counter()
+                    if mode == "brain":
+                        _, command = brain.step(i, channels)
+                        b = brain.motor.running
+                        r = env.step(world.actions[b], command)
+                        ended, channels = r.outcome is not None, r.channels
+                        chosen.append(b)
+                    elif mode == "adapter":
+                        b = chosen[i]
+                        ended = env.step(world.actions[b], wheels[b]).outcome is not None
+                    else:
+                        ended = bare(chosen[i])
+                    spent[mode] += time.perf_counter() - t
+                    if ended:
+                        episode[mode] += 1
+                        fresh = env.reset(episode_seed(0, episode[mode]))
+                        if mode == "brain":
+                            channels = fresh
+                            brain.reset_episode()
     finally:
-        env.close()
-    return out[0], out[1], out[2]
+        for env in envs.values():
+            env.close()
+    return spent["bare"] / steps, spent["adapter"] / steps, spent["brain"] / steps
 
 
 def main() -> None:

@@ -22,6 +22,7 @@ import contextlib
 import io
 import math
 from collections.abc import Mapping
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -49,14 +50,28 @@ def _wrap_deg(a: float) -> float:
     return (a + 180.0) % 360.0 - 180.0
 
 
+@lru_cache(maxsize=8)
+def _sectors(n: int, angle_min: float, angle_increment: float) -> tuple[slice, slice, slice]:
+    """The beams of the front, left and right sectors (beams run from right to left)."""
+    angles = np.degrees(angle_min + angle_increment * np.arange(n)) + 1e-9
+
+    def span(mask: Any) -> slice:
+        idx = np.flatnonzero(mask)
+        return slice(int(idx[0]), int(idx[-1]) + 1) if len(idx) else slice(0, 0)
+
+    front = span(np.abs(angles) <= FRONT_DEG + 2e-9)
+    left = span((angles > FRONT_DEG + 2e-9) & (angles <= SIDE_DEG + 2e-9))
+    right = span((angles < -FRONT_DEG) & (angles >= -SIDE_DEG))
+    return front, left, right
+
+
 def lidar_channels(ranges: Any, angle_min: float, angle_increment: float) -> list[float]:
     """The lidar's front, left and right ranges from one scan."""
-    r = np.asarray(ranges, dtype=np.float64)
-    angles = np.degrees(angle_min + angle_increment * np.arange(len(r)))
-    front = r[np.abs(angles) <= FRONT_DEG]
-    left = r[(angles > FRONT_DEG) & (angles <= SIDE_DEG)]
-    right = r[(angles < -FRONT_DEG) & (angles >= -SIDE_DEG)]
-    return [float(x.min()) if len(x) else NONE for x in (front, left, right)]
+    r = ranges.tolist() if isinstance(ranges, np.ndarray) else list(ranges)
+    return [
+        min(r[sector]) if sector.stop > sector.start else NONE
+        for sector in _sectors(len(r), float(angle_min), float(angle_increment))
+    ]
 
 
 def seen_channels(
@@ -90,37 +105,45 @@ class Corridor:
         self.max_ticks = int(options.get("max_ticks", 300))
         self.env = irsim.make(str(world), display=False, headless=True, log_level="ERROR")
         self.ticks = 0
+        self._robot: Any = None
+        self._round: list[tuple[Any, float]] = []
+        self._radius = 0.0
+        self._goal = (0.0, 0.0)
 
     def _channels(self) -> list[float]:
-        env = self.env
-        robot = env.robot
-        s = robot.state[:, 0]
-        pose = (float(s[0]), float(s[1]), float(s[2]))
-        scan = env.get_lidar_scan()
+        robot = self._robot
+        s = robot.state
+        pose = (float(s[0, 0]), float(s[1, 0]), float(s[2, 0]))
+        scan = robot.get_lidar_scan()
         seen = [
-            (float(o.state[0, 0]), float(o.state[1, 0]), float(o.radius))
-            for o in env.obstacle_list
-            if o.shape == "circle" and robot.fov_detect_object(o)
+            (float(o.state[0, 0]), float(o.state[1, 0]), r)
+            for o, r in self._round
+            if robot.fov_detect_object(o)
         ]
-        goal = robot.goal[:, 0]
         return [
             *lidar_channels(scan["ranges"], scan["angle_min"], scan["angle_increment"]),
-            *seen_channels(pose, seen, float(robot.radius)),
-            *goal_channels(pose, (float(goal[0]), float(goal[1]))),
+            *seen_channels(pose, seen, self._radius),
+            *goal_channels(pose, self._goal),
         ]
 
     def reset(self, seed: int) -> list[float]:
         """A new scene drawn from `seed`."""
-        self.env.set_random_seed(seed)
-        self.env.reset(random=True)
+        env = self.env
+        env.set_random_seed(seed)
+        env.reset(random=True)
         self.ticks = 0
+        robot = self._robot = env.robot
+        self._round = [(o, float(o.radius)) for o in env.obstacle_list if o.shape == "circle"]
+        self._radius = float(robot.radius)
+        goal = robot.goal[:, 0]
+        self._goal = (float(goal[0]), float(goal[1]))
         return self._channels()
 
     def step(self, action: str, wheels: MotorCommand) -> StepResult:
         """Drive at the wheel command for one step."""
         self.env.step([wheels.speed_mps, wheels.turn_rad_s])
         self.ticks += 1
-        robot = self.env.robot
+        robot = self._robot
         outcome = None
         if robot.collision:
             outcome = "collision"

@@ -51,7 +51,7 @@ AGENT_X, AGENT_Y = 3, 6
 NONE = 99.0
 
 
-def _nearest_ahead(kinds: npt.NDArray[np.int64], column: int, start: int) -> float:
+def _nearest_ahead(kinds: npt.NDArray[Any], column: int, start: int) -> float:
     """Rows ahead of the nearest ball in `column`, from `start` rows ahead on (99: none)."""
     for k in range(start, AGENT_Y + 1):
         if kinds[column, AGENT_Y - k] == BALL:
@@ -61,7 +61,7 @@ def _nearest_ahead(kinds: npt.NDArray[np.int64], column: int, start: int) -> flo
 
 def channels_of(image: npt.NDArray[Any]) -> list[float]:
     """The channels of one observation's 7x7x3 image."""
-    kinds = np.asarray(image)[:, :, 0].astype(np.int64)
+    kinds = np.asarray(image)[:, :, 0]
     ahead = int(kinds[AGENT_X, AGENT_Y - 1])
     left = int(kinds[AGENT_X - 1, AGENT_Y])
     right = int(kinds[AGENT_X + 1, AGENT_Y])

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 import worlds_or_skip  # noqa: F401  # before the environments: skips the module without them
 
+from bench.outside import measure
 from core.outside.lab import per_seed
 from core.outside.run import run_seed
 from core.outside.world import load_outside
@@ -63,3 +64,9 @@ def test_the_cli_runs_an_experiment_on_two_seeds(
     assert [r["on"] for r in report["declared"]] == ["all", "held-out"]
     assert {p["key"] for p in report["properties"]["properties"]} == {"1", "2", "3"}
     assert "kp - sonar" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("name", WORLDS)
+def test_the_bench_times_the_three_steps(name: str) -> None:
+    bare, adapter, brain = measure(load_outside(name), 60)
+    assert min(bare, adapter, brain) > 0.0
