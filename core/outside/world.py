@@ -293,6 +293,14 @@ def load_outside(name_or_path: str | Path) -> OutsideWorld:
         )
     except ConditionFileError as e:
         raise OutsideWorldError(str(e)) from None
+    names = {s.name for s in sensors}
+    for c in conditions:
+        if c.learning and c.agent == "brain" and not names & set(c.learnable_sensors):
+            raise OutsideWorldError(
+                f"{cfile}: condition {c.name!r}: it learns, but its learnable_sensors "
+                f"({', '.join(c.learnable_sensors)}) name none of the world's sensors "
+                f"({', '.join(sorted(names))})"
+            )
     return OutsideWorld(
         name=folder.name,
         folder=folder,

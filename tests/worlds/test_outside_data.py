@@ -110,3 +110,12 @@ def test_a_world_without_its_package_says_how_to_install_it(
         load_outside(name).make()
     err = exits_2(["outside", "check", name, "--seeds", "1"], capsys)
     assert "make install-worlds" in err
+
+
+def test_a_learning_condition_must_name_the_worlds_sensors(world: Path) -> None:
+    (world / "conditions.toml").write_text(
+        '[[condition]]\nname = "eager"\nnetwork = "reflex"\nlearning = true\n'
+    )
+    with pytest.raises(OutsideWorldError, match=r"condition 'eager': it learns, but its "
+                       r"learnable_sensors \(signal, camera_obstacle\) name none"):  # fmt: skip
+        load_outside(world)
