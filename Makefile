@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines install-worlds run test test-unit test-fast test-baselines test-worlds lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | install-worlds | test-worlds | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -52,6 +52,13 @@ install: $(DEV_SYNCED)
 # after it); a later `make install` that re-syncs removes it again, `make run` keeps it.
 install-baselines: install
 	bash scripts/install-baselines.sh $(UV) $(BIN)/python
+
+# The optional srlab[worlds] extra (MiniGrid, ir-sim: `srlab outside`, core/outside/) into
+# .venv at uv.lock's versions, keeping what is there (--inexact). `make test` never installs
+# it (tests/worlds' environment tests skip; CI runs `make test-worlds` after it); a later
+# `make install` that re-syncs removes it again, `make run` keeps it.
+install-worlds: install
+	$(UV) sync --frozen --extra ray --extra worlds --inexact --compile-bytecode --quiet
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install-run
@@ -104,6 +111,9 @@ test-fast: test-unit
 
 test-baselines: install-baselines
 	$(BIN)/pytest tests/baselines -q
+
+test-worlds: install-worlds
+	$(BIN)/pytest tests/worlds -q -n 2
 
 format: install
 	$(BIN)/ruff format .

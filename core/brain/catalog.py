@@ -284,23 +284,23 @@ def parse_behaviours(raw: Iterable[Mapping[str, Any]]) -> tuple[Behaviour, ...]:
     return tuple(out)
 
 
-def _parse_condition(raw: Any, where: str) -> RuleCondition:
+def _parse_condition(raw: Any, where: str, channels: tuple[str, ...] = CHANNELS) -> RuleCondition:
     if not (isinstance(raw, list | tuple) and len(raw) == 3):
         raise CatalogError(
             f"{where}: a condition is [channel, op, value] or [channel, op, channel], got {raw!r}"
         )
     channel, op, value = raw
-    if channel not in CHANNELS:
+    if channel not in channels:
         raise CatalogError(f"{where}: unknown channel {channel!r}")
     if op not in OPS:
         raise CatalogError(f"{where}: unknown operator {op!r} (use one of {' '.join(OPS)})")
     if isinstance(value, str):
-        if value not in CHANNELS:
+        if value not in channels:
             raise CatalogError(f"{where}: unknown channel {value!r} to compare with")
         if value == channel:
             raise CatalogError(f"{where}: {channel!r} compared with itself")
-        return RuleCondition(CHANNELS.index(channel), op, 0.0, CHANNELS.index(value))
-    return RuleCondition(CHANNELS.index(channel), op, _number(value, "value", where))
+        return RuleCondition(channels.index(channel), op, 0.0, channels.index(value))
+    return RuleCondition(channels.index(channel), op, _number(value, "value", where))
 
 
 def _definition_stimuli(
@@ -338,12 +338,16 @@ def _definition_stimuli(
 
 
 def parse_sensors(
-    raw: Iterable[Mapping[str, Any]], definition: str | None = None
+    raw: Iterable[Mapping[str, Any]],
+    definition: str | None = None,
+    channels: tuple[str, ...] = CHANNELS,
 ) -> tuple[tuple[LogicalSensorSpec, ...], tuple[Stimulus, ...]]:
     """Logical sensors and the stimuli they declare, from their data-file form.
 
     A sensor may give several `definitions` of its stimuli's rules (same names, other
-    meanings); `definition` picks one (None: each such sensor's first).
+    meanings); `definition` picks one (None: each such sensor's first). `channels` names
+    the channels the rules may read: srlab's own by default, an outside world's
+    (`core.outside`) otherwise.
     """
     sensors: list[LogicalSensorSpec] = []
     stimuli: list[Stimulus] = []
@@ -372,7 +376,7 @@ def parse_sensors(
             if not alternatives or any(not alt for alt in alternatives):
                 raise CatalogError(f"{swhere}: needs a non-empty 'when' or 'any'")
             rule = tuple(
-                tuple(_parse_condition(c, f"{swhere} ({sname})") for c in alt)
+                tuple(_parse_condition(c, f"{swhere} ({sname})", channels) for c in alt)
                 for alt in alternatives
             )
             stimuli.append(Stimulus(len(stimuli), sname, name, objective, level, priority, rule))

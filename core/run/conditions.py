@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, fields, replace
 from functools import cache
 from pathlib import Path
@@ -144,6 +144,7 @@ def _condition_of(
     known: dict[str, Condition],
     fail: Callable[[str, str | None], NoReturn],
     networks: Callable[[str], bool] | None,
+    sensors: Collection[str] | None = None,
 ) -> Condition:
     """One table's condition (`fail(reason, key)` raises, naming where)."""
     for key, value in entry.items():
@@ -201,7 +202,8 @@ def _condition_of(
         for n in (items,) if isinstance(items, str) else items:
             if key in entry and not networks(n):
                 fail(f"{key}: {n!r} is no network (built in, a file, or the S-R editor's)", key)
-    sensors = {s.name for s in _default_catalog().sensors}
+    if sensors is None:
+        sensors = {s.name for s in _default_catalog().sensors}
     for n in values.get("learnable_sensors", ()):
         if n not in sensors:
             fail(f"learnable_sensors: unknown sensor {n!r} (known: {', '.join(sorted(sensors))})",
@@ -231,12 +233,14 @@ def parse_condition_file(
     where: str,
     known: dict[str, Condition] | None = None,
     networks: Callable[[str], bool] | None = None,
+    sensors: Collection[str] | None = None,
 ) -> tuple[Condition, ...]:
     """The conditions of a data file's text (``[[condition]]`` tables), in file order.
 
     `known` are the conditions a table may be `based_on` (and may not be named as), besides
     the file's earlier ones; `networks` says whether a network name is known (None: the
-    names, and the sensors and trainer, are not checked, as for the built-in file). A bad
+    names, and the sensors and trainer, are not checked, as for the built-in file);
+    `sensors` the logical sensors `learnable_sensors` may name (None: srlab's own). A bad
     file raises `ConditionFileError` naming `where` (the file), the entry, its line and the
     reason.
     """
@@ -263,7 +267,7 @@ def parse_condition_file(
             at = f" (line {line})" if line is not None else ""
             raise ConditionFileError(f"{where}: {label}{at}: {reason}")
 
-        condition = _condition_of(entry, so_far, fail, networks)
+        condition = _condition_of(entry, so_far, fail, networks, sensors)
         if condition.name in so_far:
             what = "a built-in condition" if known and condition.name in known else "an earlier one"
             fail(f"the name {condition.name!r} is taken by {what}: name it otherwise", "name")

@@ -1,13 +1,14 @@
 """The `srlab` command line: one module a command, or a family of small ones.
 
 `simulate`, `experiment`, `sweep`, `phase`, `teachers`, `equal-start`, `noise`,
-`export` and `study` (its actions: create, add, status, forget, export) have a module
-each; `tune` holds `tune` and `qlambda-sweep`, `world` holds `probe`, `world-check` and
-`world` (list, check, show), `run` holds `run` and `runs`, `db` and `serve` the database
-and the service. `common` has what they share: argument types and groups, the backend
-choice, progress bars and tables. Each module adds its parsers with a `handler`, and
-imports what only its handler needs (storage, the service, the report writers) when it
-runs, so that a command starts without the others' dependencies.
+`export`, `outside` (list, check, experiment) and `study` (its actions: create, add,
+status, forget, export) have a module each; `tune` holds `tune` and `qlambda-sweep`,
+`world` holds `probe`, `world-check` and `world` (list, check, show), `run` holds `run`
+and `runs`, `db` and `serve` the database and the service. `common` has what they share:
+argument types and groups, the backend choice, progress bars and tables. Each module adds
+its parsers with a `handler`, and imports what only its handler needs (storage, the
+service, the report writers) when it runs, so that a command starts without the others'
+dependencies.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from server.cli import (
     experiment,
     export,
     noise,
+    outside,
     phase,
     run,
     serve,
@@ -59,6 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     equal_start.add_parser(sub)
     noise.add_parser(sub)
     tune.add_qlambda_sweep_parser(sub)
+    outside.add_parser(sub)
     db.add_parser(sub)
     run.add_run_parser(sub)
     serve.add_parser(sub)

@@ -1,0 +1,1 @@
+"""srlab's brain on outside worlds: Gymnasium environments and simulators srlab did not build."""
