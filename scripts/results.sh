@@ -78,6 +78,13 @@ run noisy-perception noise --conditions kp,sonar,rp,qlambda-hybrid,dp --signal g
 run noisy-phase phase --param echo_range_m=0.1,0.2,0.3,0.4,0.5,0.6 \
     --conditions kp,sonar,rp,qlambda-hybrid,dp --signal given --perception noisy \
     --seeds 20 --episodes 50 --jobs "$JOBS" --quiet --out "$OUT"/noisy-perception/phase
+# The corridor presets that pass world-check (figure-8 does not: nothing learns on it), the
+# obstacle claim's conditions on each, signal given.
+for world in l-shape u-shape narrow-passage; do
+    run "$world" experiment --conditions kp,sonar,rp,qlambda-hybrid,reflexes,expert \
+        --world "$world" --signal given --declare kp-sonar,kp-rp,kp-qlambda-hybrid \
+        "${COMMON[@]}" --out "$OUT/$world"
+done
 # Two studies written by scripts, run by `run` as the CLI's are (SRLAB set for the call).
 # A teacher that is wrong: kp, kp-punished and sonar, 20 seeds x 200 episodes, two worlds.
 SRLAB=.venv/bin/python run wrong-teacher scripts/wrong_teacher.py "$OUT"/wrong-teacher \
