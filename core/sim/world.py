@@ -36,6 +36,7 @@ __all__ = [
     "WorldConfig",
     "episode_layout",
     "make_world",
+    "obstacles_at",
 ]
 """The world's plain types live in `core.sim.types`; they are re-exported here."""
 
@@ -121,6 +122,19 @@ def corridor_layout(
         signal_phases=_signal_phases(config, rng),
         obstacles=placed,
     )
+
+
+def obstacles_at(
+    geometry: Geometry, layout: EpisodeLayout, time_s: float
+) -> list[tuple[float, float]]:
+    """Where every obstacle of an episode is `time_s` seconds into it (the ring: its one).
+
+    A function of the layout and the time alone, as `CorridorWorld` moves them, so a view
+    of a stored episode puts them where the run had them.
+    """
+    if isinstance(geometry, CorridorGeometry):
+        return [geometry.obstacle_at(p, time_s) for p in layout.obstacles]
+    return [] if layout.obstacle_center is None else [layout.obstacle_center]
 
 
 def _pick_on_straights(straights: list[tuple[int, float, float]], u: float) -> tuple[int, float]:
