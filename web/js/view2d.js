@@ -310,13 +310,14 @@ export function drawTrack(canvas, world, pose) {
 
 /** A corridor track of any shape: its floor, a quadrilateral a segment, then its walls. */
 function corridor(ctx, f, world) {
+  // One path of all the quadrilaterals (all turn the same way), filled once: no seams.
   ctx.fillStyle = FLOOR;
+  ctx.beginPath();
   for (const quad of world.floor) {
-    ctx.beginPath();
     quad.forEach(([x, y], k) => (k ? ctx.lineTo(f.px(x), f.py(y)) : ctx.moveTo(f.px(x), f.py(y))));
     ctx.closePath();
-    ctx.fill();
   }
+  ctx.fill("nonzero");
   ctx.strokeStyle = WALL;
   ctx.lineWidth = 3;
   ctx.lineCap = "square";

@@ -17,8 +17,7 @@ from server.viewer.scene import TickView, obstacle_box, scene_frame, sonar_range
 
 L_SHAPE = load_world("l-shape").config
 SCENE = static_scene(L_SHAPE)
-GEO = SCENE.geometry
-assert isinstance(GEO, CorridorGeometry)
+GEO = CorridorGeometry.build(L_SHAPE.track)  # type: ignore[arg-type]
 CORRIDORS = [n for n in world_names() if isinstance(load_world(n).config.track, CorridorConfig)]
 
 
@@ -41,8 +40,7 @@ def in_floor(x: float, y: float) -> bool:
     v = np.asarray(SCENE.floor_vertices)[:, :2]
     p = np.array([x, y])
     for i, j, k in SCENE.floor_faces:
-        parts = (triangle_area(v[i], v[j], p), triangle_area(v[j], v[k], p))
-        parts += (triangle_area(v[k], v[i], p),)
+        parts = [triangle_area(a, b, p) for a, b in ((v[i], v[j]), (v[j], v[k]), (v[k], v[i]))]
         if min(parts) >= -1e-12:
             return True
     return False
@@ -116,7 +114,9 @@ def test_a_side_sonar_ray_ends_at_the_wall_beside_it() -> None:
     # Where the ray ends lies on a wall segment of the track.
     ex, ey = x, y + mount + ranges[left]
     on = [
-        w for w in GEO.walls if abs((w[2] - w[0]) * (ey - w[1]) - (w[3] - w[1]) * (ex - w[0])) < 1e-9
+        w
+        for w in GEO.walls
+        if abs((w[2] - w[0]) * (ey - w[1]) - (w[3] - w[1]) * (ex - w[0])) < 1e-9
     ]
     assert on and all(min(w[0], w[2]) <= ex <= max(w[0], w[2]) for w in on)
 
