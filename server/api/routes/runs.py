@@ -17,7 +17,7 @@ from core.ports import StoredRun
 from core.run.trace import unpack
 from core.sim.corridor import CorridorGeometry, floor_quads
 from core.sim.types import WorldConfig, build_geometry
-from core.sim.world import episode_layout, obstacles_at
+from core.sim.world import episode_layout, obstacle_places
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
 from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -377,8 +377,9 @@ def _obstacles_of(run: StoredRun, episode: int) -> Callable[[int], list[list[flo
     """Where an episode's obstacles are at each of its ticks, as the run's world drew them."""
     config = _world_config(run.spec.world)
     geo = build_geometry(config.track)
-    layout = episode_layout(config, geo, run.spec.seed, episode)
-    return lambda tick: [list(p) for p in obstacles_at(geo, layout, tick * config.dt_s)]
+    places = obstacle_places(geo, episode_layout(config, geo, run.spec.seed, episode))
+    dt = config.dt_s
+    return lambda tick: [[x, y] for x, y in places(tick * dt)]
 
 
 @router.post(
