@@ -68,6 +68,8 @@ class SceneNodes:
     _cache: Cache
     _trail_nodes: list[viser.LineSegmentsHandle]
     _trail_sent: list[int]
+    _wall_nodes: list[viser.BoxHandle]
+    _obstacles: list[viser.BoxHandle]
 
     def _light(self) -> None:
         """Light the scene once: the lights do not depend on the world shown."""
@@ -116,14 +118,19 @@ class SceneNodes:
             side="double",
             cast_shadow=False,
         )
+        # Another world's walls and obstacles go: a track may have fewer than the one before.
+        for node in (*self._wall_nodes, *self._obstacles):
+            node.remove()
+        self._wall_nodes = []
         for i, w in enumerate(s.walls):
-            sc.add_box(
+            wall = sc.add_box(
                 f"/track/walls/{i}",
                 color=_WALL,
                 dimensions=w.size,
                 position=w.center,
                 wxyz=yaw_quaternion(w.yaw_rad),
             )
+            self._wall_nodes.append(wall)
         sl = s.stopline
         sc.add_box(
             "/track/stopline",

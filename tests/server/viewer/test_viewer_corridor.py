@@ -10,7 +10,7 @@ import pytest
 import viser
 
 from core.sim.corridor import CorridorConfig, CorridorGeometry
-from core.sim.world import CorridorWorld, LampColor, MotorCommand, episode_layout
+from core.sim.world import CorridorWorld, LampColor, MotorCommand, WorldConfig, episode_layout
 from core.sim.worlds import load_world, world_names
 from server.viewer.render import Renderer
 from server.viewer.scene import TickView, obstacle_box, scene_frame, sonar_ranges, static_scene
@@ -145,3 +145,25 @@ def test_the_3d_view_sends_every_wall_and_an_obstacle_box_each() -> None:
     walls = {n for n in names if isinstance(n, str) and n.startswith("/track/walls/")}
     assert len(walls) == len(GEO.walls)
     assert {"/track/floor", "/obstacle", "/obstacle_1"} <= names
+
+
+def test_a_view_moving_to_the_ring_drops_the_corridors_extra_walls_and_obstacles() -> None:
+    ring = WorldConfig()
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        renderer = Renderer(server, SCENE, L_SHAPE, lambda _: None)
+        renderer.use_world(ring)
+        buffer = server._websock_server.get_message_buffer()  # viser internals
+        sent = list(buffer.message_from_id.values())
+    finally:
+        server.stop()
+    # What a browser connecting now is sent, in order: each node's last word.
+    last: dict[str, str] = {}
+    for m in sent:
+        name = getattr(m, "name", None)
+        if isinstance(name, str):
+            last[name] = type(m).__name__
+    shown = {n for n, kind in last.items() if "Remove" not in kind}
+    walls = {n for n in shown if n.startswith("/track/walls/")}
+    assert len(walls) == len(static_scene(ring).walls) == 8
+    assert "/obstacle" in shown and "/obstacle_1" not in shown
