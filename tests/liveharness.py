@@ -91,6 +91,15 @@ def servers() -> Iterator[Callable[..., LiveServer]]:
             kill_server(server)
 
 
+def start_run(api: httpx.Client, **body: Any) -> int:
+    """POST /api/runs with `body` (201), then start it (200); its id."""
+    r = api.post("/api/runs", json=body)
+    assert r.status_code == 201, r.text
+    run_id: int = r.json()["id"]
+    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    return run_id
+
+
 def wait_run(
     api: httpx.Client,
     run_id: int,

@@ -71,11 +71,11 @@ class TickPublished:
     """A tick's snapshot, as subscribers see it (throttled to their rate).
 
     With what a top-down view draws besides the pose: the sonars' readings of that tick
-    (in the robot's sonar order, noisy as the robot read them), the obstacle's centre
-    (None: the episode has none), the competition among the behaviours its stimuli
-    released and the run's totals at that tick (None: not taken), and whether its behaviour
-    was released through an association KP taught. Read only when a tick is published,
-    never per tick.
+    (in the robot's sonar order, noisy as the robot read them), the first obstacle's centre
+    (None: the episode has none) and every obstacle's, the competition among the behaviours
+    its stimuli released and the run's totals at that tick (None: not taken), and whether
+    its behaviour was released through an association KP taught. Read only when a tick is
+    published, never per tick.
     """
 
     run_id: int
@@ -85,11 +85,13 @@ class TickPublished:
     competition: Competition | None = None
     totals: RunTotals | None = None
     kp: bool = False
+    obstacles: tuple[tuple[float, float], ...] = ()
+    """Every obstacle's centre at that tick, the first (`obstacle`) first."""
 
     def __reduce__(self) -> tuple[type[TickPublished], tuple[object, ...]]:
         # As `Competition.__reduce__`: pickled as a tuple of its fields.
         fields = (self.run_id, self.snapshot, self.sonar_m, self.obstacle, self.competition)
-        return TickPublished, (*fields, self.totals, self.kp)
+        return TickPublished, (*fields, self.totals, self.kp, self.obstacles)
 
 
 class SubscriptionClosed(Exception):

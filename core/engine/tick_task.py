@@ -343,14 +343,16 @@ class TickTask:
 
     def _tick_event(self, snap: Snapshot) -> TickPublished:
         sim = self.sim
+        obstacles = sim.obstacle_centers()
         return TickPublished(
             self.run_id,
             snap,
             sim.sonar_m(),
-            sim.world.layout.obstacle_center,
+            obstacles[0] if obstacles else None,
             Competition.of(sim.brain.selector, snap.stimuli),
             self.totals,
             released_by_kp(sim.brain.network, snap),
+            obstacles,
         )
 
     def _enqueue_internal(self, e: RewardDue) -> None:

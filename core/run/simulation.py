@@ -20,7 +20,7 @@ from core.run.conditions import Condition
 from core.run.setup import condition_network
 from core.run.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.sim.channels import Channel
-from core.sim.world import LampColor, World, WorldConfig, make_world
+from core.sim.world import CorridorWorld, LampColor, World, WorldConfig, make_world
 from core.sim.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)
@@ -184,6 +184,14 @@ class Simulation:
     def sonar_m(self) -> tuple[float, ...]:
         """The sonars' readings of the last tick (or reset), in metres, sonar 0 first."""
         return tuple(self._channels[Channel.SONAR_0 : Channel.SONAR_7 + 1])
+
+    def obstacle_centers(self) -> tuple[tuple[float, float], ...]:
+        """Where every obstacle is at the last tick (or reset), the first placed first."""
+        world = self.world
+        if isinstance(world, CorridorWorld):
+            return tuple(world.obstacle_centers())
+        center = world.layout.obstacle_center
+        return () if center is None else (center,)
 
     def upcoming_stimuli(self) -> list[int]:
         """The stimuli the next tick will act on (sensed at the end of the last one)."""

@@ -46,6 +46,7 @@ __all__ = [
     "residuals_at",
     "sense",
     "sense_corridor",
+    "walls_hit",
 ]
 
 _F = TypeVar("_F", bound=Callable[..., Any])
@@ -314,7 +315,7 @@ def ray_segment(ox: float, oy: float, dx: float, dy: float, w: Any) -> float:
 
 
 @_jit
-def _walls_hit(ox: float, oy: float, dx: float, dy: float, walls: Any) -> float:
+def walls_hit(ox: float, oy: float, dx: float, dy: float, walls: Any) -> float:
     """Distance along a ray to the first wall segment."""
     best = INF
     for k in range(walls.shape[0]):
@@ -339,7 +340,7 @@ def _sees_past_walls(
         return False, dist, fwd, lat
     if abs(math.atan2(lat, fwd)) > g[G_FOV_HALF]:
         return False, dist, fwd, lat
-    if _walls_hit(cx, cy, rx, ry, walls) < 1.0:
+    if walls_hit(cx, cy, rx, ry, walls) < 1.0:
         return False, dist, fwd, lat
     return True, dist, fwd, lat
 
@@ -399,7 +400,7 @@ def sense_corridor(
         dy = math.sin(a)
         ox = x + mount * dx
         oy = y + mount * dy
-        wall = _walls_hit(ox, oy, dx, dy, walls)
+        wall = walls_hit(ox, oy, dx, dy, walls)
         seen = wall
         for j in range(n_obstacles):
             hit = ray_entry(ox, oy, dx, dy, obstacles[j])

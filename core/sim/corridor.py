@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -296,20 +297,22 @@ def turn_angle(d0: FloatArray, d1: FloatArray) -> float:
     return math.atan2(_cross(d0[0], d0[1], d1[0], d1[1]), float(np.dot(d0, d1)))
 
 
-def _walls(
+def _mitred_sides(
     starts: FloatArray,
     directions: FloatArray,
     normals: FloatArray,
     widths: FloatArray,
     lengths: FloatArray,
-    crossings: tuple[tuple[int, int], ...],
-) -> FloatArray:
-    """The wall segments: each side's offset of the centre line, mitred, opened at crossings."""
+) -> list[tuple[list[FloatArray], list[FloatArray], list[tuple[int, FloatArray, FloatArray]]]]:
+    """Each side's (left, then right) offset of the centre line, mitred with its neighbours.
+
+    Per side: where each segment's wall begins and ends, and the steps (segment, a, b)
+    joining two segments in line whose widths differ.
+    """
     n = len(starts)
-    pieces: list[tuple[int, FloatArray, FloatArray]] = []  # (segment, a, b)
+    sides = []
     for side in (1.0, -1.0):
         off = [starts[k] + side * normals[k] * widths[k] / 2 for k in range(n)]
-        # begin[k], end[k]: the wall of segment k's ends, mitred with its neighbours.
         begin: list[FloatArray] = [off[k] for k in range(n)]
         end: list[FloatArray] = [off[k] + directions[k] * lengths[k] for k in range(n)]
         steps: list[tuple[int, FloatArray, FloatArray]] = []
@@ -322,6 +325,41 @@ def _walls(
                 continue
             end[k] = meet
             begin[j] = meet
+        sides.append((begin, end, steps))
+    return sides
+
+
+def floor_quads(centre: Sequence[Point], widths: Sequence[float]) -> list[list[Point]]:
+    """The corridor's floor, one quadrilateral per segment between its mitred walls.
+
+    Each is [left begin, left end, right end, right begin]; together they cover the
+    corridor (at a crossing two of them overlap in its square).
+    """
+    starts = np.asarray(centre, dtype=np.float64)
+    ends = np.roll(starts, -1, axis=0)
+    lengths = np.hypot(*(ends - starts).T)
+    directions = (ends - starts) / lengths[:, None]
+    normals = np.stack([-directions[:, 1], directions[:, 0]], axis=1)
+    w = np.asarray(widths, dtype=np.float64)
+    (lb, le, _), (rb, re, _) = _mitred_sides(starts, directions, normals, w, lengths)
+    return [
+        [(float(p[0]), float(p[1])) for p in (lb[k], le[k], re[k], rb[k])]
+        for k in range(len(starts))
+    ]
+
+
+def _walls(
+    starts: FloatArray,
+    directions: FloatArray,
+    normals: FloatArray,
+    widths: FloatArray,
+    lengths: FloatArray,
+    crossings: tuple[tuple[int, int], ...],
+) -> FloatArray:
+    """The wall segments: each side's offset of the centre line, mitred, opened at crossings."""
+    n = len(starts)
+    pieces: list[tuple[int, FloatArray, FloatArray]] = []  # (segment, a, b)
+    for begin, end, steps in _mitred_sides(starts, directions, normals, widths, lengths):
         pieces += [(k, begin[k], end[k]) for k in range(n)]
         pieces += steps
     out: list[FloatArray] = []

@@ -37,6 +37,8 @@ __all__ = [
     "WorldConfig",
     "episode_layout",
     "make_world",
+    "obstacle_places",
+    "obstacles_at",
 ]
 """The world's plain types live in `core.sim.types`; they are re-exported here."""
 
@@ -124,6 +126,41 @@ def corridor_layout(
         signal_phases=_signal_phases(config, rng),
         obstacles=placed,
     )
+
+
+def obstacle_places(
+    geometry: Geometry, layout: EpisodeLayout
+) -> Callable[[float], list[tuple[float, float]]]:
+    """Where every obstacle of an episode is, as a function of the time into it (seconds).
+
+    The ring's one obstacle stands; a corridor track's move as `CorridorWorld` moves them,
+    so a view of a stored episode puts them where the run had them. Each obstacle's line is
+    worked out once: a call costs about a microsecond an obstacle.
+    """
+    if not isinstance(geometry, CorridorGeometry):
+        still = [] if layout.obstacle_center is None else [layout.obstacle_center]
+        return lambda time_s: list(still)
+    lines = []
+    for p in layout.obstacles:
+        bx, by = geometry.point_on_leg(p.segment, 0.0, p.lateral_m)
+        dx, dy = (float(v) for v in geometry.directions[p.segment])
+        lines.append((p, bx, by, dx, dy))
+
+    def places(time_s: float) -> list[tuple[float, float]]:
+        out = []
+        for p, bx, by, dx, dy in lines:
+            a = p.along_at(time_s)
+            out.append((bx + dx * a, by + dy * a))
+        return out
+
+    return places
+
+
+def obstacles_at(
+    geometry: Geometry, layout: EpisodeLayout, time_s: float
+) -> list[tuple[float, float]]:
+    """Where every obstacle of an episode is `time_s` seconds into it (the ring: its one)."""
+    return obstacle_places(geometry, layout)(time_s)
 
 
 def _pick_on_straights(straights: list[tuple[int, float, float]], u: float) -> tuple[int, float]:

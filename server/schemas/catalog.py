@@ -116,6 +116,14 @@ class RunWorldPublic(BaseModel):
         description="the corridor's width on each centre-line segment (segment k runs from "
         "vertex k to vertex k + 1)"
     )
+    floor: list[list[list[float]]] = Field(
+        description="the corridor's floor, a quadrilateral [[x, y] x 4] per centre-line "
+        "segment between its mitred walls (at a crossing two overlap)"
+    )
+    ring: bool = Field(
+        description="true: the rectangular ring (`outer_box` and `inner_box` are its walls); "
+        "false: a corridor track of any shape (`walls` and `floor` are)"
+    )
     corridor_width_m: float
     stopline: list[list[float]] = Field(description="the stop line's two ends, [[x, y], [x, y]]")
     lamp: list[float] = Field(description="[x, y] of the traffic lamp")

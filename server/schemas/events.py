@@ -127,7 +127,13 @@ class TickEvent(BaseModel):
         "axes are in GET /api/runs/{id}/world)",
     )
     obstacle: list[float] | None = Field(
-        None, description="the obstacle's centre [x, y] in metres; null: this episode has none"
+        None,
+        description="the first obstacle's centre [x, y] in metres; null: this episode has none",
+    )
+    obstacles: list[list[float]] = Field(
+        default_factory=list,
+        description="every obstacle's centre [x, y] at that tick, the first first (a moving "
+        "one where it has moved to)",
     )
     competition: CompetitionEvent | None = None
 

@@ -228,6 +228,11 @@ class TraceRowPublic(BaseModel):
     released_by: str | None = Field(description="the stimulus the behaviour answered")
     lamp: int
     stimuli: list[str]
+    obstacles: list[list[float]] = Field(
+        default_factory=list,
+        description="every obstacle's centre [x, y] at that tick, as the run's world placed "
+        "and moved them",
+    )
 
 
 class EpisodeDetail(EpisodePublic):

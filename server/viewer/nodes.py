@@ -68,6 +68,8 @@ class SceneNodes:
     _cache: Cache
     _trail_nodes: list[viser.LineSegmentsHandle]
     _trail_sent: list[int]
+    _wall_nodes: list[viser.BoxHandle]
+    _obstacles: list[viser.BoxHandle]
 
     def _light(self) -> None:
         """Light the scene once: the lights do not depend on the world shown."""
@@ -116,14 +118,19 @@ class SceneNodes:
             side="double",
             cast_shadow=False,
         )
+        # Another world's walls and obstacles go: a track may have fewer than the one before.
+        for node in (*self._wall_nodes, *self._obstacles):
+            node.remove()
+        self._wall_nodes = []
         for i, w in enumerate(s.walls):
-            sc.add_box(
+            wall = sc.add_box(
                 f"/track/walls/{i}",
                 color=_WALL,
                 dimensions=w.size,
                 position=w.center,
                 wxyz=yaw_quaternion(w.yaw_rad),
             )
+            self._wall_nodes.append(wall)
         sl = s.stopline
         sc.add_box(
             "/track/stopline",
@@ -157,9 +164,16 @@ class SceneNodes:
             for k, c in enumerate(BULBS)
         ]
         size = s.obstacle_size_m
-        self._obstacle = sc.add_box(
-            "/obstacle", color=_BOX, dimensions=(size, size, size), visible=False
-        )
+        # One box per obstacle an episode can have: the first is "/obstacle", as on the ring.
+        self._obstacles = [
+            sc.add_box(
+                "/obstacle" if i == 0 else f"/obstacle_{i}",
+                color=_BOX,
+                dimensions=(size, size, size),
+                visible=False,
+            )
+            for i in range(s.obstacle_count)
+        ]
         x, y, th = self.geometry.start_pose
         self._robot = sc.add_frame(
             "/robot", show_axes=False, position=(x, y, 0.0), wxyz=yaw_quaternion(th)
@@ -232,9 +246,12 @@ class SceneNodes:
         for bulb, color, k in zip(self._bulbs, f.bulbs, range(3), strict=True):
             if changed(f"bulb{k}", color):
                 bulb.color = color
-        if changed("obstacle", (f.obstacle_position, f.obstacle_visible)):
-            self._obstacle.position = f.obstacle_position
-            self._obstacle.visible = f.obstacle_visible
+        for i, box in enumerate(self._obstacles):
+            at = f.obstacle_positions[i] if i < len(f.obstacle_positions) else None
+            if changed(f"obstacle{i}", at):
+                box.visible = at is not None
+                if at is not None:
+                    box.position = at
         if changed("kp", f.kp):
             self._kp.visible = f.kp
         if changed("label", f.behaviour_label):

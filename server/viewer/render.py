@@ -92,6 +92,8 @@ class Renderer(SceneNodes, Panel):
         self._trail = Trail()
         self._trail_nodes: list[viser.LineSegmentsHandle] = []
         self._trail_sent: list[int] = []
+        self._wall_nodes: list[viser.BoxHandle] = []
+        self._obstacles: list[viser.BoxHandle] = []
         self._replay_trail: tuple[int, int, Trail] | None = None
         """(version, index, trail) of the replay's trail so far."""
         self._layouts: dict[tuple[int, int], EpisodeLayout] = {}

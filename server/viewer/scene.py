@@ -12,16 +12,22 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
+import numpy as np
+
+from core.sim._kernel import ray_entry, ray_exit, walls_hit
+from core.sim.corridor import CorridorGeometry, floor_quads
 from core.sim.robot import RobotConfig
-from core.sim.types import build_geometry
-from core.sim.world import EpisodeLayout, LampColor, WorldConfig
+from core.sim.types import Geometry, build_geometry
+from core.sim.world import EpisodeLayout, LampColor, WorldConfig, obstacles_at
 
 Rgb = tuple[int, int, int]
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 Mesh = tuple[tuple[Vec3, ...], tuple[tuple[int, int, int], ...]]
+Footprint = tuple[float, float, float, float]
+"""An obstacle's box from above: x0, y0, x1, y1."""
 
 WALL_HEIGHT_M = 0.3
 WALL_THICKNESS_M = 0.04
@@ -81,6 +87,18 @@ class StaticScene:
     """The middle of the track, where the camera looks."""
     outer_box: tuple[float, float, float, float]
     inner_box: tuple[float, float, float, float]
+    geometry: Geometry = field(compare=False, repr=False)
+    """The track's geometry: where the obstacles are at a tick is a function of it."""
+    dt_s: float = 0.1
+    wall_segments: np.ndarray[Any, np.dtype[np.float64]] | None = field(
+        default=None, compare=False, repr=False
+    )
+    """A corridor track's walls, one row x0 y0 x1 y1 each, that its sonar rays end at (None:
+    the ring, whose rays end at its two boxes)."""
+    obstacle_count: int = 1
+    """How many obstacles an episode has at most (the ring: one)."""
+    obstacle_echo_m: float = math.inf
+    """How far away the sonars hear an obstacle (`ObstacleConfig.echo_range_m`)."""
 
 
 def static_scene(config: WorldConfig) -> StaticScene:
@@ -89,16 +107,29 @@ def static_scene(config: WorldConfig) -> StaticScene:
     robot = config.robot
     ox0, oy0, ox1, oy1 = (float(v) for v in geo.outer_box)
     ix0, iy0, ix1, iy1 = (float(v) for v in geo.inner_box)
-    floor_vertices = (
-        (ox0, oy0, 0.0), (ox1, oy0, 0.0), (ox1, oy1, 0.0), (ox0, oy1, 0.0),
-        (ix0, iy0, 0.0), (ix1, iy0, 0.0), (ix1, iy1, 0.0), (ix0, iy1, 0.0),
-    )  # fmt: skip
-    # The ring between the two rectangles: two triangles per side, facing up (+z).
     floor_faces: list[tuple[int, int, int]] = []
-    for i in range(4):
-        j = (i + 1) % 4
-        floor_faces += [(i, j, 4 + j), (i, 4 + j, 4 + i)]
-    walls = tuple(_wall(a, b, outer=n < 4) for n, (a, b) in enumerate(geo.wall_segments()))
+    if isinstance(geo, CorridorGeometry):
+        # A quadrilateral per segment between its mitred walls, two triangles facing up.
+        quads = floor_quads(geo.centre_line(), [float(w) for w in geo.widths_m])
+        floor_vertices: tuple[Vec3, ...] = tuple((x, y, 0.0) for q in quads for x, y in q)
+        for k in range(len(quads)):
+            i = 4 * k
+            floor_faces += [(i, i + 2, i + 1), (i, i + 3, i + 2)]
+        walls = tuple(_wall(a, b, side=0.0) for a, b in geo.wall_segments())
+    else:
+        floor_vertices = (
+            (ox0, oy0, 0.0), (ox1, oy0, 0.0), (ox1, oy1, 0.0), (ox0, oy1, 0.0),
+            (ix0, iy0, 0.0), (ix1, iy0, 0.0), (ix1, iy1, 0.0), (ix0, iy1, 0.0),
+        )  # fmt: skip
+        # The ring between the two rectangles: two triangles per side, facing up (+z).
+        for i in range(4):
+            j = (i + 1) % 4
+            floor_faces += [(i, j, 4 + j), (i, 4 + j, 4 + i)]
+        # Both rectangles run counter-clockwise: beyond an outer wall is to its right, beyond
+        # an inner wall (inside the island) to its left. The box stands there, off the track.
+        walls = tuple(
+            _wall(a, b, side=-1.0 if n < 4 else 1.0) for n, (a, b) in enumerate(geo.wall_segments())
+        )
     d = geo.directions[config.track.signal.leg]
     sx, sy = geo.stopline_point
     stopline = Box(
@@ -129,17 +160,24 @@ def static_scene(config: WorldConfig) -> StaticScene:
         center=((ox0 + ox1) / 2, (oy0 + oy1) / 2, 0.0),
         outer_box=(ox0, oy0, ox1, oy1),
         inner_box=(ix0, iy0, ix1, iy1),
+        geometry=geo,
+        dt_s=config.dt_s,
+        obstacle_echo_m=config.track.obstacle.echo_range_m,
+        wall_segments=geo.walls if isinstance(geo, CorridorGeometry) else None,
+        obstacle_count=max(1, len(geo.config.obstacles))
+        if isinstance(geo, CorridorGeometry)
+        else 1,
     )
 
 
-def _wall(a: tuple[float, float], b: tuple[float, float], *, outer: bool) -> Box:
-    """A wall segment as a box standing on the floor, outside the corridor it bounds."""
+def _wall(a: tuple[float, float], b: tuple[float, float], *, side: float) -> Box:
+    """A wall segment as a box standing on the floor, its thickness to the `side`.
+
+    `side`: +1 left of a to b, -1 right, 0 centred on the segment.
+    """
     (x0, y0), (x1, y1) = a, b
     length = math.hypot(x1 - x0, y1 - y0)
     yaw = math.atan2(y1 - y0, x1 - x0)
-    # Both rectangles run counter-clockwise: beyond an outer wall is to its right, beyond
-    # an inner wall (inside the island) to its left. The box stands there, off the corridor.
-    side = -1.0 if outer else 1.0
     nx, ny = -math.sin(yaw) * side, math.cos(yaw) * side
     shift = WALL_THICKNESS_M / 2
     cx = (x0 + x1) / 2 + nx * shift
@@ -196,40 +234,7 @@ def yaw_quaternion(yaw_rad: float) -> Quat:
     return (math.cos(yaw_rad / 2), 0.0, 0.0, math.sin(yaw_rad / 2))
 
 
-def _ray_exit(px: float, py: float, dx: float, dy: float, box: Sequence[float]) -> float:
-    """Distance along a ray from inside a box to its boundary (the kernel's slab test)."""
-    t = math.inf
-    if dx > 1e-12:
-        t = min(t, (box[2] - px) / dx)
-    elif dx < -1e-12:
-        t = min(t, (box[0] - px) / dx)
-    if dy > 1e-12:
-        t = min(t, (box[3] - py) / dy)
-    elif dy < -1e-12:
-        t = min(t, (box[1] - py) / dy)
-    return max(t, 0.0)
-
-
-def _ray_entry(px: float, py: float, dx: float, dy: float, box: Sequence[float]) -> float:
-    """Distance along a ray to where it enters a box (0 inside, inf when it misses)."""
-    tmin, tmax = -math.inf, math.inf
-    for p, d, lo, hi in ((px, dx, box[0], box[2]), (py, dy, box[1], box[3])):
-        if abs(d) < 1e-12:
-            if p < lo or p > hi:
-                return math.inf
-            continue
-        t1, t2 = (lo - p) / d, (hi - p) / d
-        if t1 > t2:
-            t1, t2 = t2, t1
-        tmin, tmax = max(tmin, t1), min(tmax, t2)
-    if tmax < max(tmin, 0.0):
-        return math.inf
-    return max(tmin, 0.0)
-
-
-def obstacle_box(
-    scene: StaticScene, center: tuple[float, float] | None
-) -> tuple[float, float, float, float] | None:
+def obstacle_box(scene: StaticScene, center: tuple[float, float] | None) -> Footprint | None:
     """The obstacle's footprint (x0, y0, x1, y1), None when the episode has none."""
     if center is None:
         return None
@@ -242,24 +247,33 @@ def sonar_ranges(
     x: float,
     y: float,
     heading_rad: float,
-    obstacle: tuple[float, float, float, float] | None,
+    obstacles: Sequence[Footprint],
 ) -> tuple[float, ...]:
     """What each sonar reads at a pose, without the sensor's noise.
 
-    The same geometry as the sensing kernel (`core.sim._kernel.sense`), recomputed here so
-    that a replay, whose trace keeps poses but not readings, shows the rays too.
+    The same geometry as the sensing kernel (`core.sim._kernel.sense` on the ring, against
+    its two boxes; `sense_corridor` on a corridor track, against its wall segments), with
+    its ray casts, recomputed here so that a replay, whose trace keeps poses but not
+    readings, shows the rays too.
     """
     out = []
     mount = scene.sonar_mount_m
+    walls = scene.wall_segments
     for a in scene.sonar_angles_rad:
         th = heading_rad + a
         dx, dy = math.cos(th), math.sin(th)
         ox, oy = x + mount * dx, y + mount * dy
-        seen = min(
-            _ray_exit(ox, oy, dx, dy, scene.outer_box), _ray_entry(ox, oy, dx, dy, scene.inner_box)
-        )
-        if obstacle is not None:
-            seen = min(seen, _ray_entry(ox, oy, dx, dy, obstacle))
+        if walls is not None:
+            seen = walls_hit(ox, oy, dx, dy, walls)
+        else:
+            seen = min(
+                ray_exit(ox, oy, dx, dy, scene.outer_box),
+                ray_entry(ox, oy, dx, dy, scene.inner_box),
+            )
+        for box in obstacles:
+            hit = ray_entry(ox, oy, dx, dy, box)
+            if hit <= scene.obstacle_echo_m:  # beyond its echo range, what lies behind
+                seen = min(seen, hit)
         out.append(min(max(seen, 0.0), scene.sonar_range_m))
     return tuple(out)
 
@@ -337,13 +351,23 @@ class SceneFrame:
     obstacle_visible: bool
     kp: bool
     behaviour_label: str
+    obstacle_positions: tuple[Vec3, ...] = ()
+    """Every obstacle's centre at that tick, the first (`obstacle_position`) first."""
 
 
 def scene_frame(scene: StaticScene, view: TickView, layout: EpisodeLayout | None) -> SceneFrame:
-    """The scene at one tick: where everything is and what colour it has."""
-    center = layout.obstacle_center if layout is not None else None
-    box = obstacle_box(scene, center)
-    ranges = sonar_ranges(scene, view.x, view.y, view.heading_rad, box)
+    """The scene at one tick: where everything is and what colour it has.
+
+    Every obstacle is where it has moved to by the tick's place in its episode.
+    """
+    centers = (
+        obstacles_at(scene.geometry, layout, view.episode_tick * scene.dt_s)
+        if layout is not None
+        else []
+    )
+    center = centers[0] if centers else None
+    boxes = [b for c in centers if (b := obstacle_box(scene, c)) is not None]
+    ranges = sonar_ranges(scene, view.x, view.y, view.heading_rad, boxes)
     points = []
     for (sx, sy), a, r in zip(scene.sonar_origins, scene.sonar_angles_rad, ranges, strict=True):
         end = (sx + r * math.cos(a), sy + r * math.sin(a), SONAR_HEIGHT_M)
@@ -365,6 +389,7 @@ def scene_frame(scene: StaticScene, view: TickView, layout: EpisodeLayout | None
         obstacle_visible=center is not None,
         kp=view.kp,
         behaviour_label=label,
+        obstacle_positions=tuple((cx, cy, scene.obstacle_size_m / 2) for cx, cy in centers),
     )
 
 

@@ -10,7 +10,7 @@ import re
 from typing import Any
 
 from browser import artifact
-from liveharness import wait_episodes, wait_status
+from liveharness import start_run, wait_episodes, wait_status
 from playwright.sync_api import Page, expect
 from webpage import eventually, open_view
 
@@ -26,11 +26,7 @@ chosen with responses there, so the reward has records to credit."""
 
 
 def started(server: LiveServer, **body: Any) -> int:
-    r = server.client.post("/api/runs", json=body)
-    assert r.status_code == 201, r.text
-    run_id: int = r.json()["id"]
-    assert server.client.post(f"/api/runs/{run_id}/start").status_code == 200
-    return run_id
+    return start_run(server.client, **body)
 
 
 def finished(server: LiveServer, episodes: int, seed: int) -> int:

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from browser import artifact
 from conftest import BROWSER_WAIT_MS
-from liveharness import wait_status
+from liveharness import start_run, wait_status
 from PIL import Image
 from playwright.sync_api import Browser, Page
 from webpage import eventually
@@ -87,9 +87,7 @@ def test_the_view_shows_the_live_robot_and_its_panel_rewards_it(
 ) -> None:
     api = server.client
 
-    r = api.post("/api/runs", json={"condition": "kp", "mode": "realtime", "hz": 20, "seed": 3})
-    run_id = r.json()["id"]
-    assert api.post(f"/api/runs/{run_id}/start").status_code == 200
+    run_id = start_run(api, condition="kp", mode="realtime", hz=20, seed=3)
     page = open_view(browser, server)
     try:
         page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
@@ -293,3 +291,23 @@ def test_a_view_past_max_viewers_says_it_is_full_then_opens_when_one_leaves(
             if not page.is_closed():
                 page.close()
         stop_server(full)
+
+
+def test_the_view_draws_a_corridor_runs_track_and_robot(
+    server: LiveServer, browser: Browser
+) -> None:
+    api = server.client
+    run_id = start_run(api, condition="kp", world="l-shape", mode="realtime", hz=20, seed=3)
+    page = open_view(browser, server)
+    try:
+        page.get_by_text(f"Run {run_id}").first.wait_for(timeout=90_000)
+        png, _ = wait_for_robot(page)
+        artifact("viewer-l-shape.png").write_bytes(png)
+        # Both of the l-shape's obstacles stand in the scene: its boxes' brown, lit.
+        image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)[:, :PANEL_LEFT]
+        r, g, b = image[..., 0], image[..., 1], image[..., 2]
+        brown = (r > 90) & (r - g > 25) & (g - b > 25) & (r - b < 160)
+        assert brown.sum() > 40, f"{brown.sum()} brown pixels"
+    finally:
+        page.close()
+        api.post(f"/api/runs/{run_id}/stop")

@@ -61,7 +61,7 @@ function build() {
         el("button", { type: "button", id: "view2d-toggle", text: "❚❚ Pause", onclick: toggle }),
         el("button", { type: "button", id: "view2d-step", text: "Step one tick", title: "Run exactly one tick of the paused run", onclick: step }),
         form,
-        el("p", { class: "muted small", text: "Rays: the sonars' readings, red when close. The lamp shows its colour; the brown square is the obstacle." }))));
+        el("p", { class: "muted small", text: "Rays: the sonars' readings, red when close. The lamp shows its colour; the brown squares are the obstacles, where each is at that tick." }))));
   new ResizeObserver(() => schedule()).observe(view.canvas);
   controls();
 }
@@ -176,7 +176,8 @@ function frame() {
   stats.draws += 1;
 }
 
-/** The canvas's transform: metres (y up) to CSS pixels, fitting the outer box. */
+/** The canvas's transform: metres (y up) to CSS pixels, fitting the outer box (a corridor
+ * track's: the bounding box of its walls). */
 function fit(world, width) {
   const [x0, y0, x1, y1] = world.outer_box;
   const scale = (width - 2 * MARGIN_PX) / (x1 - x0);
@@ -191,10 +192,12 @@ function draw() {
 /**
  * Draw `world` (GET /api/runs/{id}/world) on `canvas`, and the robot at `pose` if one is
  * given: `x`, `y`, `heading_rad` and `tick`, with the lamp's colour (`lamp`, a Lamp name),
- * the sonars' readings (`sonar_m`) and the obstacle (`obstacle`: its centre) where known.
+ * the sonars' readings (`sonar_m`) and the obstacles (`obstacles`: every one's centre at
+ * that tick; or `obstacle`, the first's) where known. The track is the ring's two boxes, or
+ * a corridor track's floor and walls (`world.ring` false).
  * A tick event is such a pose, and so is a stored trace's row once its lamp is named (the
  * console's replay draws those). The canvas keeps what it drew in its data attributes
- * (tick, pose, pixels): tests read them back.
+ * (tick, pose, pixels, walls, obstacles): tests read them back.
  */
 export function drawTrack(canvas, world, pose) {
   const width = Math.max(200, Math.round(canvas.clientWidth || canvas.width));
@@ -228,8 +231,13 @@ export function drawTrack(canvas, world, pose) {
       ctx.strokeRect(x, y, w, h);
     }
   };
-  rect(world.outer_box, FLOOR, WALL);
-  rect(world.inner_box, GROUND, WALL);
+  if (world.ring) {
+    rect(world.outer_box, FLOOR, WALL);
+    rect(world.inner_box, GROUND, WALL);
+  } else {
+    corridor(ctx, f, world);
+  }
+  canvas.dataset.walls = String(world.ring ? 8 : world.walls.length);
   // The stop line, dark on the light floor (the 3D view's white one vanished on it).
   const [[sx0, sy0], [sx1, sy1]] = world.stopline;
   ctx.strokeStyle = "#111827";
@@ -250,13 +258,14 @@ export function drawTrack(canvas, world, pose) {
   canvas.dataset.lamp = t ? t.lamp : "";
   if (!t) {
     delete canvas.dataset.tick;
+    delete canvas.dataset.obstacles;
     return;
   }
-  if (t.obstacle) {
-    const half = world.obstacle_size_m / 2;
-    const [ox, oy] = t.obstacle;
-    rect([ox - half, oy - half, ox + half, oy + half], OBSTACLE, "#5b3a1a");
-  }
+  // Every obstacle where it is at this tick (a stored trace's row or a tick event says).
+  const obstacles = t.obstacles && t.obstacles.length ? t.obstacles : t.obstacle ? [t.obstacle] : [];
+  const half = world.obstacle_size_m / 2;
+  for (const [ox, oy] of obstacles) rect([ox - half, oy - half, ox + half, oy + half], OBSTACLE, "#5b3a1a");
+  canvas.dataset.obstacles = obstacles.map(([ox, oy]) => `${fmt(ox, 3)},${fmt(oy, 3)}`).join(" ");
   const cos = Math.cos(t.heading_rad);
   const sin = Math.sin(t.heading_rad);
   const toWorld = (rx, ry) => [t.x + rx * cos - ry * sin, t.y + rx * sin + ry * cos];
@@ -297,6 +306,40 @@ export function drawTrack(canvas, world, pose) {
     tick: String(t.tick), x: fmt(t.x, 3), y: fmt(t.y, 3),
     px: fmt(f.px(t.x), 1), py: fmt(f.py(t.y), 1), heading: fmt(t.heading_rad, 3),
   });
+}
+
+/** A corridor track of any shape: its floor, a quadrilateral a segment, then its walls. */
+function corridor(ctx, f, world) {
+  // One path of all the quadrilaterals (all turn the same way), filled once: no seams.
+  ctx.fillStyle = FLOOR;
+  ctx.beginPath();
+  for (const quad of world.floor) {
+    quad.forEach(([x, y], k) => (k ? ctx.lineTo(f.px(x), f.py(y)) : ctx.moveTo(f.px(x), f.py(y))));
+    ctx.closePath();
+  }
+  ctx.fill("nonzero");
+  ctx.strokeStyle = WALL;
+  ctx.lineWidth = 3;
+  ctx.lineCap = "square";
+  ctx.beginPath();
+  for (const [x0, y0, x1, y1] of world.walls) {
+    ctx.moveTo(f.px(x0), f.py(y0));
+    ctx.lineTo(f.px(x1), f.py(y1));
+  }
+  ctx.stroke();
+  ctx.lineCap = "butt";
+  // The start: a dashed line across the corridor where each episode begins.
+  const [x, y, th] = world.start_pose;
+  const half = world.corridor_width_m / 2;
+  const [nx, ny] = [-Math.sin(th) * half, Math.cos(th) * half];
+  ctx.strokeStyle = "#f5f5f0";
+  ctx.lineWidth = 2;
+  ctx.setLineDash([5, 4]);
+  ctx.beginPath();
+  ctx.moveTo(f.px(x - nx), f.py(y - ny));
+  ctx.lineTo(f.px(x + nx), f.py(y + ny));
+  ctx.stroke();
+  ctx.setLineDash([]);
 }
 
 function rayColor(range, max) {

@@ -80,6 +80,7 @@ def encode(event: object, catalog: Catalog) -> tuple[str, dict[str, Any]] | None
             "lamp": snap.lamp.name.lower(), "progress_m": snap.progress_m,
             "sonar_m": [round(r, 3) for r in event.sonar_m],
             "obstacle": None if event.obstacle is None else list(event.obstacle),
+            "obstacles": [list(o) for o in event.obstacles],
         }  # fmt: skip
     if isinstance(event, RewardApplied):
         return "reward", {

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Annotated
 
 import numpy as np
@@ -14,8 +15,9 @@ from core.engine.messages import Command, Pause, Resume, SetRate, Stop
 from core.errors import UnknownNameError
 from core.ports import StoredRun
 from core.run.trace import unpack
-from core.sim.corridor import CorridorGeometry
-from core.sim.types import build_geometry
+from core.sim.corridor import CorridorGeometry, floor_quads
+from core.sim.types import WorldConfig, build_geometry
+from core.sim.world import episode_layout, obstacle_places
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
 from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard
@@ -200,13 +202,17 @@ async def set_run_rate(
     return await _control(run_id, store, engines, SetRate(body.hz))
 
 
+def _world_config(name: str) -> WorldConfig:
+    """World preset `name`'s config ("" or gone: the default's)."""
+    try:
+        return load_world(name or None).config
+    except UnknownNameError:
+        return load_world().config
+
+
 def world_public(name: str) -> RunWorldPublic:
     """The fixed parts of world preset `name` ("" or gone: the default) for a 2D view."""
-    try:
-        preset = load_world(name or None)
-    except UnknownNameError:
-        preset = load_world()
-    config = preset.config
+    config = _world_config(name)
     geo = build_geometry(config.track)
     robot = config.robot
     leg = config.track.signal.leg
@@ -232,6 +238,8 @@ def world_public(name: str) -> RunWorldPublic:
         walls=[[*a, *b] for a, b in geo.wall_segments()],
         centre_line=[list(p) for p in centre],
         corridor_widths_m=widths,
+        floor=[[list(p) for p in quad] for quad in floor_quads(centre, widths)],
+        ring=not isinstance(geo, CorridorGeometry),
         corridor_width_m=config.track.corridor_width_m,
         stopline=[[sx - nx, sy - ny], [sx + nx, sy + ny]],
         lamp=list(geo.lamp_point),
@@ -339,6 +347,8 @@ def get_episode(
     stimuli = [s.name for s in state.catalog.stimuli]
     names = [b.name for b in state.catalog.behaviours] + [b.name for b in store.behaviours(run_id)]
     n_stimuli, n_names = len(stimuli), len(names)
+    rows = unpack(found.trace) if found.trace else []
+    where = _obstacles_of(store.run_summary(run_id), episode) if rows else None
     # The rows are the store's own, so they are written as JSON directly (pydantic-core's
     # encoder; the stdlib's takes 3 ms on floats): a pydantic row each, validated again as
     # the response model, cost two thirds of a long episode's read (4.5 of 7.4 ms for 361
@@ -351,8 +361,9 @@ def get_episode(
             "how": r.how, "origin": r.origin,
             "released_by": stimuli[r.released_by] if 0 <= r.released_by < n_stimuli else None,
             "lamp": r.lamp, "stimuli": [stimuli[i] for i in r.stimuli if i < n_stimuli],
+            "obstacles": where(r.tick - found.start_tick) if where else [],
         }
-        for r in (unpack(found.trace) if found.trace else [])
+        for r in rows
     ]  # fmt: skip
     body = {
         "episode": found.episode, "outcome": found.outcome, "cause": found.cause,
@@ -360,6 +371,15 @@ def get_episode(
         "trace": trace,
     }  # fmt: skip
     return Response(to_json(body), media_type="application/json")
+
+
+def _obstacles_of(run: StoredRun, episode: int) -> Callable[[int], list[list[float]]]:
+    """Where an episode's obstacles are at each of its ticks, as the run's world drew them."""
+    config = _world_config(run.spec.world)
+    geo = build_geometry(config.track)
+    places = obstacle_places(geo, episode_layout(config, geo, run.spec.seed, episode))
+    dt = config.dt_s
+    return lambda tick: [[x, y] for x, y in places(tick * dt)]
 
 
 @router.post(

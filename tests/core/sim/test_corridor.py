@@ -57,11 +57,11 @@ def test_the_walls_of_an_l_shape_are_its_two_mitred_outlines() -> None:
 def test_a_narrow_passage_is_as_wide_as_its_file_says_with_steps_either_end() -> None:
     geo = geometry("narrow-passage")
     x, y = geo.point_on_leg(3, 0.8, 0.0)  # the passage's middle
-    up = k._walls_hit(x, y, 0.0, 1.0, geo.walls)
-    down = k._walls_hit(x, y, 0.0, -1.0, geo.walls)
+    up = k.walls_hit(x, y, 0.0, 1.0, geo.walls)
+    down = k.walls_hit(x, y, 0.0, -1.0, geo.walls)
     assert up + down == pytest.approx(0.7)
     x, y = geo.point_on_leg(2, 1.0, 0.0)  # before it, full width
-    assert k._walls_hit(x, y, 0.0, 1.0, geo.walls) + k._walls_hit(
+    assert k.walls_hit(x, y, 0.0, 1.0, geo.walls) + k.walls_hit(
         x, y, 0.0, -1.0, geo.walls
     ) == pytest.approx(1.2)
     across = [abs(w[3] - w[1]) for w in geo.walls if w[0] == pytest.approx(w[2])]

@@ -30,6 +30,25 @@ async def _paused_realtime_run(client: Any, hz: float = 5.0) -> int:
     return run_id
 
 
+async def streamed_ticks(client: Any, app: Any, run_id: int, n: int) -> list[dict[str, Any]]:
+    """Start run `run_id`, read `n` tick events of its stream as JSON, then stop it."""
+    await client.post(f"/api/runs/{run_id}/start")
+    await until(client, run_id, "running")
+    live = app.state.srlab.engines.get(run_id)
+    assert live is not None
+    sub = live.subscribe(256, tick_hz=100)
+    ticks: list[dict[str, Any]] = []
+    async with asyncio.timeout(30):
+        while len(ticks) < n:
+            encoded = encode(await sub.get(), live.catalog)
+            if encoded is not None and encoded[0] == "tick":
+                ticks.append(json.loads(json.dumps(encoded[1])))
+    live.unsubscribe(sub)
+    await client.post(f"/api/runs/{run_id}/stop")
+    await until(client, run_id, "stopped")
+    return ticks
+
+
 async def test_step_runs_exactly_one_tick_of_a_paused_run(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
         run_id = await _paused_realtime_run(client)
@@ -136,22 +155,60 @@ def test_a_corridor_worlds_view_has_its_walls_and_centre_line() -> None:
 async def test_tick_events_carry_sonar_readings_and_the_obstacle(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, app):
         run = await create(client, condition="kp", mode="realtime", hz=50)
-        await client.post(f"/api/runs/{run['id']}/start")
-        await until(client, run["id"], "running")
-        live = app.state.srlab.engines.get(run["id"])
-        assert live is not None
-        sub = live.subscribe(256, tick_hz=50)
-        ticks: list[dict[str, Any]] = []
-        async with asyncio.timeout(30):
-            while len(ticks) < 3:
-                encoded = encode(await sub.get(), live.catalog)
-                if encoded is not None and encoded[0] == "tick":
-                    ticks.append(json.loads(json.dumps(encoded[1])))
-        live.unsubscribe(sub)
-        await client.post(f"/api/runs/{run['id']}/stop")
+        ticks = await streamed_ticks(client, app, run["id"], 3)
         world = (await client.get(f"/api/runs/{run['id']}/world")).json()
     for t in ticks:
         TickEvent.model_validate(t)  # the stream's contract
         assert len(t["sonar_m"]) == len(world["sonars"]) == 8
         assert all(0 <= r <= world["sonar_range_m"] + 0.5 for r in t["sonar_m"])
         assert t["obstacle"] is None or len(t["obstacle"]) == 2
+
+
+def test_a_views_floor_is_a_quadrilateral_a_segment_and_says_which_kind_of_track() -> None:
+    ring, corridor = world_public(""), world_public("l-shape")
+    assert ring.ring and not corridor.ring
+    assert len(ring.floor) == 4 and len(corridor.floor) == len(corridor.centre_line) == 6
+    # The l-shape's first segment, (0.6, 0.6) to (7.4, 0.6), 1.2 m wide, mitred at both
+    # corners: left side (0.6 m in) from x 1.2 to 6.8, right side from x 0 to 8.
+    assert [v for p in corridor.floor[0] for v in p] == pytest.approx(
+        [1.2, 1.2, 6.8, 1.2, 8, 0, 0, 0]
+    )
+    x0, y0, x1, y1 = corridor.outer_box
+    assert all(x0 <= x <= x1 and y0 <= y <= y1 for q in corridor.floor for x, y in q)
+
+
+async def test_a_corridor_runs_ticks_and_trace_carry_every_obstacle_where_it_is(
+    tmp_path: Path,
+) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, app):
+        run = await create(client, condition="kp", world="l-shape", mode="realtime", hz=100)
+        ticks = await streamed_ticks(client, app, run["id"], 12)
+    for t in ticks:
+        TickEvent.model_validate(t)
+        assert len(t["obstacles"]) == 2 and t["obstacle"] == t["obstacles"][0]
+    # The seeded obstacle stands, the trolley on segment 0 (y = 0.6 + 0.3) moves.
+    same = [t for t in ticks if t["episode"] == ticks[0]["episode"]]
+    first, last = same[0], same[-1]
+    assert last["tick"] > first["tick"]
+    assert first["obstacles"][0] == last["obstacles"][0]
+    assert first["obstacles"][1] != last["obstacles"][1]
+    assert first["obstacles"][1][1] == pytest.approx(0.9)
+
+
+async def test_a_stored_corridor_episodes_trace_rows_place_every_obstacle(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        run = await create(client, condition="rp", world="l-shape", seed=4, episodes=1)
+        await client.post(f"/api/runs/{run['id']}/start")
+        await until(client, run["id"], "finished")
+        trace = (await client.get(f"/api/runs/{run['id']}/episodes/0")).json()["trace"]
+        ring = await create(client, condition="rp", seed=4, episodes=1)
+        await client.post(f"/api/runs/{ring['id']}/start")
+        await until(client, ring["id"], "finished")
+        ring_trace = (await client.get(f"/api/runs/{ring['id']}/episodes/0")).json()["trace"]
+    assert len(trace) > 10 and all(len(r["obstacles"]) == 2 for r in trace)
+    trolley = {tuple(r["obstacles"][1]) for r in trace}
+    assert len(trolley) > 5  # it moves through the episode
+    assert len({tuple(r["obstacles"][0]) for r in trace}) == 1  # the seeded one stands
+    # The ring's one obstacle, or none, the same on every row.
+    assert len({json.dumps(r["obstacles"]) for r in ring_trace}) == 1
+    assert all(len(r["obstacles"]) <= 1 for r in ring_trace)

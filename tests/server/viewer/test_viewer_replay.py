@@ -17,6 +17,7 @@ from core.run.runner import run as headless_run
 from core.run.simulation import Simulation, Snapshot
 from core.run.trace import TraceRow
 from core.sim.world import EpisodeLayout, LampColor, WorldConfig
+from core.sim.worlds import load_world
 from server.persistence import SqlAlchemyRunStore, make_sessionmaker
 from server.viewer.replay import ReplayClock, load_replay, replay_views
 from server.viewer.scene import scene_frame, static_scene
@@ -157,3 +158,32 @@ def test_a_behaviour_released_by_a_kp_association_is_flagged_kp() -> None:
     assert [v.kp for v in views] == [True, False, False, False]
     assert [v.episode_tick for v in views] == [1, 2, 3, 4]
     assert views[3].behaviour is None
+
+
+def test_a_replayed_corridor_episode_shows_every_obstacle_where_the_run_had_it(
+    sqlite_engine: DbEngine, catalog: Catalog
+) -> None:
+    # The l-shape: a seeded obstacle and a trolley moving on the first straight.
+    store = SqlAlchemyRunStore(make_sessionmaker(sqlite_engine))
+    spec = RunSpec("rp", 6, 1, Mode.FAST, world="l-shape")
+    engine = RunEngine.create(spec, store, catalog=catalog)
+    assert asyncio.run(engine.run()) is RunStatus.FINISHED
+    world = load_world("l-shape").config
+    sim = Simulation(get_condition("rp"), 6, catalog=catalog, world_config=world)
+    where: dict[int, tuple[tuple[float, float], ...]] = {}
+
+    def on_tick(s: Snapshot) -> None:
+        if s.episode == 0:
+            where[s.episode_tick] = sim.obstacle_centers()
+
+    headless_run(get_condition("rp"), 6, 1, on_tick=on_tick, simulation=sim)
+    replay = load_replay(store, catalog, engine.run_id, 0)
+    scene = static_scene(world)
+    trolley = set()
+    for view in replay.views:
+        frame = scene_frame(scene, view, replay.layout)
+        shown = [p[:2] for p in frame.obstacle_positions]
+        assert len(shown) == 2
+        assert np.allclose(shown, where[view.episode_tick], atol=1e-9), view.episode_tick
+        trolley.add(shown[1])
+    assert len(trolley) > 10

@@ -87,7 +87,7 @@ def test_sonar_rays_match_what_the_robot_senses_within_its_noise() -> None:
         for i in range(120):
             world.apply(MotorCommand(0.45, 0.5 * math.sin(i / 9)))
             frame = world.step()
-            mine = sonar_ranges(SCENE, frame.x, frame.y, frame.heading_rad, box)
+            mine = sonar_ranges(SCENE, frame.x, frame.y, frame.heading_rad, [box] if box else [])
             sensed = frame.channels[:8]
             assert np.abs(np.asarray(mine) - sensed).max() <= 6 * noise, (episode, i)
 
