@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-run install-baselines run test test-unit test-fast test-baselines lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines install-ros2 run test test-unit test-fast test-baselines test-ros2 lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | install-ros2 | test-ros2 | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -52,6 +52,11 @@ install: $(DEV_SYNCED)
 # after it); a later `make install` that re-syncs removes it again, `make run` keeps it.
 install-baselines: install
 	bash scripts/install-baselines.sh $(UV) $(BIN)/python
+
+# The optional srlab[ros2] extra (rclpy and Fast DDS wheels, core/sim/ros2.py) into .venv at
+# uv.lock's versions. `make test` never installs it (tests/ros2 skip); `make test-ros2` does.
+install-ros2: install
+	bash scripts/install-ros2.sh $(UV) $(BIN)/python
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install-run
@@ -104,6 +109,11 @@ test-fast: test-unit
 
 test-baselines: install-baselines
 	$(BIN)/pytest tests/baselines -q
+
+# The ROS 2 adapter against a fake AmigoBot node, all inside a network namespace of its own
+# with only loopback up (scripts/loopback-netns.sh), so no DDS traffic leaves the machine.
+test-ros2: install-ros2
+	bash scripts/loopback-netns.sh $(BIN)/pytest tests/ros2 -q -p no:cacheprovider
 
 format: install
 	$(BIN)/ruff format .
