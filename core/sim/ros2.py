@@ -21,12 +21,18 @@ simulation's episodes and the engine's realtime pacing run on it unchanged. A ro
   zero Twist at once, from the reading thread, and calls the `on_lost` callbacks; every
   later command is zero too.
 
+**Pacing from the robot's clock**: `RobotPacer` is the engine's realtime clock read off the
+robot (its odometry's stamps), so a tick starts as the odometry of its period arrives, and
+`latest()` lets the simulation read that message before the brain decides: the command
+answers readings a fraction of a millisecond old instead of a period old.
+
 There is no referee on a robot: frames report no collision and no violation; an episode ends
 on a full lap by odometry or at the time limit.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import importlib
 import math
@@ -35,7 +41,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,6 +50,9 @@ from core.sim.robotfile import ODOMETRY, RobotFile, TopicSpec
 from core.sim.types import EpisodeLayout, LampColor, MotorCommand, SensorFrame
 from core.sim.world import make_world
 from core.sim.worlds import load_world
+
+if TYPE_CHECKING:
+    from core.engine.pacing import Wake
 
 MAP_CHANNELS = (
     Channel.LATERAL_OFFSET_M,
@@ -142,6 +151,9 @@ class Ros2World:
         self.latencies_s: list[float] = []
         """For each command, the age of the newest sensor message it was computed from."""
         self._used_at = -math.inf
+        self.robot_time = 0.0
+        """The robot's clock: the stamp of its latest odometry, seconds."""
+        self._on_odometry: tuple[Callable[[], object], ...] = ()
         self._tick = 0
         self._origin = (0.0, 0.0, 0.0)
         self._pose = self.geometry.start_pose
@@ -184,6 +196,11 @@ class Ros2World:
             self.rejected += 1
             return
         self._latest[i] = (now, values)
+        if i == self._odometry:
+            stamp = getattr(getattr(msg, "header", None), "stamp", None)
+            self.robot_time = now if stamp is None else stamp.sec + stamp.nanosec * 1e-9
+            for callback in self._on_odometry:
+                callback()
 
     def _watch(self) -> None:
         if self._lost or self._clock() - self._last_any <= self.robot.lost_after_s:
@@ -213,6 +230,15 @@ class Ros2World:
     def on_lost(self, callback: Callable[[], object]) -> None:
         """Call `callback` (on the reading thread) when the robot is lost."""
         self._lost_callbacks.append(callback)
+
+    def listen_odometry(self, callback: Callable[[], object]) -> Callable[[], None]:
+        """Call `callback` (on the reading thread) on each odometry; returns its removal."""
+        self._on_odometry = (*self._on_odometry, callback)
+
+        def remove() -> None:
+            self._on_odometry = tuple(c for c in self._on_odometry if c is not callback)
+
+        return remove
 
     @property
     def layout(self) -> EpisodeLayout:
@@ -249,6 +275,10 @@ class Ros2World:
     def step(self) -> SensorFrame:
         """The latest readings as a frame (the robot moves by itself: nothing to advance)."""
         self._tick += 1
+        return self._sense()
+
+    def latest(self) -> SensorFrame:
+        """The latest readings, read again within the tick (`Simulation` calls it first)."""
         return self._sense()
 
     def close(self) -> None:
@@ -307,3 +337,48 @@ class Ros2World:
         colour = LampColor(int(lamp)) if math.isfinite(lamp) and 0 <= lamp <= 3 else LampColor.NONE
         x, y, heading = self._pose
         return SensorFrame(self._tick, x, y, heading, out, colour, None, False)
+
+
+class RobotPacer:
+    """The engine's realtime clock (`core.engine.pacing.Pacer`) read off the robot.
+
+    `now()` is the stamp of the robot's latest odometry; a sleep ends when odometry stamped
+    that much later arrives (or on a wake-up, or when the robot stays silent for
+    `lost_after_s` past it). A realtime run at the robot's rate then ticks as each period's
+    odometry arrives, whatever the two machines' clocks say. The robot's own timing jitters:
+    odometry stamped up to a quarter of a period early counts as on time.
+    """
+
+    def __init__(self, world: Ros2World) -> None:
+        self._world = world
+        self._early_s = 0.25 / world.robot.hz
+
+    def now(self) -> float:
+        """The robot's clock, seconds (the latest odometry's stamp, a quarter period on)."""
+        return self._world.robot_time + self._early_s
+
+    async def sleep(self, seconds: float, wake: Wake) -> None:
+        """Until the robot's clock is `seconds` on, or `wake` is set."""
+        if wake.is_set():
+            return
+        until = self.now() + seconds - 1e-6
+        loop = asyncio.get_running_loop()
+        fut: asyncio.Future[None] = wake.waiter()
+
+        def check() -> None:
+            if not fut.done() and self.now() >= until:
+                fut.set_result(None)
+
+        remove = self._world.listen_odometry(lambda: loop.call_soon_threadsafe(check))
+        silent = loop.call_later(
+            max(0.0, seconds) + self._world.robot.lost_after_s,
+            lambda: None if fut.done() else fut.set_result(None),
+        )
+        try:
+            check()
+            await fut
+        finally:
+            silent.cancel()
+            remove()
+            if not wake.is_set():
+                wake.forget(fut)

@@ -1,4 +1,4 @@
-"""A whole lap on the fake AmigoBot through the ROS 2 adapter, paced in realtime at 20 Hz."""
+"""A whole lap on the fake AmigoBot through the ROS 2 adapter, paced by its clock at 20 Hz."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from core.engine import RunEngine
 from core.events import Outcome
 from core.ports import Mode, RunSpec, RunStatus
 from core.sim.robotfile import load_robot_file
-from core.sim.ros2 import Ros2World
+from core.sim.ros2 import RobotPacer, Ros2World
 
 CATALOG = load_catalog()
 
@@ -25,7 +25,8 @@ def test_a_whole_lap_through_the_adapter_at_20_hz() -> None:
         world = Ros2World(robot)
         try:
             spec = RunSpec("innate", 1, 1, Mode.REALTIME, hz=robot.hz, world=robot.world)
-            engine = RunEngine.create(spec, InMemoryRunStore(CATALOG), world=world)
+            store = InMemoryRunStore(CATALOG)
+            engine = RunEngine.create(spec, store, world=world, pacer=RobotPacer(world))
             status = asyncio.run(engine.run())
         finally:
             world.close()
