@@ -53,7 +53,7 @@ install: $(DEV_SYNCED)
 install-baselines: install
 	bash scripts/install-baselines.sh $(UV) $(BIN)/python
 
-# The optional srlab[ros2] extra (rclpy and Fast DDS wheels, core/sim/ros2.py) into .venv at
+# The optional srlab[ros2] extra (rclpy and Fast DDS wheels, server/robots/ros2.py) into .venv at
 # uv.lock's versions. `make test` never installs it (tests/ros2 skip); `make test-ros2` does.
 install-ros2: install
 	bash scripts/install-ros2.sh $(UV) $(BIN)/python

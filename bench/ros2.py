@@ -3,7 +3,7 @@
 Run as ``make bench-ros2`` (or ``bash scripts/loopback-netns.sh .venv/bin/python -m
 bench.ros2 --ticks N`` after ``make install-ros2``): inside a network namespace with only
 loopback, the fake AmigoBot (tests/ros2/fake_amigobot.py) runs as a process and a realtime
-run of the engine drives it through the adapter (`core.sim.ros2.Ros2World`) at the robot
+run of the engine drives it through the adapter (`server.robots.ros2.Ros2World`) at the robot
 file's rate, paced by the robot's clock (`RobotPacer`), storing to SQLite as `srlab serve`
 does, for ``--ticks`` ticks (default 10,000: 500 s at 20 Hz). Printed, not asserted:
 
@@ -30,10 +30,10 @@ from pathlib import Path
 from core.engine import RunEngine
 from core.ports import Mode, RunSpec
 from core.sim.robotfile import load_robot_file
-from core.sim.ros2 import RobotPacer, Ros2World
 from server.persistence.db import make_engine, make_sessionmaker
 from server.persistence.migrate import upgrade
 from server.persistence.sqlalchemy_repo import SqlAlchemyRunStore
+from server.robots.ros2 import RobotPacer, Ros2World
 
 FAKE = Path(__file__).resolve().parents[1] / "tests" / "ros2" / "fake_amigobot.py"
 
@@ -85,7 +85,7 @@ def measure(robot_name: str, ticks: int, rate: int, folder: Path) -> dict[str, f
     received = int(json.loads(out.strip().splitlines()[-1])["commands"])
     lat = [s * 1000 for s in world.latencies_s if s < 1e9]
     return {
-        "ticks": engine.sim.tick_count,
+        "ticks": len(world.latencies_s),
         "seconds": elapsed,
         "p50_ms": _pct(lat, 50),
         "p99_ms": _pct(lat, 99),

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The optional srlab[ros2] extra (rclpy, the Fast DDS middleware and the message packages the
-# ROS 2 adapter reads, core/sim/ros2.py) in the project's .venv:
+# ROS 2 adapter reads, server/robots/ros2.py) in the project's .venv:
 #
 #   scripts/install-ros2.sh UV PYTHON     # what `make install-ros2` runs
 #

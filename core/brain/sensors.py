@@ -12,7 +12,7 @@ StimulusDetector = Callable[[Sequence[float]], list[int]]
 def _condition_source(c: RuleCondition) -> str:
     # Every piece is validated data: an int index, an operator from a closed set, a float
     # or another int index. A stale channel is NaN (a robot's topic gone quiet,
-    # core.sim.ros2): every comparison with it is false, `!=` too, so it releases nothing.
+    # server.robots.ros2): every comparison with it is false, `!=` too, so it releases nothing.
     if c.other >= 0:
         source = f"c[{int(c.channel)}] {c.op} c[{int(c.other)}]"
         if c.op == "!=":

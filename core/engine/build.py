@@ -84,7 +84,7 @@ def new_simulation(
     network: tuple[Association, ...] | None,
     world: World | None = None,
 ) -> Simulation:
-    """A fresh simulation for a run, in `world` if given (a robot: `core.sim.ros2`).
+    """A fresh simulation for a run, in `world` if given (a robot: `server.robots.ros2`).
 
     Its network is `network`, else the spec's knowledge set, else the condition's own;
     a knowledge set is taken in its variant for the catalogue's sensor definition

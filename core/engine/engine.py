@@ -130,7 +130,7 @@ class RunEngine:
         `world_config` replace the setup's: a catalogue must use the definition the spec
         names, and is the definition of a spec that names none. `network` replaces the
         spec's knowledge set. `world` replaces the simulated world (a robot,
-        `core.sim.ros2.Ros2World`: a realtime spec paces it at the robot's rate).
+        `server.robots.ros2.Ros2World`: a realtime spec paces it at the robot's rate).
         """
         run_id, spec, sim = create_run(
             spec, store, catalog=catalog, world_config=world_config, network=network, world=world

@@ -136,7 +136,7 @@ class Simulation:
         self._snapshot: Snapshot | None = None
         self._channels: list[float] = []
         self._latest: Callable[[], SensorFrame] | None = getattr(self.world, "latest", None)
-        """A world whose readings arrive by themselves (a robot, `core.sim.ros2`): each tick
+        """A world whose readings arrive by themselves (a robot, `server.robots.ros2`): each tick
         reads them afresh right before the brain decides, so the command answers the newest."""
         self.ticks_by_origin: dict[str, int] = {}
         """Ticks run so far by what made their behaviour run (see `Snapshot.origin`)."""

@@ -4,7 +4,7 @@ A robot file (core/data/robots/*.toml, docs/robots.md) names the srlab world pre
 track is the map, the tick rate, and a `[ros2]` section: the node's name, the command topic,
 when the robot counts as lost, and for each sensor topic its message type, the field read,
 the frame it must be in, how old its latest message may be, and the channels it feeds in
-order. Parsing needs no ROS install; `core.sim.ros2` subscribes to what it describes.
+order. Parsing needs no ROS install; `server.robots.ros2` subscribes to what it describes.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from core.ports import Mode, RunSpec, RunStatus
 from core.run.conditions import CONDITIONS
 from core.run.simulation import Simulation
 from core.sim.robotfile import load_robot_file
-from core.sim.ros2 import Ros2World
+from server.robots.ros2 import Ros2World
 
 CATALOG = load_catalog()
 ROBOT = load_robot_file("amigobot")

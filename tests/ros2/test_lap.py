@@ -13,7 +13,7 @@ from core.engine import RunEngine
 from core.events import Outcome
 from core.ports import Mode, RunSpec, RunStatus
 from core.sim.robotfile import load_robot_file
-from core.sim.ros2 import RobotPacer, Ros2World
+from server.robots.ros2 import RobotPacer, Ros2World
 
 CATALOG = load_catalog()
 
