@@ -113,7 +113,7 @@ test-baselines: install-baselines
 # The ROS 2 adapter against a fake AmigoBot node, all inside a network namespace of its own
 # with only loopback up (scripts/loopback-netns.sh), so no DDS traffic leaves the machine.
 test-ros2: install-ros2
-	bash scripts/loopback-netns.sh $(BIN)/pytest tests/ros2 -q -p no:cacheprovider
+	bash scripts/loopback-netns.sh $(BIN)/pytest tests/ros2 -q
 
 format: install
 	$(BIN)/ruff format .

@@ -71,6 +71,9 @@ _SONARS = slice(Channel.SONAR_0, Channel.SONAR_7 + 1)
 _RESIDUALS = slice(Channel.SONAR_0_RESIDUAL, Channel.SONAR_7_RESIDUAL + 1)
 
 
+INSTALL_HINT = "`make install-ros2` installs the srlab[ros2] extra (rclpy and Fast DDS wheels)"
+
+
 class RobotLostError(RuntimeError):
     """The robot sent no odometry in time."""
 
@@ -122,7 +125,10 @@ class Ros2World:
     """
 
     def __init__(self, robot: RobotFile, clock: Callable[[], float] = time.monotonic) -> None:
-        import rclpy
+        try:
+            import rclpy
+        except ImportError as e:
+            raise ImportError(f"{e.name} is not installed: {INSTALL_HINT}") from None
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile
         from rclpy.signals import SignalHandlerOptions

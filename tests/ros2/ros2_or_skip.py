@@ -11,12 +11,13 @@ from pathlib import Path
 
 import pytest
 
+from server.robots.ros2 import INSTALL_HINT
+
 try:
     import rclpy  # noqa: F401
 except ImportError as e:
     pytest.skip(
-        f"{e.name} is not installed: `make install-ros2` installs the srlab[ros2] extra "
-        "(rclpy and Fast DDS wheels); `make test-ros2` runs these tests",
+        f"{e.name} is not installed: {INSTALL_HINT}; `make test-ros2` runs these tests",
         allow_module_level=True,
     )
 
