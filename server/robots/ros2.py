@@ -172,7 +172,9 @@ class Ros2World:
         self._context = rclpy.Context()
         rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
         self._node = rclpy.create_node(robot.node, context=self._context)
-        self._cmd = self._node.create_publisher(Twist, robot.cmd_vel, QoSProfile(depth=1))
+        # Commands are kept 10 deep until delivered (reliable), so a robot whose reader
+        # was busy for a tick still gets each; its sensors keep 1, the latest.
+        self._cmd = self._node.create_publisher(Twist, robot.cmd_vel, QoSProfile(depth=10))
         for i, t in enumerate(robot.topics):
             self._node.create_subscription(
                 message_class(t.type), t.topic, partial(self._receive, i, t), QoSProfile(depth=1)

@@ -97,7 +97,7 @@ def main() -> int:
             driven_since[0] = time.monotonic()
         received[0] += 1
 
-    node.create_subscription(Twist, "cmd_vel", on_twist, qos)
+    node.create_subscription(Twist, "cmd_vel", on_twist, QoSProfile(depth=10))
     executor = SingleThreadedExecutor()
     executor.add_node(node)
 
