@@ -38,6 +38,7 @@ import importlib
 import math
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import replace
 from functools import partial
@@ -70,6 +71,9 @@ MAP_CHANNELS = (
 _SONARS = slice(Channel.SONAR_0, Channel.SONAR_7 + 1)
 _RESIDUALS = slice(Channel.SONAR_0_RESIDUAL, Channel.SONAR_7_RESIDUAL + 1)
 
+
+LATENCIES_KEPT = 100_000
+"""How many commands' latencies a world keeps (the latest): 83 minutes at 20 Hz."""
 
 INSTALL_HINT = "`make install-ros2` installs the srlab[ros2] extra (rclpy and Fast DDS wheels)"
 
@@ -154,8 +158,8 @@ class Ros2World:
         """Messages ignored: in the wrong frame or of the wrong size."""
         self.sent = 0
         """Twists published."""
-        self.latencies_s: list[float] = []
-        """For each command, the age of the newest sensor message it was computed from."""
+        self.latencies_s: deque[float] = deque(maxlen=LATENCIES_KEPT)
+        """For the latest commands, the age of the newest sensor message each answered."""
         self._used_at = -math.inf
         self.robot_time = 0.0
         """The robot's clock: the stamp of its latest odometry, seconds."""
