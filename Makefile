@@ -6,10 +6,10 @@ UV := $(shell command -v uv 2>/dev/null || echo .tools/bin/uv)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: help install install-run install-baselines install-worlds run test test-unit test-fast test-baselines test-worlds lint typecheck hooks format bench bench-results reliability screenshots migrate revision pg pg-stop up down clean
+.PHONY: help install install-run install-baselines install-worlds install-ros2 run test test-unit test-fast test-baselines test-worlds test-ros2 lint typecheck hooks format bench bench-ros2 bench-results reliability screenshots migrate revision pg pg-stop up down clean
 
 help:
-	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | install-worlds | test-worlds | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
+	@echo "make run | install-run | test | test-unit | install-baselines | test-baselines | install-worlds | test-worlds | install-ros2 | test-ros2 | lint | typecheck | hooks | format | bench | bench-results | reliability | screenshots | migrate | revision m=... | pg | pg-stop | up | down | clean"
 
 .tools/bin/uv:
 	$(PYTHON) -m venv .tools && .tools/bin/pip install --quiet 'uv>=0.4,<1'
@@ -59,6 +59,11 @@ install-baselines: install
 # `make install` that re-syncs removes it again, `make run` keeps it.
 install-worlds: install
 	$(UV) sync --frozen --extra ray --extra worlds --inexact --compile-bytecode --quiet
+
+# The optional srlab[ros2] extra (rclpy and Fast DDS wheels, server/robots/ros2.py) into .venv at
+# uv.lock's versions. `make test` never installs it (tests/ros2 skip); `make test-ros2` does.
+install-ros2: install
+	bash scripts/install-ros2.sh $(UV) $(BIN)/python
 
 # Set-up, then the service on http://127.0.0.1:8000 (it migrates and seeds ./var/srlab.db).
 run: install-run
@@ -115,6 +120,11 @@ test-baselines: install-baselines
 test-worlds: install-worlds
 	$(BIN)/pytest tests/worlds -q -n 2
 
+# The ROS 2 adapter against a fake AmigoBot node, all inside a network namespace of its own
+# with only loopback up (scripts/loopback-netns.sh), so no DDS traffic leaves the machine.
+test-ros2: install-ros2
+	bash scripts/loopback-netns.sh $(BIN)/pytest tests/ros2 -q
+
 format: install
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
@@ -134,6 +144,11 @@ screenshots: install
 # 2 cores (the deep baselines included when the srlab[baselines] extra is installed).
 bench-results: install
 	$(BIN)/python -m bench.experiment --only results --jobs 2
+
+# bench/ros2.py: the ROS 2 adapter's sensor-to-command latency and dropped commands against
+# the fake AmigoBot, in a loopback-only namespace (10,000 ticks at 20 Hz: about 9 minutes).
+bench-ros2: install-ros2
+	bash scripts/loopback-netns.sh $(BIN)/python -m bench.ros2 $(ARGS)
 
 bench: install
 	$(BIN)/python -m bench.ticks

@@ -4,8 +4,8 @@ The rooms: `api/` (the HTTP API's routes and its contract), `services/` (live ne
 edits), `persistence/` (SQLAlchemy, migrations), `runtime/` (the runs'
 host, where they tick, and the service's side of them), `viewer/` (the viser
 3D view), `cli/` (the `srlab` command, a module a command), `reports/` (the markdown,
-JSON and plots the experiment commands write) and `backends/` (where experiment tasks
-run besides local processes: Ray).
+JSON and plots the experiment commands write), `backends/` (where experiment tasks
+run besides local processes: Ray) and `robots/` (a world over a real robot's ROS 2 topics).
 
 At the top, only the service's entry points and wiring: `main.py` (`create_app`),
 `bootstrap.py` (what the service is made of), `config.py` (settings), `serve.py` (uvicorn)

@@ -256,7 +256,12 @@ def page(browser: Browser) -> Iterator[Page]:
 # carries `@pytest.mark.slow` itself.
 
 TESTS = Path(__file__).resolve().parent
-DIRECTORY_MARKERS = {"web": "browser", "reliability": "reliability", "deploy": "docker"}
+DIRECTORY_MARKERS = {
+    "web": "browser",
+    "reliability": "reliability",
+    "deploy": "docker",
+    "ros2": "slow",  # a fake robot in a subprocess, ticks in realtime
+}
 MODULE_MARKERS = {"web/test_node.py": "node"}
 """Modules marked otherwise than their directory: the web client's node tests need no Chromium."""
 PG_FIXTURES = frozenset(

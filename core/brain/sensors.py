@@ -11,10 +11,18 @@ StimulusDetector = Callable[[Sequence[float]], list[int]]
 
 def _condition_source(c: RuleCondition) -> str:
     # Every piece is validated data: an int index, an operator from a closed set, a float
-    # or another int index.
+    # or another int index. A stale channel is NaN (a robot's topic gone quiet,
+    # server.robots.ros2): every comparison with it is false, `!=` too, so it releases nothing.
     if c.other >= 0:
-        return f"c[{int(c.channel)}] {c.op} c[{int(c.other)}]"
-    return f"c[{int(c.channel)}] {c.op} {float(c.value)!r}"
+        source = f"c[{int(c.channel)}] {c.op} c[{int(c.other)}]"
+        if c.op == "!=":
+            source += f" and c[{int(c.channel)}] == c[{int(c.channel)}]"
+            source += f" and c[{int(c.other)}] == c[{int(c.other)}]"
+        return source
+    source = f"c[{int(c.channel)}] {c.op} {float(c.value)!r}"
+    if c.op == "!=":
+        source += f" and c[{int(c.channel)}] == c[{int(c.channel)}]"
+    return source
 
 
 def compile_detector(catalog: Catalog) -> StimulusDetector:

@@ -23,7 +23,7 @@ from core.run.checkpoint import decode, encode, export_state, restore_simulation
 from core.run.conditions import Condition, get_condition
 from core.run.setup import Setup, condition_network
 from core.run.simulation import Simulation
-from core.sim.world import WorldConfig
+from core.sim.world import World, WorldConfig
 
 
 def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
@@ -82,8 +82,9 @@ def new_simulation(
     catalog: Catalog,
     world_config: WorldConfig,
     network: tuple[Association, ...] | None,
+    world: World | None = None,
 ) -> Simulation:
-    """A fresh simulation for a run.
+    """A fresh simulation for a run, in `world` if given (a robot: `server.robots.ros2`).
 
     Its network is `network`, else the spec's knowledge set, else the condition's own;
     a knowledge set is taken in its variant for the catalogue's sensor definition
@@ -99,6 +100,7 @@ def new_simulation(
         cond,
         spec.seed,
         catalog=catalog,
+        world=world,
         world_config=world_config,
         network=net,
         brain_config=config,
@@ -115,16 +117,19 @@ def create_run(
     catalog: Catalog | None,
     world_config: WorldConfig | None,
     network: tuple[Association, ...] | None,
+    world: World | None = None,
 ) -> tuple[int, RunSpec, Simulation]:
     """A new run stored with status created: its id, its spec as stored, its simulation.
 
-    The spec is stored with its world preset and sensor definition resolved by name.
+    The spec is stored with its world preset and sensor definition resolved by name. A
+    `world` given (a robot) replaces the preset's simulated one.
     """
     check_hz(spec.hz)
     chosen, catalog = setup(spec, catalog)
     chosen = chosen.resolved()
     spec = replace(spec, world=chosen.world, sensors=chosen.sensors)
-    sim = new_simulation(spec, catalog, world_config or chosen.world_config(), network)
+    config = world.config if world is not None else world_config or chosen.world_config()
+    sim = new_simulation(spec, catalog, config, network, world)
     pairs = tuple(pair(sim, a) for a in sim.brain.network)
     run_id = store.create_run(spec, pairs)
     # A checkpoint before the first tick: a run can be rebuilt whatever network it

@@ -44,7 +44,7 @@ from core.errors import RunStateError, SeenTickError, StorageError
 from core.ports import ACTIVE, Mode, RunSpec, RunStatus, RunStore, RunTotals, StoredRun
 from core.run.simulation import Simulation
 from core.run.trace import TraceRecorder
-from core.sim.world import WorldConfig
+from core.sim.world import World, WorldConfig
 from core.text import check_storable
 
 
@@ -121,6 +121,7 @@ class RunEngine:
         network: tuple[Association, ...] | None = None,
         trace: bool = True,
         pacer: Pacer | None = None,
+        world: World | None = None,
     ) -> RunEngine:
         """A new run, stored with status created.
 
@@ -128,10 +129,11 @@ class RunEngine:
         defaults resolved (an unknown name raises `UnknownNameError`). `catalog` and
         `world_config` replace the setup's: a catalogue must use the definition the spec
         names, and is the definition of a spec that names none. `network` replaces the
-        spec's knowledge set.
+        spec's knowledge set. `world` replaces the simulated world (a robot,
+        `server.robots.ros2.Ros2World`: a realtime spec paces it at the robot's rate).
         """
         run_id, spec, sim = create_run(
-            spec, store, catalog=catalog, world_config=world_config, network=network
+            spec, store, catalog=catalog, world_config=world_config, network=network, world=world
         )
         return cls(run_id, spec, store, sim, trace=trace, pacer=pacer)
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import heapq
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -20,6 +20,7 @@ from core.run.conditions import Condition
 from core.run.setup import condition_network
 from core.run.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.sim.channels import Channel
+from core.sim.types import SensorFrame
 from core.sim.world import CorridorWorld, LampColor, World, WorldConfig, make_world
 from core.sim.worlds import load_world
 
@@ -134,6 +135,9 @@ class Simulation:
         self._done = True
         self._snapshot: Snapshot | None = None
         self._channels: list[float] = []
+        self._latest: Callable[[], SensorFrame] | None = getattr(self.world, "latest", None)
+        """A world whose readings arrive by themselves (a robot, `server.robots.ros2`): each tick
+        reads them afresh right before the brain decides, so the command answers the newest."""
         self.ticks_by_origin: dict[str, int] = {}
         """Ticks run so far by what made their behaviour run (see `Snapshot.origin`)."""
         self.stimulus_ticks = [0] * len(self.catalog.stimuli)
@@ -235,6 +239,8 @@ class Simulation:
         self.tick_count += 1
         self._episode_tick += 1
         brain = self.brain
+        if self._latest is not None:
+            self._channels = self._latest().channels.tolist()
         active, command = brain.step(self.tick_count, self._channels, inputs.behaviour)
         was = self._was_active
         counts, met = self.stimulus_ticks, self.encounters

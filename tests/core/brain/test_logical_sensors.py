@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import replace
 
 import pytest
 from fakes import channel_list
 
-from core.brain.catalog import Catalog
-from core.brain.sensors import StimulusDetector
+from core.brain.catalog import Catalog, RuleCondition
+from core.brain.sensors import StimulusDetector, compile_detector
 from core.sim.channels import Channel
 from core.sim.robot import RobotConfig
 from core.sim.track import ObstacleConfig, TrackConfig
@@ -354,3 +355,23 @@ def test_world_obstacle_ahead_gives_a_camera_obstacle_stimulus(
         fired |= {catalog.stimuli[i].name for i in detector(frame.channels.tolist())}
     assert "Obstacle_M_M" in fired
     assert "SonarObstacleFront" in fired
+
+
+def test_stale_channels_release_nothing(catalog: Catalog, detector: StimulusDetector) -> None:
+    assert detector([math.nan] * len(Channel)) == []
+
+
+@pytest.mark.parametrize("other", [-1, int(C.SONAR_1)])
+def test_a_not_equal_rule_is_false_on_a_stale_channel(catalog: Catalog, other: int) -> None:
+    rule = ((RuleCondition(int(C.SONAR_0), "!=", 1.0, other),),)
+    stimulus = replace(catalog.stimuli[0], rule=rule)
+    detect = compile_detector(replace(catalog, stimuli=(stimulus,)))
+    fresh = [0.0] * len(Channel)
+    fresh[C.SONAR_1] = 1.0
+    assert detect(fresh) == [stimulus.id]
+    for stale in (C.SONAR_0, C.SONAR_1):
+        if other < 0 and stale == C.SONAR_1:
+            continue
+        channels = list(fresh)
+        channels[stale] = math.nan
+        assert detect(channels) == []

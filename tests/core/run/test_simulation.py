@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import pytest
 from fakes import ScriptedStep, ScriptedWorld, lap_steps
 
@@ -12,6 +14,7 @@ from core.events import Cause, EpisodeEnded, Event, Outcome, RewardApplied
 from core.run.conditions import get_condition
 from core.run.simulation import Simulation, TickInputs, TickResult
 from core.sim.channels import Channel
+from core.sim.types import SensorFrame
 from core.sim.world import WorldConfig
 
 STEP_M = 0.5
@@ -231,3 +234,32 @@ def test_a_failed_episode_punishes_kp_rltm_only_when_a_penalty_is_set(penalty: f
     assert after == pytest.approx(v)
     assert AssociationDemoted(mm, rt30, after) in results[-1].events
     assert brain.network.get(mm, rt30) is None
+
+
+class LiveWorld(ScriptedWorld):
+    """A world whose readings arrive by themselves, like a robot's: `latest()` reads them."""
+
+    def __init__(self, now: Mapping[Channel, float]) -> None:
+        super().__init__()
+        self.now = now
+        self.reads = 0
+
+    def latest(self) -> SensorFrame:
+        self.reads += 1
+        return self._frame(ScriptedStep(self.now))
+
+
+def test_a_live_world_is_read_right_before_the_brain_decides() -> None:
+    world = LiveWorld({Channel.LATERAL_OFFSET_M: 0.5})  # left of the centre line
+    sim = Simulation(get_condition("innate"), seed=0, world=world)
+    sim.reset()  # its frame says the robot is on the centre line
+    snap = sim.tick().snapshot
+    assert world.reads == 1
+    assert [sim.catalog.stimuli[s].name for s in snap.stimuli] == ["Left"]
+
+
+def test_a_world_without_latest_acts_on_the_frame_of_the_last_step() -> None:
+    world = ScriptedWorld(initial={Channel.LATERAL_OFFSET_M: 0.5})
+    sim = Simulation(get_condition("innate"), seed=0, world=world)
+    sim.reset()
+    assert [sim.catalog.stimuli[s].name for s in sim.tick().snapshot.stimuli] == ["Left"]

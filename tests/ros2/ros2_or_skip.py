@@ -1,0 +1,33 @@
+"""Imported first by the ROS 2 tests: skips their module without the ros2 extra or off loopback.
+
+The tests talk DDS to a fake robot; inside `make test-ros2`'s network namespace
+(scripts/loopback-netns.sh) only loopback exists, so none of it leaves the machine. Outside
+it they skip rather than send discovery traffic onto the host's network.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from server.robots.ros2 import INSTALL_HINT
+
+try:
+    import rclpy  # noqa: F401
+except ImportError as e:
+    pytest.skip(
+        f"{e.name} is not installed: {INSTALL_HINT}; `make test-ros2` runs these tests",
+        allow_module_level=True,
+    )
+
+_INTERFACES = [
+    line.split(":", 1)[0].strip()
+    for line in Path("/proc/net/dev").read_text(encoding="utf-8").splitlines()[2:]
+]
+if _INTERFACES != ["lo"]:
+    pytest.skip(
+        f"network interfaces {', '.join(_INTERFACES)} besides loopback: the ROS 2 tests run "
+        "only in a namespace with loopback alone; `make test-ros2` runs them in one",
+        allow_module_level=True,
+    )
