@@ -150,6 +150,17 @@ class Ros2World:
             for t in robot.topics
         ]
         self._odometry = next(i for i, t in enumerate(robot.topics) if t.channels == (ODOMETRY,))
+        fed = {c for i in self._index for c in i if c >= 0}
+        fed |= {int(c) for c in MAP_CHANNELS} | {int(Channel.PROGRESS_M)}
+        fed |= (
+            set(range(len(CHANNELS))[_RESIDUALS])
+            if fed & set(range(len(CHANNELS))[_SONARS])
+            else set()
+        )
+        self.fed = frozenset(fed)
+        """The channels the robot's topics and its map give; every other one stays stale
+        (NaN: a world's channel this robot has no sensor for, e.g. `beacon_phase`), so a
+        logical sensor over it releases nothing."""
         self._last_any = -math.inf
         self._lost = False
         self._lost_callbacks: list[Callable[[], object]] = []

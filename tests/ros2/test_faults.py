@@ -130,7 +130,8 @@ def test_ten_times_the_message_rate_leaves_no_backlog() -> None:
             sim = _simulation(world)
             for _ in range(60):
                 frame = world.step()
-                assert not any(math.isnan(v) for v in frame.channels), "every channel fresh"
+                fresh = [frame.channels[c] for c in sorted(world.fed)]
+                assert not any(math.isnan(v) for v in fresh), "every channel the robot feeds"
                 sim.tick()
                 time.sleep(1 / ROBOT.hz)
         finally:

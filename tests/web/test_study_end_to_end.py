@@ -51,6 +51,7 @@ def test_a_participants_console_goes_live_with_their_token(
     [invited] = api.post("/api/studies/closed/participants", json={"count": 1}).json()["data"]
     token = invited["token"]
     context = browser.new_context(viewport={"width": 1280, "height": 800})
+    context.set_default_timeout(BROWSER_WAIT_MS)  # a load on a busy machine
     sent: list[Request] = []
     try:
         page = context.new_page()
@@ -159,6 +160,7 @@ PRESSES: list[list[tuple[str, str]]] = [
 def organiser_page(browser: Browser, server: LiveServer) -> tuple[BrowserContext, Page]:
     """The Studies page in a context of its own, holding the organiser's saved token."""
     context = browser.new_context(viewport={"width": 1280, "height": 900})
+    context.set_default_timeout(BROWSER_WAIT_MS)  # a load on a busy machine
     context.add_init_script(f"localStorage.setItem('srlab.token', {TOKEN!r})")
     page = context.new_page()
     page.goto(f"{server.url}/#/studies")
@@ -223,6 +225,7 @@ def test_a_study_end_to_end_its_export_matches_each_console(
         pages = []
         for link, presses in zip(links, PRESSES, strict=True):
             person = browser.new_context(viewport={"width": 1280, "height": 800})
+            person.set_default_timeout(BROWSER_WAIT_MS)  # a load on a busy machine
             contexts.append(person)
             page = person.new_page()
             pages.append(page)
