@@ -27,8 +27,9 @@ from core.events import Cause, EpisodeEnded, Outcome
 from core.run.conditions import Condition
 from core.run.runner import EpisodeSummary
 from core.run.simulation import NO_INPUTS, Simulation, TickInputs
+from core.sim.corridor_world import CorridorWorld
 from core.sim.render import TopDown
-from core.sim.world import CorridorWorld, WorldConfig
+from core.sim.world import WorldConfig
 
 ENV_ID = "srlab/AmigoTrack-v0"
 MAX_SKIPPED = 100

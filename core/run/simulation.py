@@ -20,8 +20,9 @@ from core.run.conditions import Condition
 from core.run.setup import condition_network
 from core.run.trainer import ReinforcementProgram, Teacher, load_trainer
 from core.sim.channels import Channel
+from core.sim.corridor_world import CorridorWorld
 from core.sim.types import SensorFrame
-from core.sim.world import CorridorWorld, LampColor, World, WorldConfig, make_world
+from core.sim.world import LampColor, World, WorldConfig, make_world
 from core.sim.worlds import load_world
 
 _PROGRESS = int(Channel.PROGRESS_M)

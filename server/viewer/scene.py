@@ -18,9 +18,10 @@ import numpy as np
 
 from core.sim._kernel import ray_entry, ray_exit, walls_hit
 from core.sim.corridor import CorridorGeometry, floor_quads
+from core.sim.corridor_world import obstacles_at
 from core.sim.robot import RobotConfig
 from core.sim.types import Geometry, build_geometry
-from core.sim.world import EpisodeLayout, LampColor, WorldConfig, obstacles_at
+from core.sim.world import EpisodeLayout, LampColor, WorldConfig
 
 Rgb = tuple[int, int, int]
 Vec3 = tuple[float, float, float]

@@ -16,8 +16,9 @@ from core.errors import UnknownNameError
 from core.ports import StoredRun
 from core.run.trace import unpack
 from core.sim.corridor import CorridorGeometry, floor_quads
+from core.sim.corridor_world import obstacle_places
 from core.sim.types import WorldConfig, build_geometry
-from core.sim.world import episode_layout, obstacle_places
+from core.sim.world import episode_layout
 from core.sim.worlds import load_world
 from server.api.access import PrincipalDep
 from server.api.deps import AppState, EnginesDep, NetworksDep, StateDep, StoreDep, WriteGuard

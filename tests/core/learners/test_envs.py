@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 from core.events import Outcome
 from core.learners.envs import ENV_ID, AmigoTrackEnv, register
 from core.run.runner import EpisodeSummary
-from core.sim.world import CorridorWorld
+from core.sim.corridor_world import CorridorWorld
 from core.sim.worlds import load_world
 
 

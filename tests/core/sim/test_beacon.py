@@ -86,7 +86,7 @@ def test_a_world_without_a_beacon_never_hears_one() -> None:
 
 
 def test_a_corridor_world_file_with_a_beacon_hears_it_near_its_stop_line(tmp_path: Path) -> None:
-    from core.sim.world import CorridorWorld
+    from core.sim.corridor_world import CorridorWorld
 
     text = (Path(__file__).parents[3] / "core" / "data" / "worlds" / "u-shape.toml").read_text()
     with_beacon = text.replace(

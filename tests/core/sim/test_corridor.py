@@ -15,9 +15,10 @@ from core.run.simulation import Simulation
 from core.sim import _kernel as k
 from core.sim.channels import Channel
 from core.sim.corridor import CorridorConfig, CorridorGeometry, PlacedObstacle, seeded_area
+from core.sim.corridor_world import CorridorWorld
 from core.sim.render import TopDown
 from core.sim.sensing import INF
-from core.sim.world import CorridorWorld, MotorCommand, PymunkWorld, make_world
+from core.sim.world import MotorCommand, PymunkWorld, make_world
 from core.sim.worlds import load_world, with_settings
 
 

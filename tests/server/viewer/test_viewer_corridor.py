@@ -10,7 +10,8 @@ import pytest
 import viser
 
 from core.sim.corridor import CorridorConfig, CorridorGeometry
-from core.sim.world import CorridorWorld, LampColor, MotorCommand, WorldConfig, episode_layout
+from core.sim.corridor_world import CorridorWorld
+from core.sim.world import LampColor, MotorCommand, WorldConfig, episode_layout
 from core.sim.worlds import load_world, world_names
 from server.viewer.render import Renderer
 from server.viewer.scene import TickView, obstacle_box, scene_frame, sonar_ranges, static_scene
