@@ -36,7 +36,8 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from server.api.guard import SitePolicy
-from server.viewer.gate import Peer, Relay, refusal
+from server.viewer.gate import Peer, Relay
+from server.viewer.heads import refusal
 
 log = logging.getLogger("srlab.viewer")
 

@@ -30,7 +30,8 @@ from websockets.typing import Subprotocol
 
 from server.api.guard import SitePolicy
 from server.viewer import gate as gate_module
-from server.viewer.gate import MAX_VIEWERS, Gate, Peer, Relay, handshake_answer, run_path
+from server.viewer.gate import MAX_VIEWERS, Gate, Peer, Relay
+from server.viewer.heads import handshake_answer, run_path
 
 pytestmark = pytest.mark.anyio
 

@@ -6,7 +6,7 @@ from http import HTTPStatus
 
 import pytest
 
-from server.viewer.gate import cookie_values, target
+from server.viewer.heads import cookie_values, target
 from server.viewer.passes import (
     MAX_PASSES,
     PER_RUN,
