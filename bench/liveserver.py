@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from collections import deque
 from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -22,6 +23,9 @@ from bench.procs import descendants
 
 ROOT = Path(__file__).resolve().parents[1]
 
+
+_RECENT: deque[int] = deque(maxlen=256)
+"""The ports `free_port` handed out last in this process."""
 
 EPHEMERAL_PORTS = Path("/proc/sys/net/ipv4/ip_local_port_range")
 
@@ -41,15 +45,22 @@ def free_port() -> int:
     It is taken below the ephemeral range, which the kernel draws on for every client
     connection and every bind to port 0: a server restarted on its port finds it free even
     while other processes (pytest-xdist's workers) open connections all the time.
+
+    A port is not handed out twice in a row within one process (the last
+    `_RECENT.maxlen` are skipped): a server and its 3D view, asked for one after the
+    other before either binds, get two ports.
     """
     candidates = _below_ephemeral()
     for _ in range(50 if candidates else 0):
         port = candidates[secrets.randbelow(len(candidates))]
+        if port in _RECENT:
+            continue
         with socket.socket() as s:
             try:
                 s.bind(("127.0.0.1", port))
             except OSError:
                 continue
+            _RECENT.append(port)
             return port
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
