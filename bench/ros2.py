@@ -10,7 +10,9 @@ does, for ``--ticks`` ticks (default 10,000: 500 s at 20 Hz). Printed, not asser
 - sensor-to-command latency, p50 / p99 / max: from the arrival of the newest sensor message
   a tick read to the publication of the Twist it decided (goal: p99 <= 10 ms);
 - dropped commands: Twists published less Twists the robot received (goal: 0);
-- ticks whose odometry was stale (the robot's messages came late).
+- ticks whose odometry was stale (the robot's messages came late);
+- once the robot goes silent (it exits at the end), how long after its last message the
+  zero Twist went out (goal: one tick period + 100 ms).
 
 ``--rate 10`` has the robot publish its sensors 10 times a tick.
 """
@@ -77,7 +79,10 @@ def measure(robot_name: str, ticks: int, rate: int, folder: Path) -> dict[str, f
         elapsed = time.monotonic() - started
         time.sleep(0.5)  # the last Twists on their way
         sent = world.sent
-        out, _ = fake.communicate(timeout=30)
+        out, _ = fake.communicate(timeout=30)  # the robot goes silent: it is lost
+        silent_until = time.monotonic() + 10
+        while not world.lost and time.monotonic() < silent_until:
+            time.sleep(0.01)
     finally:
         world.close()
         if fake.poll() is None:
@@ -92,6 +97,8 @@ def measure(robot_name: str, ticks: int, rate: int, folder: Path) -> dict[str, f
         "max_ms": max(lat),
         "stale_odometry_ticks": len(world.latencies_s) - len(lat),
         "dropped": sent - received,
+        "stopped_after_ms": world.stopped_after_s * 1000,
+        "stop_goal_ms": (1.0 / robot.hz + 0.1) * 1000,
     }
 
 
@@ -114,6 +121,10 @@ def main() -> None:
     )
     print(f"  dropped commands             {r['dropped']:>8.0f}  (goal: 0)")
     print(f"  ticks on stale odometry      {r['stale_odometry_ticks']:>8.0f}")
+    print(
+        f"  zero Twist after it went silent {r['stopped_after_ms']:>5.0f} ms  "
+        f"(goal: <= one tick period + 100 ms = {r['stop_goal_ms']:.0f} ms)"
+    )
 
 
 if __name__ == "__main__":

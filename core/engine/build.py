@@ -7,6 +7,7 @@ definition, rate) before anything is stored or ticks.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -15,7 +16,7 @@ from core.brain.catalog import Catalog
 from core.brain.memory import DEFAULT_REACTION_S, ReactionWindow
 from core.brain.network import Association, BehaviourNetwork
 from core.engine.learning import pair
-from core.engine.pacing import check_hz
+from core.engine.pacing import Pacer, check_hz
 from core.errors import CatalogError, RunStateError
 from core.params import applicable, configure
 from core.ports import Checkpoint, Mode, RunSpec, RunStatus, RunStore, RunTotals, StoredRun
@@ -23,7 +24,12 @@ from core.run.checkpoint import decode, encode, export_state, restore_simulation
 from core.run.conditions import Condition, get_condition
 from core.run.setup import Setup, condition_network
 from core.run.simulation import Simulation
+from core.sim.robotfile import robot_of
 from core.sim.world import World, WorldConfig
+
+Connect = Callable[[RunSpec], tuple[World, Pacer]]
+"""Reaches the robot a run's world names (``ros2:ROBOT``, `core.sim.robotfile`): the world
+its ticks sense and act in, and the clock that paces them (`server.robots.connect`)."""
 
 
 def condition(spec: RunSpec) -> tuple[Condition, BrainConfig]:
@@ -151,6 +157,18 @@ class Restored:
     totals: RunTotals
     last_external_id: int
     """The newest trainer's reward the checkpoint holds."""
+    pacer: Pacer | None = None
+    """A robot's clock (None: the engine's own)."""
+
+    @property
+    def replays(self) -> bool:
+        """Whether the run re-runs its ticks after the checkpoint: not on a robot.
+
+        A robot cannot run those ticks again: a robot run resumes at the start of the
+        episode it stopped in, as a person puts the robot back at the start. The rewards
+        and edits logged in that episode stay in the log; the learning they brought is lost.
+        """
+        return self.pacer is None
 
 
 def restore_run(
@@ -160,15 +178,42 @@ def restore_run(
     catalog: Catalog | None,
     world_config: WorldConfig | None,
     mode: Mode | None,
+    connect: Connect | None = None,
 ) -> Restored:
     """A stored run (neither finished nor running) rebuilt from its last checkpoint.
 
     It runs in the world and sensor definition it was stored with (the defaults for a
-    run stored before runs kept them).
+    run stored before runs kept them); a robot's run (world ``ros2:ROBOT``) on the robot
+    `connect` reaches (`RunStateError` without it).
     """
     stored = store.load_run(run_id)
     if stored.status in (RunStatus.FINISHED, RunStatus.RUNNING):
         raise RunStateError(f"run {run_id} is {stored.status.value}: nothing to resume")
+    robot = robot_of(stored.spec.world)
+    if robot is None:
+        return _restore(run_id, stored, catalog, world_config, mode, None)
+    if connect is None:
+        raise RunStateError(
+            f"run {run_id} drives the robot {robot!r}: `srlab serve` runs it (docs/robots.md)"
+        )
+    world, pacer = connect(stored.spec)
+    try:
+        return replace(_restore(run_id, stored, catalog, world_config, mode, world), pacer=pacer)
+    except BaseException:
+        close = getattr(world, "close", None)
+        if close is not None:
+            close()
+        raise
+
+
+def _restore(
+    run_id: int,
+    stored: StoredRun,
+    catalog: Catalog | None,
+    world_config: WorldConfig | None,
+    mode: Mode | None,
+    world: World | None,
+) -> Restored:
     spec = stored.spec
     chosen, catalog = setup(spec, catalog)
     world_config = world_config or chosen.world_config()
@@ -176,7 +221,7 @@ def restore_run(
         spec = replace(spec, mode=mode)
     cond, config = condition(spec)
     if stored.checkpoint is None:  # stored before runs got a checkpoint at creation
-        sim = new_simulation(spec, catalog, world_config, None)
+        sim = new_simulation(spec, catalog, world_config, None, world)
         return Restored(spec, sim, stored, RunTotals(0, 0, 0), 0)
     state = decode(stored.checkpoint.state)
     sim = restore_simulation(
@@ -187,6 +232,7 @@ def restore_run(
         world_config=world_config,
         defer_rewards=True,
         brain_config=config,
+        world=world,
     )
     sim.brain.window = reaction_window(spec)
     skip = int(state.get("last_external_reward_id", 0))

@@ -30,7 +30,13 @@ from core.brain.memory import ReactionWindow
 from core.brain.network import Association
 from core.commands import EditAssociation, InjectReward, RewardSource
 from core.engine.boundary import Boundary
-from core.engine.build import create_run, reaction_seconds, reaction_window, restore_run
+from core.engine.build import (
+    Connect,
+    create_run,
+    reaction_seconds,
+    reaction_window,
+    restore_run,
+)
 from core.engine.bus import EventBus, StatusChanged, Subscription
 from core.engine.jobs import CommandJob, RewardAck, RewardJob
 from core.engine.pacing import HZ_MAX, HZ_MIN, Controls, MonotonicPacer, Pacer, check_hz
@@ -148,22 +154,26 @@ class RunEngine:
         trace: bool = True,
         mode: Mode | None = None,
         pacer: Pacer | None = None,
+        connect: Connect | None = None,
     ) -> RunEngine:
         """A stored run, rebuilt from its last checkpoint; `run()` replays its log first.
 
         It runs in the world and sensor definition it was stored with (the defaults for a
-        run stored before runs kept them).
+        run stored before runs kept them). A robot's run runs on the robot `connect`
+        reaches, paced by its clock, and replays nothing (`Restored.replays`).
         """
-        r = restore_run(run_id, store, catalog=catalog, world_config=world_config, mode=mode)
+        r = restore_run(
+            run_id, store, catalog=catalog, world_config=world_config, mode=mode, connect=connect
+        )
         return cls(
             run_id,
             r.spec,
             store,
             r.sim,
-            replay=r.stored,
+            replay=r.stored if r.replays else None,
             totals=r.totals,
             trace=trace,
-            pacer=pacer,
+            pacer=pacer or r.pacer,
             last_external_id=r.last_external_id,
         )
 

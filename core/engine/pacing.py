@@ -28,6 +28,11 @@ from core.events import EpisodeEnded
 FAST_YIELD_TICKS = 128
 """In fast mode the tick task yields to the event loop this often, so commands get in."""
 
+ON_TIME_S = 1e-4
+"""A tick woken this little before its deadline is on time: a clock that steps by whole
+periods (a robot's, `server.robots.ros2.RobotPacer`) lands on a deadline summed period by
+period only to within float rounding."""
+
 APPROACH_S = 0.005
 """A realtime tick first sleeps until this long before its deadline (at most a quarter of
 the period), then sleeps the rest: see `sleep_until`."""
@@ -341,7 +346,7 @@ class Realtime:
         if controls.rate_changed:
             controls.rate_changed = False
             self._deadline = self._started + 1.0 / controls.hz
-        if clock() < self._deadline:
+        if clock() < self._deadline - ON_TIME_S:
             return False  # woken early (a rate change): sleep what is left
         self._started = clock()
         self._stats.lateness_s.add(max(0.0, self._started - self._deadline))

@@ -18,7 +18,7 @@ from core.brain.network import Association, BehaviourNetwork
 from core.errors import CoreError
 from core.run.conditions import Condition
 from core.run.simulation import Simulation
-from core.sim.world import WorldConfig
+from core.sim.world import World, WorldConfig
 
 VERSION = 1
 
@@ -95,8 +95,9 @@ def restore_simulation(
     world_config: WorldConfig | None = None,
     defer_rewards: bool = False,
     brain_config: BrainConfig | None = None,
+    world: World | None = None,
 ) -> Simulation:
-    """A simulation in the state `export_state` gave.
+    """A simulation in the state `export_state` gave, in `world` if given (a robot).
 
     Its next `reset()` starts the episode after the checkpointed one.
     """
@@ -116,6 +117,7 @@ def restore_simulation(
         sim = Simulation(
             condition,
             seed,
+            world=world,
             world_config=world_config,
             catalog=catalog,
             network=network,

@@ -20,7 +20,10 @@ from core.sim.channels import CHANNELS
 ODOMETRY = "odometry"
 """The pseudo-channel a pose feeds: x, y and heading, read against the map."""
 
-ROBOTS_DIR = Path(__file__).resolve().parent.parent / "data" / "robots"
+INSTALL_HINT = "`make install-ros2` installs the srlab[ros2] extra (rclpy and Fast DDS wheels)"
+
+ROBOT_PREFIX = "ros2:"
+"""A run's world that names a robot file: ``ros2:NAME`` or ``ros2:PATH.toml``."""
 
 
 class RobotFileError(ValueError):
@@ -62,6 +65,10 @@ class RobotFile:
         cmd_vel: the topic each tick's wheel command is sent on (`geometry_msgs/msg/Twist`).
         lost_after_s: no message on any topic for this long: the robot is lost and stopped.
         topics: the sensor topics.
+        use_sim_time: the robot's clock is the `/clock` topic (a simulator's, as ROS 2's
+            `use_sim_time`): messages' ages are read on it, so a simulator that runs slower
+            or faster than the wall clock (or in lockstep with the commands) is sensed as
+            at its own pace. Losing the robot is still wall-clock silence.
     """
 
     name: str
@@ -73,6 +80,7 @@ class RobotFile:
     cmd_vel: str
     lost_after_s: float
     topics: tuple[TopicSpec, ...]
+    use_sim_time: bool = False
 
 
 def _positive(where: str, table: dict[str, Any], key: str, default: float | None = None) -> float:
@@ -150,14 +158,42 @@ def parse_robot_file(text: str, source: str) -> RobotFile:
         _text(f"{source}: [ros2]", ros2, "cmd_vel", "cmd_vel"),
         _positive(f"{source}: [ros2]", ros2, "lost_after_s", 0.5),
         parsed,
+        _flag(f"{source}: [ros2]", ros2, "use_sim_time"),
     )
+
+
+def _flag(where: str, table: dict[str, Any], key: str) -> bool:
+    value = table.get(key, False)
+    if not isinstance(value, bool):
+        raise RobotFileError(f"{where}: {key} must be true or false, got {value!r}")
+    return value
+
+
+def robots_dir() -> Path:
+    """The folder of robot files: ``robots`` in srlab's data folder (``SRLAB_DATA_DIR``)."""
+    from core.brain.catalog import data_dir
+
+    return data_dir() / "robots"
+
+
+def robot_names() -> list[str]:
+    """The robot files in `robots_dir`, by name."""
+    return sorted(p.stem for p in robots_dir().glob("*.toml"))
+
+
+def robot_of(world: str) -> str | None:
+    """The robot file a run's world names (``ros2:NAME``), or None for a simulated world."""
+    return world[len(ROBOT_PREFIX) :] if world.startswith(ROBOT_PREFIX) else None
 
 
 def load_robot_file(name: str) -> RobotFile:
     """A robot file by name (core/data/robots/NAME.toml) or by path (ending in ``.toml``)."""
-    path = Path(name) if name.endswith(".toml") else ROBOTS_DIR / f"{name}.toml"
+    path = Path(name) if name.endswith(".toml") else robots_dir() / f"{name}.toml"
     try:
         text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        known = ", ".join(robot_names()) or "none"
+        raise RobotFileError(f"unknown robot {name!r}: no file {path} (known: {known})") from None
     except OSError as e:
         raise RobotFileError(f"{path}: {e.strerror or e}") from None
     return parse_robot_file(text, str(path))

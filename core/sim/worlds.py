@@ -24,6 +24,7 @@ from core.brain.catalog import data_dir
 from core.errors import CatalogError, UnknownNameError
 from core.params import Parameter
 from core.run.conditions import Condition
+from core.sim.robotfile import ROBOT_PREFIX, RobotFile, RobotFileError, load_robot_file, robot_of
 from core.sim.world import WorldConfig
 
 
@@ -165,6 +166,12 @@ def load_world(name: str | None = None) -> WorldPreset:
     """
     raw = _raw()
     name = name or default_world()
+    robot = robot_of(name)
+    if robot is not None:
+        try:
+            return robot_preset(load_robot_file(robot), name)
+        except RobotFileError as e:
+            raise UnknownNameError(str(e)) from None
     if name in _files() or name.endswith(".toml"):
         from core.sim.worldfile import load_world_file
 
@@ -182,6 +189,20 @@ def load_world(name: str | None = None) -> WorldPreset:
         str(spec.get("reasons", "")).strip(),
         config,
         overrides,
+    )
+
+
+def robot_preset(robot: RobotFile, name: str = "") -> WorldPreset:
+    """The world a robot (`core.sim.robotfile`) runs in: its map's preset at its rate.
+
+    The map's track, with the robot's tick (dt = 1 / hz) and episode time limit; named
+    `name` (``ros2:ROBOT`` by default).
+    """
+    preset = load_world(robot.world)
+    config = dataclasses.replace(preset.config, dt_s=1.0 / robot.hz, max_ticks=robot.max_ticks)
+    description = f"the robot {robot.name} through ROS 2, on the map of {preset.name}"
+    return WorldPreset(
+        name or f"{ROBOT_PREFIX}{robot.name}", description, preset.reasons, config, {}
     )
 
 

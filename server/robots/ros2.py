@@ -19,7 +19,8 @@ simulation's episodes and the engine's realtime pacing run on it unchanged. A ro
   m/s, angular.z rad/s); a command that is not finite (the motor read stale odometry) is
   sent as zero. **Losing the robot** (no message on any topic for `lost_after_s`) sends a
   zero Twist at once, from the reading thread, and calls the `on_lost` callbacks; every
-  later command is zero too.
+  later command is zero too. A moving robot sent no command for `HOLD_PERIODS` ticks (its
+  run paused, or between episodes) is sent a zero Twist as well.
 
 **Pacing from the robot's clock**: `RobotPacer` is the engine's realtime clock read off the
 robot (its odometry's stamps), so a tick starts as the odometry of its period arrives, and
@@ -40,17 +41,17 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from core.engine.pacing import ON_TIME_S
 from core.sim.channels import CHANNELS, Channel
-from core.sim.robotfile import ODOMETRY, RobotFile, TopicSpec
+from core.sim.robotfile import INSTALL_HINT, ODOMETRY, RobotFile, TopicSpec
 from core.sim.types import EpisodeLayout, LampColor, MotorCommand, SensorFrame
 from core.sim.world import make_world
-from core.sim.worlds import load_world
+from core.sim.worlds import robot_preset
 
 if TYPE_CHECKING:
     from core.engine.pacing import Wake
@@ -75,7 +76,9 @@ _RESIDUALS = slice(Channel.SONAR_0_RESIDUAL, Channel.SONAR_7_RESIDUAL + 1)
 LATENCIES_KEPT = 100_000
 """How many commands' latencies a world keeps (the latest): 83 minutes at 20 Hz."""
 
-INSTALL_HINT = "`make install-ros2` installs the srlab[ros2] extra (rclpy and Fast DDS wheels)"
+
+HOLD_PERIODS = 2
+"""A moving robot sent no command for this many tick periods gets a zero Twist."""
 
 
 class RobotLostError(RuntimeError):
@@ -125,7 +128,8 @@ class Ros2World:
 
     Args:
         robot: the robot file.
-        clock: seconds, monotonic (message ages and the watchdog).
+        clock: seconds, monotonic: the watchdog's, latencies', and message ages' unless the
+            robot file says `use_sim_time` (then ages are read on the robot's `/clock`).
     """
 
     def __init__(self, robot: RobotFile, clock: Callable[[], float] = time.monotonic) -> None:
@@ -138,13 +142,17 @@ class Ros2World:
         from rclpy.signals import SignalHandlerOptions
 
         self.robot = robot
-        preset = load_world(robot.world)
-        self.config = replace(preset.config, dt_s=1.0 / robot.hz, max_ticks=robot.max_ticks)
+        self.config = robot_preset(robot).config
         self._map = make_world(self.config)
         self.geometry = self._map.geometry
         self._clock = clock
         self._mount = self.config.robot.sonar_mount_m
-        self._latest: list[tuple[float, tuple[float, ...]] | None] = [None] * len(robot.topics)
+        self._latest: list[tuple[float, float, tuple[float, ...]] | None] = [None] * len(
+            robot.topics
+        )
+        """Per topic, its latest message: received when (wall clock, age clock), values."""
+        self.sim_time = 0.0
+        """The robot's `/clock` (with `use_sim_time`): seconds."""
         self._index = [
             (-1,) if t.channels == (ODOMETRY,) else tuple(CHANNELS.index(c) for c in t.channels)
             for t in robot.topics
@@ -163,12 +171,18 @@ class Ros2World:
         logical sensor over it releases nothing."""
         self._last_any = -math.inf
         self._lost = False
+        self.stopped_after_s = math.nan
+        """How long after the robot's last message its zero Twist went out, once lost."""
         self._lost_callbacks: list[Callable[[], object]] = []
         self._lock = threading.Lock()
         self.rejected = 0
         """Messages ignored: in the wrong frame or of the wrong size."""
         self.sent = 0
         """Twists published."""
+        self.held = 0
+        """Zero Twists sent because no command came for `HOLD_PERIODS` ticks."""
+        self._commanded_at = -math.inf
+        self._moving = False
         self.latencies_s: deque[float] = deque(maxlen=LATENCIES_KEPT)
         """For the latest commands, the age of the newest sensor message each answered."""
         self._used_at = -math.inf
@@ -194,6 +208,11 @@ class Ros2World:
             self._node.create_subscription(
                 message_class(t.type), t.topic, partial(self._receive, i, t), QoSProfile(depth=1)
             )
+        if robot.use_sim_time:
+            from rclpy.qos import qos_profile_sensor_data
+            from rosgraph_msgs.msg import Clock
+
+            self._node.create_subscription(Clock, "/clock", self._tock, qos_profile_sensor_data)
         self._node.create_timer(min(robot.lost_after_s / 4, 0.05), self._watch)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
@@ -208,6 +227,14 @@ class Ros2World:
         with contextlib.suppress(ExternalShutdownException):
             self._executor.spin()
 
+    def _ages_now(self) -> float:
+        """The clock message ages are read on: the robot's `/clock` or the wall clock."""
+        return self.sim_time if self.robot.use_sim_time else self._clock()
+
+    def _tock(self, msg: Any) -> None:
+        self._last_any = self._clock()
+        self.sim_time = msg.clock.sec + msg.clock.nanosec * 1e-9
+
     def _receive(self, i: int, spec: TopicSpec, msg: Any) -> None:
         now = self._clock()
         self._last_any = now
@@ -218,22 +245,39 @@ class Ros2World:
         if len(values) != (3 if spec.channels == (ODOMETRY,) else len(spec.channels)):
             self.rejected += 1
             return
-        self._latest[i] = (now, values)
+        header = getattr(msg, "header", None)
+        stamp = None if header is None else header.stamp.sec + header.stamp.nanosec * 1e-9
+        # On the robot's clock a message is as old as its stamp says (it may have waited
+        # in its queue while this thread was busy); on the wall clock, from its arrival
+        # (the robot's wall clock is another machine's).
+        aged = stamp if stamp is not None and self.robot.use_sim_time else self._ages_now()
+        self._latest[i] = (now, aged, values)
         if i == self._odometry:
-            stamp = getattr(getattr(msg, "header", None), "stamp", None)
-            self.robot_time = now if stamp is None else stamp.sec + stamp.nanosec * 1e-9
+            self.robot_time = aged if stamp is None else stamp
             for callback in self._on_odometry:
                 callback()
 
     def _watch(self) -> None:
+        self._hold()
         if self._lost or self._clock() - self._last_any <= self.robot.lost_after_s:
             return
         if self._last_any == -math.inf:
             return  # not connected yet: reset() waits for the robot
         self._lost = True
         self._publish(0.0, 0.0)
+        self.stopped_after_s = self._clock() - self._last_any
         for callback in self._lost_callbacks:
             callback()
+
+    def _hold(self) -> None:
+        """Stop a moving robot (a zero Twist) sent no command for `HOLD_PERIODS` ticks.
+
+        Its run paused, between episodes, or its engine stalled.
+        """
+        if self._moving and self._ages_now() - self._commanded_at > HOLD_PERIODS / self.robot.hz:
+            self._moving = False
+            self._publish(0.0, 0.0)
+            self.held += 1
 
     def _publish(self, speed: float, turn: float) -> None:
         msg = self._twist()
@@ -272,7 +316,7 @@ class Ros2World:
         """Wait for odometry (up to `connect_timeout_s`), take its pose as the start pose."""
         self._map.reset(seed, episode)
         deadline = self._clock() + self.robot.connect_timeout_s
-        while self._latest[self._odometry] is None or self._stale(self._odometry, self._clock()):
+        while self._latest[self._odometry] is None or self._stale(self._odometry):
             if self._clock() > deadline or self._lost:
                 raise RobotLostError(
                     f"no odometry on {self.robot.topics[self._odometry].topic!r} "
@@ -281,7 +325,7 @@ class Ros2World:
             time.sleep(0.01)
         latest = self._latest[self._odometry]
         assert latest is not None
-        x, y, heading = latest[1]
+        x, y, heading = latest[2]
         self._origin = (x, y, heading)
         self._tick = 0
         self._progress = 0.0
@@ -293,6 +337,8 @@ class Ros2World:
         if self._lost or not (math.isfinite(speed) and math.isfinite(turn)):
             speed, turn = 0.0, 0.0
         self._publish(float(speed), float(turn))
+        self._commanded_at = self._ages_now()
+        self._moving = (speed, turn) != (0.0, 0.0)
         self.latencies_s.append(self._clock() - self._used_at)
 
     def step(self) -> SensorFrame:
@@ -318,9 +364,14 @@ class Ros2World:
 
     # --- sensing ---------------------------------------------------------------------
 
-    def _stale(self, i: int, now: float) -> bool:
+    def _stale(self, i: int, now: float | None = None) -> bool:
+        """Whether topic `i` has no message younger than its `stale_after_s` (on the age clock)."""
         latest = self._latest[i]
-        return latest is None or now - latest[0] > self.robot.topics[i].stale_after_s
+        if latest is None:
+            return True
+        return (self._ages_now() if now is None else now) - latest[1] > self.robot.topics[
+            i
+        ].stale_after_s
 
     def _map_pose(self, x: float, y: float, th: float) -> tuple[float, float, float]:
         ox, oy, oth = self._origin
@@ -336,7 +387,7 @@ class Ros2World:
         )
 
     def _sense(self) -> SensorFrame:
-        now = self._clock()
+        now = self._ages_now()
         out = np.full(len(CHANNELS), math.nan)
         newest = -math.inf
         for i, latest in enumerate(self._latest):
@@ -344,12 +395,12 @@ class Ros2World:
                 continue
             newest = max(newest, latest[0])
             if i != self._odometry:
-                out[list(self._index[i])] = latest[1]
+                out[list(self._index[i])] = latest[2]
         self._used_at = newest
         if not self._stale(self._odometry, now):
             latest = self._latest[self._odometry]
             assert latest is not None
-            self._pose = self._map_pose(*latest[1])
+            self._pose = self._map_pose(*latest[2])
             on_map = self._map.place(*self._pose, None).channels
             out[list(MAP_CHANNELS)] = on_map[list(MAP_CHANNELS)]
             out[_RESIDUALS] = on_map[_SONARS] - out[_SONARS]
@@ -384,7 +435,7 @@ class RobotPacer:
         """Until the robot's clock is `seconds` on, or `wake` is set."""
         if wake.is_set():
             return
-        until = self.now() + seconds - 1e-6
+        until = self.now() + seconds - ON_TIME_S
         loop = asyncio.get_running_loop()
         fut: asyncio.Future[None] = wake.waiter()
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any, Protocol
 
@@ -30,6 +31,7 @@ from core.engine import RunEngine, RunView, Subscription, SubscriptionClosed
 from core.engine.messages import Command, Latest, Query, RunState, latest, perform, state_of
 from core.errors import RunStateError, StorageError
 from core.ports import ACTIVE, RunSpec, RunStatus, RunStore
+from server.robots.connect import Robots
 
 log = logging.getLogger("srlab.engines")
 
@@ -94,6 +96,8 @@ class RunHost:
         self.max_runs = max_runs
         self.outlet = outlet
         self.queries = {**CORE_QUERIES, **queries}
+        self.robots = Robots()
+        """The robots its runs drive (a run's world ``ros2:ROBOT``: docs/robots.md)."""
         self._engines: dict[int, RunEngine] = {}
         self._tasks: dict[int, asyncio.Task[RunStatus]] = {}
         self._starting: set[int] = set()
@@ -136,10 +140,19 @@ class RunHost:
             stale = self._engines.get(run_id)
             if stale is not None:  # it ended here without its status stored
                 await asyncio.to_thread(self._settle_status, stale)
-            # In its stored world and definition.
-            engine = await asyncio.to_thread(RunEngine.restore, run_id, self.store)
+            # In its stored world and definition (on its robot, for a robot's run).
+            engine = await asyncio.to_thread(
+                RunEngine.restore, run_id, self.store, connect=self.robots.connect_for(run_id)
+            )
+        except BaseException:
+            await asyncio.to_thread(self.robots.release, run_id)
+            raise
         finally:
             self._starting.discard(run_id)
+        robot = self.robots.world(run_id)
+        if robot is not None:
+            loop = asyncio.get_running_loop()
+            robot.on_lost(lambda: loop.call_soon_threadsafe(self._robot_lost, engine))
         self._engines[run_id] = engine
         view = engine.view()
         state = state_of(view, 1)
@@ -340,6 +353,19 @@ class RunHost:
         except Exception:
             log.exception("run %s failed", engine.run_id)
             return RunStatus.FAILED
+        finally:
+            if self.robots.world(engine.run_id) is not None:
+                await asyncio.to_thread(self.robots.release, engine.run_id)
+
+    def _robot_lost(self, engine: RunEngine) -> None:
+        """The run's robot went silent (it was sent a zero Twist): interrupt the run."""
+        world = self.robots.world(engine.run_id)
+        silent = world.robot.lost_after_s if world is not None else math.nan
+        engine.error = (
+            f"the robot went silent for {silent:g} s: it was stopped; start the run again"
+        )
+        log.warning("run %s: %s", engine.run_id, engine.error)
+        engine.interrupt()
 
     def _ended(self, engine: RunEngine) -> None:
         """The run's task ended: say so, and let its engine go if its end is stored."""

@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from core.brain.memory import MAX_REACTION_S
 from core.engine import HZ_MAX, HZ_MIN
 from core.run.conditions import CONDITIONS
+from core.sim.robotfile import ROBOT_PREFIX, robot_names, robot_of
 from server.schemas.catalog import SENSOR_DEFINITIONS, WORLD_NAMES
 from server.schemas.common import Strict, one_of
 from server.schemas.networks import AssociationPublic
@@ -20,6 +21,9 @@ if TYPE_CHECKING:
 else:  # the data's names, for validation and the OpenAPI schema's enum
     EngineCondition = Literal[ENGINE_CONDITIONS]
 
+
+ROBOT_WORLDS = [f"{ROBOT_PREFIX}{name}" for name in robot_names()]
+"""The robots the service knows when it starts, listed in /openapi.json."""
 
 ReactionSeconds = Annotated[float, Field(ge=0.0, le=MAX_REACTION_S)]
 
@@ -73,8 +77,10 @@ class RunCreate(Strict):
     world: str | None = Field(
         None,
         max_length=100,
-        description="a world preset of GET /api/worlds (default: the default one)",
-        json_schema_extra={"enum": [*WORLD_NAMES, None]},
+        description="a world preset of GET /api/worlds (default: the default one), or a "
+        "robot's: `ros2:ROBOT` for a robot file of core/data/robots (a realtime run at the "
+        "robot's rate, docs/robots.md)",
+        json_schema_extra={"enum": [*WORLD_NAMES, *ROBOT_WORLDS, None]},
     )
     sensors: str | None = Field(
         None,
@@ -87,6 +93,9 @@ class RunCreate(Strict):
     @field_validator("world")
     @classmethod
     def _known_world(cls, value: str | None) -> str | None:
+        if value is not None and robot_of(value) is not None:
+            robots = [f"{ROBOT_PREFIX}{name}" for name in robot_names()]
+            return one_of(value, robots, "robot")
         return one_of(value, WORLD_NAMES, "world")
 
     @field_validator("sensors")

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from server.robots.ros2 import INSTALL_HINT
+from core.sim.robotfile import INSTALL_HINT
 
 try:
     import rclpy  # noqa: F401

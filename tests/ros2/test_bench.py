@@ -23,3 +23,4 @@ def test_the_bench_prints_latency_and_dropped_commands() -> None:
     assert "ticks                              40 in" in done.stdout
     assert "sensor-to-command latency    p50 " in done.stdout
     assert "dropped commands" in done.stdout
+    assert "zero Twist after it went silent" in done.stdout

@@ -10,7 +10,7 @@ import time
 from typing import Any
 
 import ros2_or_skip  # noqa: F401  # before rclpy: skips the module without it
-from amigobot_process import fake_amigobot
+from amigobot_process import GUARD_S, LOCKSTEP, fake_amigobot, heard_all, settle
 from fakes import InMemoryRunStore
 
 from core.brain.catalog import load_catalog
@@ -18,14 +18,12 @@ from core.engine import RunEngine
 from core.ports import Mode, RunSpec, RunStatus
 from core.run.conditions import CONDITIONS
 from core.run.simulation import Simulation
-from core.sim.robotfile import load_robot_file
+from core.sim.channels import CHANNELS
 from server.robots.ros2 import Ros2World
 
 CATALOG = load_catalog()
-ROBOT = load_robot_file("amigobot")
+ROBOT = LOCKSTEP
 SONAR_STIMULI = {s.id for s in CATALOG.stimuli if s.sensor in ("wall", "sonar_obstacle")}
-GUARD_S = 60.0
-"""A guard against hanging, not a speed goal."""
 
 
 class TwistListener:
@@ -80,7 +78,10 @@ def test_a_robot_killed_mid_lap_gets_a_zero_twist_and_the_run_stops() -> None:
 
         try:
             status = asyncio.run(scenario())
-            time.sleep(0.2)  # the last Twist on its way to the listener
+            deadline = time.monotonic() + GUARD_S  # the zero Twist on its way to the listener
+            while not listener.heard or listener.heard[-1] != (0.0, 0.0):
+                assert time.monotonic() < deadline, listener.heard[-3:]
+                time.sleep(0.01)
         finally:
             world.close()
             listener.close()
@@ -88,12 +89,15 @@ def test_a_robot_killed_mid_lap_gets_a_zero_twist_and_the_run_stops() -> None:
     assert world.lost
     assert status is RunStatus.STOPPED
     assert any(speed > 0 for speed, _ in listener.heard), "it drove before"
-    assert listener.heard[-1] == (0.0, 0.0)
+    # The zero Twist went out once the robot was silent for lost_after_s (bench/ros2.py
+    # measures how soon after).
+    assert world.stopped_after_s >= ROBOT.lost_after_s
 
 
 def _simulation(world: Ros2World) -> Simulation:
     sim = Simulation(CONDITIONS["innate"], 1, world=world, catalog=CATALOG)
     sim.reset()
+    heard_all(world)
     return sim
 
 
@@ -109,14 +113,14 @@ def test_a_sonar_gone_quiet_is_stale_and_releases_nothing() -> None:
                 sonars = sim.sonar_m()  # read at the end of the tick: the next one acts on them
                 upcoming = set(sim.upcoming_stimuli())
                 if all(math.isnan(v) for v in sonars):
-                    stale += fresh > 0  # not yet heard at the start: stale as well
+                    stale += 1
                     names = [CATALOG.stimuli[s].name for s in upcoming & SONAR_STIMULI]
                     assert not names, names
                 else:
                     assert stale == 0, "a sonar that stopped stays stale"
                     assert all(math.isfinite(v) for v in sonars)
                     fresh += 1
-                time.sleep(1 / ROBOT.hz)
+                settle(world, world.sent)
         finally:
             world.close()
     assert fresh > 0
@@ -130,13 +134,36 @@ def test_ten_times_the_message_rate_leaves_no_backlog() -> None:
             sim = _simulation(world)
             for _ in range(60):
                 frame = world.step()
-                fresh = [frame.channels[c] for c in sorted(world.fed)]
-                assert not any(math.isnan(v) for v in fresh), "every channel the robot feeds"
+                stale = [CHANNELS[c] for c in sorted(world.fed) if math.isnan(frame.channels[c])]
+                assert not stale, "every channel the robot feeds"
                 sim.tick()
-                time.sleep(1 / ROBOT.hz)
+                settle(world, world.sent)
         finally:
             world.close()
         fake.stop()
     assert world.rejected == 0
     assert world.sent == 61  # a command a tick, and the zero Twist of close()
     assert 0 < fake.stats["commands"] <= world.sent
+
+
+def test_a_robot_left_without_commands_is_stopped() -> None:
+    listener = TwistListener()
+    with fake_amigobot("--world", ROBOT.world) as _:
+        world = Ros2World(ROBOT)
+        try:
+            sim = _simulation(world)
+            while not any(speed > 0 for speed, _ in listener.heard):  # it drives off
+                sim.tick()
+                settle(world, world.sent)
+                assert sim.tick_count < 200, "it never drove"
+            sent = world.sent
+            deadline = time.monotonic() + GUARD_S  # then nothing commands it (a pause)
+            while listener.heard[-1] != (0.0, 0.0):
+                assert time.monotonic() < deadline, listener.heard[-3:]
+                time.sleep(0.01)
+        finally:
+            world.close()
+            listener.close()
+    assert world.held == 1
+    assert world.sent == sent + 2  # the held stop, then close()'s
+    assert not world.lost

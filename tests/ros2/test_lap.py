@@ -1,25 +1,28 @@
-"""A whole lap on the fake AmigoBot through the ROS 2 adapter, paced by its clock at 20 Hz."""
+"""A whole lap on the fake AmigoBot through the ROS 2 adapter, paced by its clock at 20 Hz.
+
+The fake robot runs in lockstep (a tick per command, on its own clock): the lap takes
+1,200-odd ticks of 50 ms of the robot's time however long the machine needs for them.
+"""
 
 from __future__ import annotations
 
 import asyncio
 
 import ros2_or_skip  # noqa: F401  # before rclpy: skips the module without it
-from amigobot_process import fake_amigobot
+from amigobot_process import LOCKSTEP, fake_amigobot
 from fakes import InMemoryRunStore
 
 from core.brain.catalog import load_catalog
 from core.engine import RunEngine
 from core.events import Outcome
 from core.ports import Mode, RunSpec, RunStatus
-from core.sim.robotfile import load_robot_file
 from server.robots.ros2 import RobotPacer, Ros2World
 
 CATALOG = load_catalog()
 
 
 def test_a_whole_lap_through_the_adapter_at_20_hz() -> None:
-    robot = load_robot_file("amigobot")
+    robot = LOCKSTEP
     assert robot.hz == 20.0
     with fake_amigobot("--world", robot.world, "--hz", "20") as fake:
         world = Ros2World(robot)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from collections.abc import Callable
 from typing import Annotated
@@ -17,6 +18,7 @@ from core.ports import StoredRun
 from core.run.trace import unpack
 from core.sim.corridor import CorridorGeometry, floor_quads
 from core.sim.corridor_world import obstacle_places
+from core.sim.robotfile import INSTALL_HINT, load_robot_file, robot_of
 from core.sim.types import WorldConfig, build_geometry
 from core.sim.world import episode_layout
 from core.sim.worlds import load_world
@@ -65,7 +67,12 @@ async def run_now(store: StoreDep, engines: EnginesDep, run_id: int) -> RunPubli
     return _of_stored(await io(store.run_summary, run_id))
 
 
-@router.post("", status_code=status.HTTP_201_CREATED, dependencies=[WriteGuard])
+@router.post(
+    "",
+    status_code=status.HTTP_201_CREATED,
+    dependencies=[WriteGuard],
+    responses={409: {"model": ErrorPublic, "description": "a robot cannot run this mode or rate"}},
+)
 async def create_run(
     body: RunCreate, store: StoreDep, engines: EnginesDep, networks: NetworksDep, state: StateDep
 ) -> RunPublic:
@@ -81,7 +88,7 @@ async def create_run(
         seed=body.seed,
         episodes=body.episodes,
         mode=body.mode,
-        hz=body.hz,
+        hz=_robot_rate(body) or body.hz,
         network=body.network,
         params=params,
         world=body.world,
@@ -103,6 +110,32 @@ async def create_run(
         network = snap.associations
     run_id = await io(engines.create, spec, network)
     return await run_now(store, engines, run_id)
+
+
+def _conflict(field: str, message: str) -> HTTPException:
+    return HTTPException(status.HTTP_409_CONFLICT, f"{field}: {message}")
+
+
+def _robot_rate(body: RunCreate) -> float | None:
+    """A robot's run's rate (its robot file's), or None for a simulated world's run.
+
+    A robot's run ticks in realtime at its robot's rate, through the srlab[ros2] extra:
+    otherwise a 409 naming the field (each field is valid alone; it is the robot that
+    cannot run them).
+    """
+    name = robot_of(body.world or "")
+    if name is None:
+        return None
+    robot = load_robot_file(name)  # known: the schema checked the name
+    if importlib.util.find_spec("rclpy") is None:
+        raise _conflict("world", f"a run on a robot needs the srlab[ros2] extra: {INSTALL_HINT}")
+    if body.mode != "realtime":
+        raise _conflict("mode", f"a run on a robot ticks in realtime: {body.mode!r} given")
+    if "hz" in body.model_fields_set and body.hz != robot.hz:
+        raise _conflict(
+            "hz", f"the robot {name!r} ticks at {robot.hz:g} Hz (its robot file): {body.hz:g} given"
+        )
+    return robot.hz
 
 
 @router.get("")
@@ -199,7 +232,13 @@ async def step_run(run_id: RunId, store: StoreDep, engines: EnginesDep) -> RunPu
 async def set_run_rate(
     run_id: RunId, body: RunRate, store: StoreDep, engines: EnginesDep
 ) -> RunPublic:
-    """Change a live realtime run's tick rate from its next tick (not stored with the run)."""
+    """Change a live realtime run's tick rate from its next tick (not stored with the run).
+
+    Not a robot's run: it ticks at its robot's rate (409).
+    """
+    live = engines.get(run_id)
+    if live is not None and robot_of(live.spec.world) is not None:
+        raise _conflict("hz", f"run {run_id} ticks at its robot's rate, {live.spec.hz:g} Hz")
     return await _control(run_id, store, engines, SetRate(body.hz))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import importlib.util
 import json
 from pathlib import Path
 from typing import Any
@@ -177,3 +178,29 @@ async def test_the_event_stream_says_what_made_each_ticks_behaviour_run(tmp_path
     for t in released:
         assert t["released_by"] in t["stimuli"]
         assert t["origin"] not in ("default", "explored", "commanded")
+
+
+async def test_a_run_on_an_unknown_robot_is_refused_naming_the_known_ones(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.post("/api/runs", json={"condition": "kp", "world": "ros2:nosuch"})
+        assert r.status_code == 422, r.text
+        assert "unknown robot 'ros2:nosuch'" in r.text and "ros2:amigobot" in r.text
+
+
+async def test_a_run_on_a_robot_is_realtime_at_its_rate_with_the_ros2_extra(
+    tmp_path: Path,
+) -> None:
+    body = {"condition": "kp", "world": "ros2:amigobot", "mode": "fast"}
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        r = await client.post("/api/runs", json=body)
+        assert r.status_code == 409, r.text
+        if importlib.util.find_spec("rclpy") is None:  # `make test`'s environment
+            assert r.json()["detail"].startswith("world: a run on a robot needs the srlab[ros2]")
+        else:  # `make test-ros2`'s (tests/ros2 run such runs on a fake robot)
+            assert r.json()["detail"].startswith("mode: a run on a robot ticks in realtime")
+            made = await client.post("/api/runs", json={**body, "mode": "realtime"})
+            assert made.status_code == 201, made.text
+            assert made.json()["hz"] == 20.0  # the robot file's
+        assert (await client.get("/api/runs")).json()["count"] == (
+            0 if importlib.util.find_spec("rclpy") is None else 1
+        )
