@@ -7,6 +7,8 @@ ticks as at 20 Hz however busy the machine is.
 
 from __future__ import annotations
 
+import json
+import math
 import shutil
 import time
 from collections.abc import Callable, Iterator
@@ -54,6 +56,18 @@ def _until(server: LiveServer, run_id: int, done: Callable[[dict[str, Any]], boo
         time.sleep(0.05)
 
 
+def _first_tick(server: LiveServer, run_id: int) -> dict[str, Any]:
+    with server.client.stream("GET", f"/api/runs/{run_id}/events?tick_hz=20") as r:
+        name = ""
+        for line in r.iter_lines():
+            if line.startswith("event: "):
+                name = line[7:]
+            elif line.startswith("data: ") and name == "tick":
+                tick: dict[str, Any] = json.loads(line[6:])
+                return tick
+    raise AssertionError("the stream ended without a tick")
+
+
 def test_a_robot_run_is_checked_when_created(service: LiveServer) -> None:
     body = {"condition": "kp", "world": ROBOT, "mode": "fast"}
     runs = service.client.get("/api/runs").json()["count"]
@@ -87,6 +101,9 @@ def test_a_run_on_the_robot_ticks_takes_rewards_and_stops_it(service: LiveServer
         refused = service.client.post(f"/api/runs/{other['id']}/start")
         assert refused.status_code == 409, refused.text
         assert f"driven by run {run['id']}" in refused.text
+        # The console's and the 3D view's tick events: the robot where its odometry says.
+        tick = _first_tick(service, run["id"])
+        assert tick["progress_m"] > 0 and math.isfinite(tick["x"]) and math.isfinite(tick["y"])
         reward = service.client.post(f"/api/runs/{run['id']}/rewards", json={"value": 1.0})
         assert reward.status_code == 202, reward.text
         kp = service.client.get(f"/api/runs/{run['id']}/kp")
@@ -100,3 +117,22 @@ def test_a_run_on_the_robot_ticks_takes_rewards_and_stops_it(service: LiveServer
     rewards = service.client.get(f"/api/runs/{run['id']}/rewards").json()
     assert [r["value"] for r in rewards["data"] if r["source"] == "trainer"] == [1.0]
     assert fake.stats["commands"] >= 40  # the robot drove on the run's commands
+
+
+def test_a_robot_run_resumes_and_a_silent_robot_interrupts_it(service: LiveServer) -> None:
+    created = service.client.post(
+        "/api/runs", json={"condition": "kp", "world": ROBOT, "mode": "realtime"}
+    ).json()
+    run_id = created["id"]
+    with fake_amigobot("--world", "classic"):
+        assert service.client.post(f"/api/runs/{run_id}/start").status_code == 200
+        _until(service, run_id, lambda r: r["live"] is not None and r["live"]["tick"] >= 20)
+        assert service.client.post(f"/api/runs/{run_id}/stop").status_code == 200
+        _until(service, run_id, lambda r: r["status"] == "stopped")
+        # Started again, it runs on: the episode it stopped in starts over on the robot.
+        assert service.client.post(f"/api/runs/{run_id}/start").status_code == 200
+        _until(service, run_id, lambda r: r["live"] is not None and r["live"]["tick"] >= 20)
+    # The fake robot is gone (its process ended): the run is interrupted, saying why.
+    _until(service, run_id, lambda r: r["status"] == "interrupted")
+    run = service.client.get(f"/api/runs/{run_id}").json()
+    assert run["error"].startswith("the robot went silent for 1 s: it was stopped")
