@@ -37,7 +37,8 @@ class TopicSpec:
     Attributes:
         topic: the ROS 2 topic name.
         type: the message type as ``package/msg/Name``.
-        field: the dotted path of the value read in each message.
+        field: the dotted path of the value read in each message ("": the whole message,
+            as a `PointCloud2` is read).
         frame: the `header.frame_id` a message must carry ("" when the type has none).
         stale_after_s: a message older than this no longer counts: its channels are stale.
         channels: the channels fed, in the order of the value's elements (`ODOMETRY` for a pose).
@@ -118,7 +119,7 @@ def _topic(where: str, raw: Any) -> TopicSpec:
     return TopicSpec(
         _text(where, raw, "topic"),
         kind,
-        _text(where, raw, "field"),
+        _text(where, raw, "field", ""),
         _text(where, raw, "frame", ""),
         _positive(where, raw, "stale_after_s"),
         tuple(channels),

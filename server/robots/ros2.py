@@ -99,16 +99,44 @@ def yaw(q: Any) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
+_CLOUD2_TYPES = {7: "f4", 8: "f8"}
+"""`sensor_msgs/msg/PointField` datatypes a `PointCloud2`'s x and y may have: FLOAT32, FLOAT64."""
+
+
+def _cloud2_points(cloud: Any) -> np.ndarray:
+    """A `sensor_msgs/msg/PointCloud2`'s points' x and y (float32 or float64 fields)."""
+    fields = {f.name: f for f in cloud.fields}
+    if not {"x", "y"} <= fields.keys() or any(
+        fields[n].datatype not in _CLOUD2_TYPES for n in "xy"
+    ):
+        return np.empty((0, 2))
+    order = ">" if cloud.is_bigendian else "<"
+    dtype = np.dtype(
+        {
+            "names": ["x", "y"],
+            "formats": [order + _CLOUD2_TYPES[fields[n].datatype] for n in "xy"],
+            "offsets": [fields[n].offset for n in "xy"],
+            "itemsize": cloud.point_step,
+        }
+    )
+    points = np.frombuffer(bytes(cloud.data), dtype=dtype, count=cloud.width * cloud.height)
+    return np.stack([points["x"], points["y"]], axis=1).astype(float)
+
+
 def decode(value: Any, sonar_mount_m: float) -> tuple[float, ...]:
     """The numbers a message's field gives, by its shape.
 
     A pose (position and orientation): x, y, heading. Points (`geometry_msgs/Point32`, as
-    in a `PointCloud`): each point's range from the sonar's mount, its distance from the
-    robot's centre less `sonar_mount_m` (an echo lies on its sonar's axis). A number or a
-    bool: itself. A sequence of numbers: them.
+    in a `PointCloud`, or a whole `PointCloud2` with float x and y fields): each point's
+    range from the sonar's mount, its distance from the robot's centre less
+    `sonar_mount_m` (an echo lies on its sonar's axis). A number or a bool: itself. A
+    sequence of numbers: them.
     """
     if hasattr(value, "position") and hasattr(value, "orientation"):
         return (float(value.position.x), float(value.position.y), yaw(value.orientation))
+    if hasattr(value, "point_step") and hasattr(value, "fields"):
+        xy = _cloud2_points(value)
+        return tuple(float(r) for r in np.hypot(xy[:, 0], xy[:, 1]) - sonar_mount_m)
     if isinstance(value, bool | int | float):
         return (float(value),)
     items = list(value)
@@ -117,8 +145,9 @@ def decode(value: Any, sonar_mount_m: float) -> tuple[float, ...]:
     return tuple(float(v) for v in items)
 
 
-def _field(msg: Any, path: str) -> Any:
-    for part in path.split("."):
+def read_field(msg: Any, path: str) -> Any:
+    """The value at a dotted path in a message ("": the message itself)."""
+    for part in path.split(".") if path else ():
         msg = getattr(msg, part)
     return msg
 
@@ -241,7 +270,7 @@ class Ros2World:
         if spec.frame and getattr(getattr(msg, "header", None), "frame_id", "") != spec.frame:
             self.rejected += 1
             return
-        values = decode(_field(msg, spec.field), self._mount)
+        values = decode(read_field(msg, spec.field), self._mount)
         if len(values) != (3 if spec.channels == (ODOMETRY,) else len(spec.channels)):
             self.rejected += 1
             return

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace as NS
 
+import numpy as np
 import pytest
 
 from core.sim.robotfile import load_robot_file
@@ -34,6 +35,41 @@ def test_points_give_each_echos_range_from_its_sonars_mount() -> None:
         for r, a in zip(ranges, angles, strict=True)
     ]
     assert decode(points, MOUNT) == pytest.approx(ranges)
+
+
+@pytest.mark.parametrize(("kind", "bigendian"), [(7, False), (8, True)])
+def test_a_point_cloud2_gives_each_echos_range(kind: int, bigendian: bool) -> None:
+    angles = [math.radians(a) for a in (90.0, 12.0, -160.0)]
+    ranges = [0.5, 2.75, 0.0]
+    scalar = ">" if bigendian else "<"
+    scalar += "f4" if kind == 7 else "f8"
+    # x, y, z and an intensity the adapter skips: 4 fields a point, padded to 40 bytes.
+    points = np.zeros(
+        3,
+        dtype=np.dtype(
+            {
+                "names": ["x", "y", "z", "intensity"],
+                "formats": [scalar] * 4,
+                "offsets": [0, 8, 16, 24],
+                "itemsize": 40,
+            }
+        ),
+    )
+    points["x"] = [(MOUNT + r) * math.cos(a) for r, a in zip(ranges, angles, strict=True)]
+    points["y"] = [(MOUNT + r) * math.sin(a) for r, a in zip(ranges, angles, strict=True)]
+    fields = [
+        NS(name=n, offset=o, datatype=kind, count=1) for n, o in zip("xyz", (0, 8, 16), strict=True)
+    ]
+    cloud = NS(
+        fields=fields,
+        point_step=40,
+        width=3,
+        height=1,
+        is_bigendian=bigendian,
+        data=points.tobytes(),
+    )
+    assert decode(cloud, MOUNT) == pytest.approx(ranges, abs=1e-6)
+    assert decode(NS(**{**vars(cloud), "fields": fields[1:]}), MOUNT) == ()  # no x: nothing
 
 
 def test_numbers_and_bools_give_themselves() -> None:
