@@ -89,3 +89,20 @@ def test_a_channel_fed_twice_is_an_error() -> None:
 def test_a_missing_robot_file_is_an_error_naming_it() -> None:
     with pytest.raises(RobotFileError, match=r"nosuch\.toml"):
         load_robot_file("nosuch")
+
+
+def test_use_sim_time_is_a_flag_and_off_by_default() -> None:
+    assert parse_robot_file(GOOD, "mini.toml").use_sim_time is False
+    on = GOOD.replace("[ros2]\n", "[ros2]\nuse_sim_time = true\n")
+    assert parse_robot_file(on, "mini.toml").use_sim_time is True
+    with pytest.raises(RobotFileError, match=r"mini\.toml: \[ros2\]: use_sim_time must be true"):
+        parse_robot_file(GOOD.replace("[ros2]\n", '[ros2]\nuse_sim_time = "yes"\n'), "mini.toml")
+
+
+def test_a_robots_world_is_its_maps_preset_at_its_rate() -> None:
+    robot = load_robot_file("amigobot")
+    preset = load_world("ros2:amigobot")
+    assert preset.name == "ros2:amigobot"
+    assert preset.config.dt_s == 1.0 / robot.hz
+    assert preset.config.max_ticks == robot.max_ticks
+    assert preset.config.track == load_world(robot.world).config.track
