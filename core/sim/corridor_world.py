@@ -15,14 +15,10 @@ import pymunk
 from core.sim.corridor import CorridorConfig, CorridorGeometry, PlacedObstacle, place_obstacles
 from core.sim.types import EpisodeLayout, Geometry, MotorCommand, SensorFrame, WorldConfig
 from core.sim.world import (
-    _BEACON_PHASE,
-    _FRONT_TO_LINE,
     _OBSTACLE,
     _ROBOT,
     _WALL,
     PymunkWorld,
-    _get_angle,
-    _get_position,
     _sensing_vector,
     _set_position,
     _set_velocity,
@@ -234,23 +230,16 @@ class CorridorWorld(PymunkWorld):
         """Where the obstacles are now (for pictures and views)."""
         return [((b[0] + b[2]) / 2, (b[1] + b[3]) / 2) for b in self._boxes[: self._n_obstacles]]
 
-    def _sense(self, violation: bool) -> SensorFrame:
-        if self._noise_at >= len(self._noise):
-            self._refill_noise()
-        noise = self._noise[self._noise_at]
-        self._noise_at += 1
-        body = self._body
-        pos = _get_position(body)
-        th = _get_angle(body)
-        out = self._channels
+    def _read(self, x: float, y: float, th: float, noise: np.ndarray, out: np.ndarray) -> None:
+        """The corridor kernel's readings at pose (x, y, th) into `out`."""
         kernel = self._corridor_sense
         if kernel is None:
             from core.sim._kernel import sense_corridor
 
             kernel = self._corridor_sense = sense_corridor
         kernel(
-            pos.x,
-            pos.y,
+            x,
+            y,
             th,
             self._g,
             self._sonar_angles,
@@ -264,11 +253,6 @@ class CorridorWorld(PymunkWorld):
             self._legs,
             self._leg_state,
             out,
-        )
-        if self._beacon:
-            out[_BEACON_PHASE] = self._hear_beacon(float(out[_FRONT_TO_LINE]))
-        return SensorFrame(
-            self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
         )
 
 

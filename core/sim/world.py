@@ -412,12 +412,23 @@ class PymunkWorld:
         body = self._body
         pos = _get_position(body)
         th = _get_angle(body)
-        geo = self.geometry
         out = self._channels
+        self._read(pos.x, pos.y, th, noise, out)
+        if self._beacon:
+            out[_BEACON_PHASE] = self._hear_beacon(float(out[_FRONT_TO_LINE]))
+        if self._perception is not None:
+            self._perception.apply(out, pos.x, pos.y)
+        return SensorFrame(
+            self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
+        )
+
+    def _read(self, x: float, y: float, th: float, noise: np.ndarray, out: np.ndarray) -> None:
+        """The sensing kernel's readings at pose (x, y, th) into `out` (the ring's kernel)."""
+        geo = self.geometry
         kernel_sense = self._kernel_sense or self._load_kernel()
         kernel_sense(
-            pos.x,
-            pos.y,
+            x,
+            y,
             th,
             self._g,
             self._sonar_angles,
@@ -432,13 +443,6 @@ class PymunkWorld:
             geo.leg_lengths_m,
             geo.leg_start_m,
             out,
-        )
-        if self._beacon:
-            out[_BEACON_PHASE] = self._hear_beacon(float(out[_FRONT_TO_LINE]))
-        if self._perception is not None:
-            self._perception.apply(out, pos.x, pos.y)
-        return SensorFrame(
-            self._tick, pos.x, pos.y, th, out.copy(), self._lamp, self._hit, violation
         )
 
 
