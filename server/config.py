@@ -31,7 +31,8 @@ class Settings(BaseSettings):
         max_runs: runs that may tick at the same time; past it, starting one is refused
             with 429. The default is as many 10 Hz realtime runs, each followed and
             rewarded by its trainer, as a 2-core machine paced within the study goals
-            (docs/studies.md, "How far one machine goes").
+            beside other work that takes a core (128 on an idle one: docs/studies.md,
+            "How far one machine goes").
         max_streams: live event streams (GET /api/runs/{id}/events) open at once, over
             every run; past it, or past `max_streams_per_run` on one run, a new stream is
             refused with 503 and `Retry-After`. Each stream costs the event loop that paces
@@ -81,8 +82,8 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=1, le=65535)
     token: str | None = None
     reads: Literal["open", "token"] = "open"
-    max_runs: int = Field(64, ge=1)
-    max_streams: int = Field(128, ge=1)
+    max_runs: int = Field(96, ge=1)
+    max_streams: int = Field(192, ge=1)
     max_streams_per_run: int = Field(16, ge=1)
     reward_rate_per_s: float = Field(20.0, gt=0)
     reward_burst: int = Field(40, ge=1)
