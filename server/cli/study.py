@@ -29,7 +29,7 @@ from server.cli.common import (
 if TYPE_CHECKING:
     from pydantic import BaseModel, ValidationError
 
-    from core.studies import StudyRepository
+    from core.studies import StudyRepository, StudySpec
     from server.persistence import SqlAlchemyRunStore
 
 FLAGS = {
@@ -208,6 +208,13 @@ def _message(error: ValidationError, flags: dict[str, str]) -> str:
     return "; ".join(parts)
 
 
+def _budget(spec: StudySpec) -> str:
+    """A participant's budget as the organiser reads it: "1 episode", "5 episodes", "600 s"."""
+    if spec.budget_episodes is None:
+        return f"{spec.budget_s:g} s"
+    return f"{spec.budget_episodes} episode{'' if spec.budget_episodes == 1 else 's'}"
+
+
 def _checked(
     model: type[BaseModel], values: dict[str, Any], flags: dict[str, str] | None = None
 ) -> Any:
@@ -257,11 +264,7 @@ def _create(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
     with _stores(args.url) as (_, studies):
         made = new_study(studies, body)
     spec = made.spec
-    budget_text = (
-        f"{spec.budget_episodes} episodes"
-        if spec.budget_episodes is not None
-        else f"{spec.budget_s:g} s"
-    )
+    budget_text = _budget(spec)
     Console(file=stdout).print(
         f"study {spec.name} created: conditions {', '.join(spec.conditions)} "
         f"({spec.assignment.value}), {budget_text} each, consent version "
@@ -354,11 +357,7 @@ def _status(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
         participants = settle_stored(studies, runs, args.name)
         found = studies.get(args.name)
     spec = found.spec
-    budget = (
-        f"{spec.budget_episodes} episodes"
-        if spec.budget_episodes is not None
-        else f"{spec.budget_s:g} s"
-    )
+    budget = _budget(spec)
     Console(file=stdout).print(
         f"study {spec.name}: conditions {', '.join(spec.conditions)} ({spec.assignment.value}),"
         f" {budget} each, consent version {spec.consent_version}",

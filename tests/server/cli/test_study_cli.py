@@ -35,6 +35,19 @@ def create_argv(url: str, consent: Path, *extra: str) -> list[str]:
     ]  # fmt: skip
 
 
+def test_a_budget_of_one_episode_is_said_in_the_singular(
+    db: tuple[str, Path], consent: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = create_argv(db[0], consent)
+    argv[argv.index("--episodes") + 1] = "1"
+
+    assert main(argv) == 0
+    assert main(["study", "status", "pilot", "--url", db[0]]) == 0
+
+    out = " ".join(capsys.readouterr().out.split())  # as one line, however rich wrapped it
+    assert out.count("1 episode each") == 2 and "1 episodes" not in out
+
+
 def rows(path: Path, sql: str) -> list[tuple[object, ...]]:
     with sqlite3.connect(path) as con:
         return list(con.execute(sql))
