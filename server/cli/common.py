@@ -43,6 +43,11 @@ class UsageError(Exception):
     """Arguments that parse but do not go together: `main` answers as argparse does."""
 
 
+def counted(n: int, noun: str) -> str:
+    """`n` and `noun`, plural unless `n` is 1: "1 run", "2 runs", "0 runs"."""
+    return f"{n:,} {noun}" if n == 1 else f"{n:,} {noun}s"
+
+
 def number(
     cast: Callable[[str], float], low: float, high: float, closed_low: bool, what: str
 ) -> Callable[[str], Any]:

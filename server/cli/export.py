@@ -10,7 +10,7 @@ from typing import IO
 from rich.console import Console
 from rich.progress import TaskID
 
-from server.cli.common import check_out_folder, positive_int, progress_bar
+from server.cli.common import check_out_folder, counted, positive_int, progress_bar
 from server.cli.db import open_store
 
 
@@ -69,7 +69,8 @@ def export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 progress.advance(bar)
                 extra = f", Minari dataset {done.minari}" if done.minari else ""
                 console.print(
-                    f"run {run_id}: {done.rewards} rewards, {done.episodes} episodes{extra} "
+                    f"run {run_id}: {counted(done.rewards, 'reward')}, "
+                    f"{counted(done.episodes, 'episode')}{extra} "
                     f"-> {folder}",
                     soft_wrap=True,
                 )

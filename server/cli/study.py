@@ -21,6 +21,7 @@ from rich.table import Table
 from server.cli.common import (
     UsageError,
     check_out_folder,
+    counted,
     positive_int,
     print_table,
     progress_bar,
@@ -212,7 +213,7 @@ def _budget(spec: StudySpec) -> str:
     """A participant's budget as the organiser reads it: "1 episode", "5 episodes", "600 s"."""
     if spec.budget_episodes is None:
         return f"{spec.budget_s:g} s"
-    return f"{spec.budget_episodes} episode{'' if spec.budget_episodes == 1 else 's'}"
+    return counted(spec.budget_episodes, "episode")
 
 
 def _checked(
@@ -425,8 +426,9 @@ def _export(args: argparse.Namespace, stdout: IO[str], stderr: IO[str]) -> int:
                 progress=lambda *_: progress.advance(bar),
             )
     Console(file=stdout).print(
-        f"study {done.study}: {done.participants} participants, {done.runs} runs, "
-        f"{done.rewards} rewards, {done.episodes} episodes, {done.answers} answers -> {out}",
+        f"study {done.study}: {counted(done.participants, 'participant')}, "
+        f"{counted(done.runs, 'run')}, {counted(done.rewards, 'reward')}, "
+        f"{counted(done.episodes, 'episode')}, {counted(done.answers, 'answer')} -> {out}",
         highlight=False,
         soft_wrap=True,
     )

@@ -12,6 +12,7 @@ from clihelpers import exits_2
 
 from core.studies import token_digest
 from server.cli import main
+from server.cli.common import counted
 
 
 @pytest.fixture
@@ -46,6 +47,12 @@ def test_a_budget_of_one_episode_is_said_in_the_singular(
 
     out = " ".join(capsys.readouterr().out.split())  # as one line, however rich wrapped it
     assert out.count("1 episode each") == 2 and "1 episodes" not in out
+    assert [counted(n, "run") for n in (0, 1, 2, 1000)] == [
+        "0 runs",
+        "1 run",
+        "2 runs",
+        "1,000 runs",
+    ]
 
 
 def rows(path: Path, sql: str) -> list[tuple[object, ...]]:
