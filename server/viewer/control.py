@@ -274,6 +274,13 @@ class Controller:
             self._publish(live=self._live_info(st.run_id))
 
     def _live_info(self, run_id: int | None) -> LiveInfo | None:
+        info = self._run_info(run_id)
+        if info is not None and self.only is not None:
+            # A study's participant is not told their condition (docs/studies.md).
+            return replace(info, condition="")
+        return info
+
+    def _run_info(self, run_id: int | None) -> LiveInfo | None:
         if run_id is None:
             return None
         engine = self.manager.get(run_id)

@@ -78,6 +78,23 @@ def _assign(handle: Any, value: object) -> None:
     handle.value = value
 
 
+def run_heading(state: ViewState) -> str:
+    """The panel's first line: the run shown (its condition, unless a participant's view)."""
+    live = state.live
+    if state.run_id is None or live is None:
+        return "**srlab**: no run selected. Create one in the editor or with `srlab run`."
+    mode = f"realtime {live.hz:g} Hz" if live.realtime else "fast"
+    world = f", world {live.world}" if live.world else ""
+    text = (
+        f"**Run {live.run_id}**: {f'{live.condition}, ' if live.condition else ''}"
+        f"seed {live.seed}{world}, {mode}, "
+        f"**{live.status}**"
+    )
+    if not live.ticking and state.mode == "live":
+        text += ". Not running now: **Replay** shows its stored episodes."
+    return text
+
+
 class Panel:
     """The panel's inputs: built once, their callbacks posting commands; each frame shows the state.
 
@@ -223,26 +240,11 @@ class Panel:
                 self._play.label = "Pause" if clock.playing else "Play"
             if changed("speed", clock.speed):
                 _assign(self._speed, speed_label(clock.speed))
-        if changed("header", self._heading(state)):
-            self._header.content = self._heading(state)
+        if changed("header", run_heading(state)):
+            self._header.content = run_heading(state)
         heading = state.replay.heading() if replaying and state.replay else "**Decision**"
         text = decision_markdown(view, "replay" if replaying else "live", heading)
         if changed("decision", text):
             self._decision.content = text
         if changed("notice", state.notice):
             self._notice.content = state.notice
-
-    @staticmethod
-    def _heading(state: ViewState) -> str:
-        live = state.live
-        if state.run_id is None or live is None:
-            return "**srlab**: no run selected. Create one in the editor or with `srlab run`."
-        mode = f"realtime {live.hz:g} Hz" if live.realtime else "fast"
-        world = f", world {live.world}" if live.world else ""
-        text = (
-            f"**Run {live.run_id}**: {live.condition}, seed {live.seed}{world}, {mode}, "
-            f"**{live.status}**"
-        )
-        if not live.ticking and state.mode == "live":
-            text += ". Not running now: **Replay** shows its stored episodes."
-        return text

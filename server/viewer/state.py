@@ -32,6 +32,7 @@ class LiveInfo:
 
     run_id: int
     condition: str
+    """"" in a study participant's view: they are not told it."""
     seed: int
     status: str
     realtime: bool

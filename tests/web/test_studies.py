@@ -45,6 +45,15 @@ def test_a_study_from_invitation_to_completion(
         assert len(set(runs)) == 3
         last = pages[-1]
         last.screenshot(path=str(artifact("study-participant.png")))
+        # Blind to their condition: its description, the KP inspector are not on their page.
+        mine = server.client.get(f"/api/runs/{runs[-1]}").json()["condition"]
+        conditions = server.client.get("/api/conditions").json()
+        about = next(c["description"] for c in conditions if c["name"] == mine)
+        # Read at once (an expectation would wait until the budget ends and hides it all).
+        assert last.locator("#train-card").is_visible()
+        assert not last.locator("#train-about").is_visible()
+        assert not last.locator("#kp-inspector").is_visible()
+        assert about not in last.locator("body").inner_text()
         # Another's run, named in the URL: a clear refusal in place of the console.
         last.evaluate(f"location.hash = '#/console/{runs[0]}'")
         expect(last.locator(".study-error")).to_contain_text("only their own run")

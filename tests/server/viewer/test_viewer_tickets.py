@@ -21,6 +21,7 @@ from websockets.exceptions import InvalidStatus
 
 from bench.liveserver import free_port
 from server.viewer import Viewer
+from server.viewer.panel import run_heading
 from server.viewer.passes import TICKET_S
 from server.viewer.state import GiveReward, SelectRun
 
@@ -190,6 +191,12 @@ async def test_the_views_socket_takes_the_own_runs_cookie_alone_and_shows_it_rea
         await until(lambda: controller.state.runs, "the run list")
         assert [r.id for r in controller.state.runs] == [run_one]  # no other run listed
         assert controller.state.only == run_one and not controller.state.writable
+        # A participant is not told their condition.
+        await until(lambda: controller.state.live is not None, "the run's figures")
+        condition = (await client.get(f"/api/runs/{run_one}")).json()["condition"]
+        assert controller.state.live is not None and controller.state.live.condition == ""
+        assert run_heading(controller.state).startswith(f"**Run {run_one}**: seed ")
+        assert condition not in run_heading(controller.state)
         # What a crafted socket could post: another run, a reward. Neither is done.
         handled = controller.handled
         controller.post(SelectRun(run_two))
@@ -222,4 +229,7 @@ async def test_the_organisers_ticket_opens_every_run_with_a_writable_panel(
         await until(lambda: shows(session, run_one), f"run {run_one}, the URL's")
         await until(lambda: len(controller.state.runs) >= 2, "every run listed")
         assert controller.state.only is None and controller.state.writable
+        await until(lambda: controller.state.live is not None, "the run's figures")
+        condition = (await client.get(f"/api/runs/{run_one}")).json()["condition"]
+        assert f"**Run {run_one}**: {condition}, seed " in run_heading(controller.state)
     await until(lambda: not viewer.sessions, "the viewer's session to end")

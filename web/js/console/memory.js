@@ -29,7 +29,8 @@ export async function loadMemory() {
 /** Why the chosen memory holds nothing (an empty grid says nothing by itself). */
 function explainEmpty(kind, run) {
   const note = $("#memory-empty");
-  const c = state.conditions.get(run.condition);
+  // A study's participant is not told their condition: the reasons that name it are not theirs.
+  const c = state.participant ? null : state.conditions.get(run.condition);
   let why = "";
   if (state.memory.size === 0) {
     if (c && !c.learning) why = `${run.condition} does not learn: its LTM and RLTM stay empty.`;

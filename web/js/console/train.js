@@ -76,13 +76,14 @@ function showEffect(r, kept, previous) {
  * reward, of any source, takes the records before it, and STM is emptied per episode.
  */
 function whyNothing(r, previous) {
-  const c = state.run ? state.conditions.get(state.run.condition) : null;
+  // A study's participant is not told their condition: no reason below names or betrays it.
+  const c = state.run && !state.participant ? state.conditions.get(state.run.condition) : null;
   if (c && !c.learning) return `${state.run.condition} does not learn: the reward is logged and changes nothing.`;
   const recorded = "STM records only the ticks where a behaviour answered a stimulus (not the default behaviour's)";
   if (previous && previous.episode === r.episode) {
     const what = `${previous.id !== undefined ? `#${previous.id} ` : "the reward "}(${previous.source}, ${previous.value > 0 ? "+" : ""}${previous.value}) at tick ${previous.tick}`;
     const took = previous.credited ? `, which took the records before it (${previous.credited})` : "";
-    const program = previous.source === RewardSource.program
+    const program = previous.source === RewardSource.program && !state.participant
       ? " In this condition a reward program rewards by itself; in trainer only you and the task do."
       : "";
     return `Nothing in STM to credit: ${recorded}, and none was recorded since ${what}${took}.${program}`;
