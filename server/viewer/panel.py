@@ -243,7 +243,9 @@ class Panel:
         if changed("header", run_heading(state)):
             self._header.content = run_heading(state)
         heading = state.replay.heading() if replaying and state.replay else "**Decision**"
-        text = decision_markdown(view, "replay" if replaying else "live", heading)
+        text = decision_markdown(
+            view, "replay" if replaying else "live", heading, blind=state.only is not None
+        )
         if changed("decision", text):
             self._decision.content = text
         if changed("notice", state.notice):

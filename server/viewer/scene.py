@@ -433,24 +433,31 @@ def trail_of(views: Sequence[TickView], min_step_m: float = TRAIL_MIN_STEP_M) ->
 Mode = Literal["live", "replay"]
 
 
-def why(view: TickView) -> str:
+def why(view: TickView, blind: bool = False) -> str:
     """How a tick's behaviour came to run, e.g. ``released by `Corner` (designed)``.
 
     The stimulus it answered, and in brackets what made it run when that is not its
     `how` already: the releasing association's source (a continued primitive keeps it).
+    `blind`: without the source, which would tell a study's participant their condition.
     """
     parts = [] if view.how == "released" and view.released_by else [view.how]
     if view.released_by:
         verb = "released by" if view.how in ("released", "continued") else "answering"
         parts.append(f"{verb} `{view.released_by}`")
     text = ", ".join(parts)
-    if view.origin and view.origin != view.how:
+    if view.origin and view.origin != view.how and not blind:
         text += f" ({view.origin})"
     return text
 
 
-def decision_markdown(view: TickView | None, mode: Mode, heading: str) -> str:
-    """The panel's account of a tick: stimuli, the selected behaviour and how, counters."""
+def decision_markdown(
+    view: TickView | None, mode: Mode, heading: str, *, blind: bool = False
+) -> str:
+    """The panel's account of a tick: stimuli, the selected behaviour and how, counters.
+
+    `blind`: a study participant's view, which says nothing that tells their condition (a
+    behaviour's source, whether KP made it).
+    """
     lines = [heading]
     if view is None:
         lines.append("No tick to show yet.")
@@ -460,8 +467,8 @@ def decision_markdown(view: TickView | None, mode: Mode, heading: str) -> str:
     if view.successes is not None and view.episodes_done is not None:
         lines.append(f"Successes so far: **{view.successes}** of {view.episodes_done} episodes")
     behaviour = f"`{view.behaviour}`" if view.behaviour else "none"
-    kp = " - **KP-made**" if view.kp else ""
-    lines.append(f"Behaviour: {behaviour} ({why(view)}){kp}")
+    kp = " - **KP-made**" if view.kp and not blind else ""
+    lines.append(f"Behaviour: {behaviour} ({why(view, blind)}){kp}")
     stimuli = ", ".join(f"`{s}`" for s in view.stimuli) if view.stimuli else "none"
     lines.append(f"Stimuli: {stimuli}")
     lines.append(f"Lamp: {view.lamp.name.lower() if view.lamp else 'not seen'}")

@@ -53,6 +53,7 @@ def test_a_study_from_invitation_to_completion(
         assert last.locator("#train-card").is_visible()
         assert not last.locator("#train-about").is_visible()
         assert not last.locator("#kp-inspector").is_visible()
+        assert not last.locator("#st-origins").is_visible()
         assert about not in last.locator("body").inner_text()
         # Another's run, named in the URL: a clear refusal in place of the console.
         last.evaluate(f"location.hash = '#/console/{runs[0]}'")

@@ -163,6 +163,31 @@ def test_a_kp_made_behaviour_is_highlighted_and_labelled() -> None:
     assert "KP-made" in text and "leftturn30" in text
 
 
+def test_a_participants_panel_says_nothing_that_tells_their_condition() -> None:
+    v = view(behaviour="leftturn30", how="released", origin="kp", released_by="Corner", kp=True)
+    assert "(kp)" in why(v) and "KP-made" in decision_markdown(v, "live", "")
+    assert why(v, blind=True) == "released by `Corner`"
+    blind = decision_markdown(v, "live", "", blind=True)
+    assert "Behaviour: `leftturn30` (released by `Corner`)" in blind
+    assert "KP" not in blind and "kp" not in blind
+
+
+def test_a_participants_view_does_not_mark_a_kp_made_behaviour() -> None:
+    from server.viewer.state import LiveInfo, ViewState
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        renderer = Renderer(server, SCENE, WORLD, lambda _: None)
+        live = LiveInfo(1, "", 3, "running", True, 20.0, True)
+        tick = view(behaviour="leftturn30", how="released", kp=True)
+        renderer.draw(ViewState(clients=1, run_id=1, live=live, only=1), [tick], 0.0)
+        assert (renderer._label.text, renderer._kp.visible) == ("leftturn30", False)
+        renderer.draw(ViewState(clients=1, run_id=1, live=live), [tick], 0.0)  # the organiser's
+        assert (renderer._label.text, renderer._kp.visible) == ("leftturn30 (KP)", True)
+    finally:
+        server.stop()
+
+
 def test_the_panel_names_stimuli_behaviour_episode_tick_and_successes() -> None:
     v = view(
         episode=4, tick=1234, episode_tick=87, stimuli=("Middle", "Red"), behaviour="stop",

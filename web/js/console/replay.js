@@ -161,7 +161,7 @@ function show(i) {
 function released(row) {
   const by = !row.released_by ? row.how
     : row.how === How.released ? `released by ${row.released_by}` : `${row.how}, answering ${row.released_by}`;
-  return row.origin && row.origin !== row.how ? `${by} (${row.origin})` : by;
+  return row.origin && row.origin !== row.how && !state.participant ? `${by} (${row.origin})` : by;
 }
 
 function draw() {

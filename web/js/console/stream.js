@@ -73,7 +73,8 @@ function why(t) {
     parts.push(`${verb} ${t.released_by}`);
   }
   let text = parts.join(", ");
-  if (t.origin && t.origin !== t.how) text += ` (${t.origin})`;
+  // An association's source ("kp", "designed") would tell a study's participant their condition.
+  if (t.origin && t.origin !== t.how && !state.participant) text += ` (${t.origin})`;
   return text;
 }
 
