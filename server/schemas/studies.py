@@ -123,6 +123,13 @@ class ParticipantPublic(BaseModel):
     run_id: int | None
     consent_version: str | None
     consented_at: datetime | None
+    episodes_done: int | None = Field(
+        None, description="while they train, the episodes their run has finished (else null)"
+    )
+    seconds_done: float | None = Field(
+        None,
+        description="while they train, the seconds of their run's clock: its ticks at its rate",
+    )
 
 
 class ParticipantsPublic(BaseModel):

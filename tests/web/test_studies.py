@@ -14,7 +14,7 @@ from typing import Any
 
 from browser import artifact
 from playwright.sync_api import Browser, BrowserContext, Page, expect
-from studypage import CODE, consent, create_study, invite, reward
+from studypage import BUDGET_S, CODE, consent, create_study, invite, reward
 from webpage import open_view
 
 from bench.liveserver import LiveServer
@@ -43,6 +43,10 @@ def test_a_study_from_invitation_to_completion(
             given.append([reward(participant, "+"), reward(participant, "-")])
             given[i].append(reward(participant, "#reward-plus"))
         assert len(set(runs)) == 3
+        # The organiser watches each one's run get on: its seconds of the budget's.
+        progress = page.locator("#participants td.progress")
+        expect(progress).to_have_count(3)
+        expect(progress.last).to_contain_text(f" / {BUDGET_S} s")  # the newest trains on
         last = pages[-1]
         last.screenshot(path=str(artifact("study-participant.png")))
         # Blind to their condition: its description, the KP inspector are not on their page.
@@ -77,6 +81,7 @@ def test_a_study_from_invitation_to_completion(
     # Progress on the organiser's page; then the recruiters' ids go, after a confirmation.
     done = page.locator('#studies-list tr[data-study="pilot"] td[data-status="done"]')
     expect(done).to_have_text("3")
+    expect(page.locator("#participants td.progress")).to_have_text(["budget spent"] * 3)
     page.once("dialog", lambda dialog: dialog.accept())
     page.locator('#studies-list tr[data-study="pilot"] button').click()
     expect(page.locator("#toasts")).to_contain_text("3 recruiter ids of pilot deleted")

@@ -73,6 +73,15 @@ async function refresh() {
 
 const budget = (s) => (s.budget_episodes !== null ? `${s.budget_episodes} episode${s.budget_episodes === 1 ? "" : "s"}` : `${fmt(s.budget_s, 0)} s`);
 
+/** How much of the study's budget a participant's run has spent: "3 / 5 episodes", "120 / 600 s". */
+function spent(p, study) {
+  if (p.status === "done") return "budget spent";
+  if (p.episodes_done === null || !study) return "—";
+  return study.budget_episodes !== null
+    ? `${p.episodes_done} / ${budget(study)}`
+    : `${fmt(p.seconds_done, 0)} / ${budget(study)}`;
+}
+
 function drawStudies() {
   const box = $("#studies-list");
   if (!studies.length) {
@@ -102,14 +111,16 @@ async function loadParticipants() {
   }
   const list = await attempt(() => get(`/studies/${seg(name)}/participants`));
   if (!list || $("#invite-form").study.value !== name) return;
+  const study = studies.find((s) => s.name === name);
   $("#participants").replaceChildren(list.data.length
     ? el("table", { class: "participants" },
-      el("thead", {}, el("tr", {}, ["Pseudonym", "Status", "Condition", "Run"].map((h) => el("th", { text: h })))),
-      el("tbody", {}, list.data.map((p) => el("tr", {},
+      el("thead", {}, el("tr", {}, ["Pseudonym", "Status", "Condition", "Run", "Progress"].map((h) => el("th", { text: h })))),
+      el("tbody", {}, list.data.map((p) => el("tr", { dataset: { pseudonym: p.pseudonym } },
         el("td", { class: "mono", text: p.pseudonym.slice(0, 12), title: p.pseudonym }),
         el("td", { text: p.status }),
         el("td", { text: p.condition || "—" }),
-        el("td", {}, p.run_id === null ? "—" : el("a", { href: `#/console/${p.run_id}`, text: `#${p.run_id}` }))))))
+        el("td", {}, p.run_id === null ? "—" : el("a", { href: `#/console/${p.run_id}`, text: `#${p.run_id}` })),
+        el("td", { class: "progress", text: spent(p, study) })))))
     : el("p", { class: "muted small", text: "None yet." }));
 }
 

@@ -24,7 +24,7 @@ from server.api.deps import EnginesDep, StateDep, StoreDep
 from server.api.routes.runs import run_now, view_link
 from server.api.routing import resource_router
 from server.schemas.common import Text
-from server.schemas.runs import ViewChosen
+from server.schemas.runs import RunPublic, ViewChosen
 from server.schemas.studies import (
     AnswersCreate,
     ConsentCreate,
@@ -85,11 +85,21 @@ def study_public(study: Study) -> StudyPublic:
     )  # fmt: skip
 
 
-def participant_public(p: Participant) -> ParticipantPublic:
-    """A participant as the organiser sees them: by pseudonym, never an external id."""
+def training_run(p: Participant) -> int | None:
+    """The run `p` trains, their budget not spent yet (None: they do not train)."""
+    return p.run_id if p.status is ParticipantStatus.TRAINING else None
+
+
+def participant_public(p: Participant, run: RunPublic | None = None) -> ParticipantPublic:
+    """A participant as the organiser sees them: by pseudonym, never an external id.
+
+    With their `run` as it is now, how much of the budget they have spent.
+    """
     return ParticipantPublic(
         id=p.id, pseudonym=p.pseudonym, status=p.status.value, condition=p.condition,
         run_id=p.run_id, consent_version=p.consent_version, consented_at=p.consented_at,
+        episodes_done=None if run is None else run.episodes_done,
+        seconds_done=None if run is None else round(run.ticks / run.hz, 1),
     )  # fmt: skip
 
 
@@ -121,8 +131,18 @@ async def get_study(
 async def list_participants(
     name: StudyName, studies: StudiesDep, store: StoreDep, engines: EnginesDep
 ) -> ParticipantsPublic:
-    """A study's participants by pseudonym, in the order they were added."""
-    data = [participant_public(p) for p in await settle_study(name, studies, store, engines)]
+    """A study's participants by pseudonym, in the order they were added.
+
+    Beside each who trains, how far their run has got: its episodes and seconds so far
+    (a run stored mid-episode counts only its finished episodes, so once done, a
+    participant's status says it).
+    """
+    data = [
+        participant_public(
+            p, None if (run := training_run(p)) is None else await run_now(store, engines, run)
+        )
+        for p in await settle_study(name, studies, store, engines)
+    ]
     return ParticipantsPublic(data=data, count=len(data))
 
 
@@ -165,13 +185,14 @@ async def settle(
     from the run as it is (live here, else as stored): right after a restart too, and
     whether or not the participant's tab is still open.
     """
-    if p.status is not ParticipantStatus.TRAINING or p.run_id is None:
+    run_id = training_run(p)
+    if run_id is None:
         return p
-    run = await run_now(store, engines, p.run_id)
+    run = await run_now(store, engines, run_id)
     if not budget_spent(spec, run.episodes_done, run.ticks, run.hz):
         return p
     done = await io(studies.finish, p.id)
-    live = engines.get(p.run_id)
+    live = engines.get(run_id)
     if live is not None:  # a time budget: the run would go on ticking for no one
         with contextlib.suppress(RunStateError):
             await live.send(Stop())

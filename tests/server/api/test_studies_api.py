@@ -253,6 +253,27 @@ async def test_a_participant_is_done_once_spent_though_they_never_read_again(
                 await asyncio.sleep(0.05)
 
 
+async def test_the_participants_list_says_how_far_each_run_has_got(tmp_path: Path) -> None:
+    async with client_for(settings_for(tmp_path)) as (client, _):
+        await client.post("/api/studies", json={**STUDY, "budget": {"seconds": 600}})
+        trains = (await invited(client, {"count": 2}))[0]["token"]  # the other waits
+        run = (await consented(client, trains))["run_id"]
+
+        async def progress() -> dict[int | None, tuple[Any, Any]]:
+            listed = (await client.get("/api/studies/pilot/participants")).json()["data"]
+            return {p["run_id"]: (p["episodes_done"], p["seconds_done"]) for p in listed}
+
+        async with asyncio.timeout(60):  # a hang guard: 0.5 s of the run's clock
+            while (await progress())[run][1] < 0.5:
+                await asyncio.sleep(0.05)
+        before = (await client.get(f"/api/runs/{run}")).json()
+        episodes, seconds = (await progress())[run]
+        after = (await client.get(f"/api/runs/{run}")).json()
+        assert before["episodes_done"] <= episodes <= after["episodes_done"]
+        assert before["ticks"] / 10 - 0.05 <= seconds <= after["ticks"] / 10 + 0.05  # 10 Hz
+        assert (await progress())[None] == (None, None)  # invited: no run yet
+
+
 async def test_a_participant_spent_before_a_restart_is_done_after_it(tmp_path: Path) -> None:
     async with client_for(settings_for(tmp_path)) as (client, _):
         study = {**STUDY, "budget": {"episodes": 1}, "questionnaire": []}
