@@ -244,7 +244,7 @@ class Panel:
             self._header.content = run_heading(state)
         heading = state.replay.heading() if replaying and state.replay else "**Decision**"
         text = decision_markdown(
-            view, "replay" if replaying else "live", heading, blind=state.only is not None
+            view, "replay" if replaying else "live", heading, blind=state.blind
         )
         if changed("decision", text):
             self._decision.content = text

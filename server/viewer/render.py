@@ -214,7 +214,7 @@ class Renderer(SceneNodes, Panel):
                 layout = self.layout(state.live.seed, view.episode)
         if state.clients == 0 or not send:
             return  # nobody watches, or a dropped frame: keep the trail, send nothing
-        if view is not None and state.only is not None:
+        if view is not None and state.blind:
             view = replace(view, kp=False)  # a participant's: "(KP)" would tell the condition
         frame = scene_frame(self.static, view, layout) if view is not None else None
         with self.server.atomic():

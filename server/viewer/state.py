@@ -65,6 +65,11 @@ class ViewState:
     version: int = 0
     """Bumped when the selected run or replay changes: the renderer starts afresh."""
 
+    @property
+    def blind(self) -> bool:
+        """A study participant's view: nothing in it tells them their condition."""
+        return self.only is not None
+
 
 @dataclass(frozen=True, slots=True)
 class SelectRun:

@@ -137,12 +137,8 @@ async def list_participants(
     (a run stored mid-episode counts only its finished episodes, so once done, a
     participant's status says it).
     """
-    data = [
-        participant_public(
-            p, None if (run := training_run(p)) is None else await run_now(store, engines, run)
-        )
-        for p in await settle_study(name, studies, store, engines)
-    ]
+    settled = await settle_study(name, studies, store, engines)
+    data = [participant_public(p, run) for p, run in settled]
     return ParticipantsPublic(data=data, count=len(data))
 
 
@@ -178,31 +174,32 @@ async def delete_identities(name: StudyName, studies: StudiesDep) -> IdentitiesD
 
 async def settle(
     p: Participant, spec: StudySpec, studies: StudyRepository, store: StoreDep, engines: EnginesDep
-) -> Participant:
+) -> tuple[Participant, RunPublic | None]:
     """A participant as they are now: done once their run has spent the budget.
 
     Whoever reads first (the participant, or the organiser watching progress) marks it,
     from the run as it is (live here, else as stored): right after a restart too, and
-    whether or not the participant's tab is still open.
+    whether or not the participant's tab is still open. With the run read, while they
+    still train (None otherwise).
     """
     run_id = training_run(p)
     if run_id is None:
-        return p
+        return p, None
     run = await run_now(store, engines, run_id)
     if not budget_spent(spec, run.episodes_done, run.ticks, run.hz):
-        return p
+        return p, run
     done = await io(studies.finish, p.id)
     live = engines.get(run_id)
     if live is not None:  # a time budget: the run would go on ticking for no one
         with contextlib.suppress(RunStateError):
             await live.send(Stop())
-    return done
+    return done, None
 
 
 async def settle_study(
     name: str, studies: StudyRepository, store: StoreDep, engines: EnginesDep
-) -> tuple[Participant, ...]:
-    """A study's participants, each settled (`settle`), in the order they were added."""
+) -> tuple[tuple[Participant, RunPublic | None], ...]:
+    """A study's participants in the order they were added, each settled (`settle`)."""
     spec = (await io(studies.get, name)).spec
     found = await io(studies.participants, name)
     return tuple([await settle(p, spec, studies, store, engines) for p in found])
@@ -213,7 +210,7 @@ async def current(
 ) -> Participant:
     """The calling participant as they are now (`settle`)."""
     assert who.participant is not None and who.study is not None
-    return await settle(who.participant, who.study.spec, studies, store, engines)
+    return (await settle(who.participant, who.study.spec, studies, store, engines))[0]
 
 
 def _view(who: Principal, p: Participant, answered: bool) -> ParticipantView:

@@ -8,7 +8,7 @@
 import { get, post } from "../api.js";
 import { $, attempt, el, typing } from "../ui.js";
 import { drawTrack } from "../view2d.js";
-import { state } from "./state.js";
+import { originNote, state } from "./state.js";
 import { showRun } from "./status.js";
 import { How, Lamp } from "../generated/enums.js";
 
@@ -161,7 +161,7 @@ function show(i) {
 function released(row) {
   const by = !row.released_by ? row.how
     : row.how === How.released ? `released by ${row.released_by}` : `${row.how}, answering ${row.released_by}`;
-  return row.origin && row.origin !== row.how && !state.participant ? `${by} (${row.origin})` : by;
+  return by + originNote(row.origin, row.how);
 }
 
 function draw() {

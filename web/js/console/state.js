@@ -32,3 +32,12 @@ export const state = {
   tick: null,
   replay: null, // the replayed tick + and - reward ({episode, tick}), or null: the live robot's
 };
+
+/**
+ * The bracketed source of what made a tick's behaviour run (" (designed)"), when it is not
+ * its `how` already; none on a study participant's console: "kp" or "designed" would tell
+ * them their condition.
+ */
+export function originNote(origin, how) {
+  return origin && origin !== how && !state.participant ? ` (${origin})` : "";
+}

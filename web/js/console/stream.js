@@ -7,7 +7,7 @@ import { key } from "../matrix.js";
 import { $, el, fmt, toast } from "../ui.js";
 import { backfillEpisodes, firstGap, keepEpisode, loadEpisodes, redrawCurve } from "./episodes.js";
 import { loadMemory, refreshMemory } from "./memory.js";
-import { LIVE, state } from "./state.js";
+import { LIVE, originNote, state } from "./state.js";
 import { showRun } from "./status.js";
 import { loadRewards, syncRewards } from "./timeline.js";
 import { onReward } from "./train.js";
@@ -72,10 +72,7 @@ function why(t) {
     const verb = t.how === How.released || t.how === How.continued ? "released by" : "answering";
     parts.push(`${verb} ${t.released_by}`);
   }
-  let text = parts.join(", ");
-  // An association's source ("kp", "designed") would tell a study's participant their condition.
-  if (t.origin && t.origin !== t.how && !state.participant) text += ` (${t.origin})`;
-  return text;
+  return parts.join(", ") + originNote(t.origin, t.how);
 }
 
 function onTick(t) {
