@@ -1,7 +1,7 @@
 """A fake AmigoBot: srlab's pymunk world behind RosAria2's ROS 2 topics (run as a process).
 
     python tests/ros2/fake_amigobot.py [--world classic] [--hz 20] [--seed 1] [--rate 1]
-                                       [--sonar-for-s S] [--lockstep]
+                                       [--sonar-for-s S] [--lockstep] [--no-obstacle]
 
 It steps a world preset in realtime at `--hz` with the latest Twist taken on `cmd_vel`
 (linear.x, angular.z) and publishes what the robot senses, `--rate` times a tick. With
@@ -11,7 +11,9 @@ Twist it receives, publishes that tick's senses, then its time on `/clock`
 messages with that time; waiting for a Twist it publishes the current senses again every
 20 ms (a simulator paused is still there), and after 0.25 s without one it steps a tick
 standing still. A test on it then runs at whatever speed the machine allows, tick for tick
-as at 20 Hz.
+as at 20 Hz. `--no-obstacle` leaves the world's obstacle out (a lap no behaviour can get
+stuck on: with no referee to end the episode, a robot pressed against the obstacle backs off
+and drives into it again until the jitter of a busy machine's message timing frees it).
 
 - `sonar`: sensor_msgs/msg/PointCloud in `base_link`, one echo point per sonar on its axis,
   at the sonar's range beyond its mount (sonars 0-7 as core/sim/channels.py numbers them);
@@ -58,6 +60,7 @@ from sensor_msgs.msg import PointCloud
 from std_msgs.msg import Bool, Float32MultiArray
 
 from core.sim.channels import Channel
+from core.sim.track import TrackConfig
 from core.sim.types import MotorCommand
 from core.sim.world import make_world
 from core.sim.worlds import load_world
@@ -90,9 +93,17 @@ def main() -> int:
     parser.add_argument("--rate", type=int, default=1, help="sensor messages per tick")
     parser.add_argument("--sonar-for-s", type=float, default=math.inf)
     parser.add_argument("--lockstep", action="store_true", help="a tick per Twist, on /clock")
+    parser.add_argument("--no-obstacle", action="store_true", help="the world without its obstacle")
     args = parser.parse_args()
 
     config = replace(load_world(args.world).config, dt_s=1.0 / args.hz)
+    if args.no_obstacle:
+        track = config.track
+        if not isinstance(track, TrackConfig):
+            parser.error("--no-obstacle takes a world on a track")
+        config = replace(
+            config, track=replace(track, obstacle=replace(track.obstacle, enabled=False))
+        )
     world = make_world(config)
     frame = world.reset(args.seed, 0)
     sx, sy, sth = world.geometry.start_pose
