@@ -100,7 +100,7 @@ def main() -> int:
     if args.no_obstacle:
         track = config.track
         if not isinstance(track, TrackConfig):
-            parser.error("--no-obstacle takes a world on a track")
+            parser.error(f"--no-obstacle takes a rectangular ring's preset, not {args.world!r}")
         config = replace(
             config, track=replace(track, obstacle=replace(track.obstacle, enabled=False))
         )
