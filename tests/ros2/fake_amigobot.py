@@ -11,9 +11,9 @@ Twist it receives, publishes that tick's senses, then its time on `/clock`
 messages with that time; waiting for a Twist it publishes the current senses again every
 20 ms (a simulator paused is still there), and after 0.25 s without one it steps a tick
 standing still. A test on it then runs at whatever speed the machine allows, tick for tick
-as at 20 Hz. `--no-obstacle` leaves the world's obstacle out (a lap no behaviour can get
-stuck on: with no referee to end the episode, a robot pressed against the obstacle backs off
-and drives into it again until the jitter of a busy machine's message timing frees it).
+as at 20 Hz. `--no-obstacle` leaves the world's obstacle out: with no referee to end the
+episode, a robot pressed against the obstacle may back off and drive into it again until the
+jitter of a busy machine's message timing frees it, so a lap that must end in time has none.
 
 - `sonar`: sensor_msgs/msg/PointCloud in `base_link`, one echo point per sonar on its axis,
   at the sonar's range beyond its mount (sonars 0-7 as core/sim/channels.py numbers them);
