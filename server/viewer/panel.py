@@ -240,8 +240,9 @@ class Panel:
                 self._play.label = "Pause" if clock.playing else "Play"
             if changed("speed", clock.speed):
                 _assign(self._speed, speed_label(clock.speed))
-        if changed("header", run_heading(state)):
-            self._header.content = run_heading(state)
+        header = run_heading(state)
+        if changed("header", header):
+            self._header.content = header
         heading = state.replay.heading() if replaying and state.replay else "**Decision**"
         text = decision_markdown(
             view, "replay" if replaying else "live", heading, blind=state.blind
